@@ -1,0 +1,40 @@
+# The README's two set-up commands are `make serve` and `make test`; both create .venv on
+# first use and reinstall only when pyproject.toml changes.
+PYTHON ?= python3
+VENV ?= .venv
+HOST ?= 127.0.0.1
+PORT ?= 8000
+BIN := $(VENV)/bin
+
+.PHONY: serve test bench openapi clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+
+$(VENV)/.installed-%: pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e '.[$*]'
+	touch $@
+
+$(VENV)/.installed-run: pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e .
+	touch $@
+
+serve: $(VENV)/.installed-run
+	$(BIN)/python -m uvicorn service.app:app --host $(HOST) --port $(PORT)
+
+test: $(VENV)/.installed-test
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	@status=0; $(BIN)/python -m pytest || status=$$?; \
+	if [ $$status -eq 5 ]; then echo "pytest collected no tests: check tests/ and pyproject.toml" >&2; fi; \
+	exit $$status
+
+bench: $(VENV)/.installed-bench
+	$(BIN)/python -m benchmarks.transforms_bench $(BENCH_ARGS)
+
+openapi: $(VENV)/.installed-run
+	$(BIN)/python -m service.openapi
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis

@@ -1,0 +1,2 @@
+"""meshflat's HTTP service: thin FastAPI routes over :mod:`transforms` (ASGI app
+``service.app:app``)."""

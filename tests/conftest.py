@@ -1,0 +1,104 @@
+"""Shared fixtures: the bundled sample meshes and small constructed meshes."""
+
+from __future__ import annotations
+
+import io
+from functools import cache
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from service.samples import SAMPLES
+
+
+@cache
+def load_sample(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (n, 3) and faces (m, 3) of a bundled sample, in the file's order."""
+    data = SAMPLES[name].path.read_bytes()
+    mesh = trimesh.load(
+        io.BytesIO(data), file_type=name.rsplit(".", 1)[1], process=False, force="mesh"
+    )
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    vertices.flags.writeable = False
+    faces.flags.writeable = False
+    return vertices, faces
+
+
+@pytest.fixture
+def anyio_backend():
+    """Async tests (marked ``anyio``) run on asyncio, as uvicorn does."""
+    return "asyncio"
+
+
+def unit_rows(draw_array: np.ndarray) -> np.ndarray:
+    """Normalise rows, for strategies that drew non-zero vectors."""
+    return draw_array / np.linalg.norm(draw_array, axis=1, keepdims=True)
+
+
+#: (n, 3) arrays of directions, each row non-zero, normalised.
+directions = (
+    hnp.arrays(
+        np.float64,
+        st.tuples(st.integers(1, 40), st.just(3)),
+        elements=st.floats(-1.0, 1.0, allow_nan=False, width=64),
+    )
+    .filter(lambda a: bool((np.linalg.norm(a, axis=1) > 1e-3).all()))
+    .map(unit_rows)
+)
+
+#: Warp parameters across the accepted range, denser near the useful middle.
+sigmas = st.one_of(
+    st.floats(0.02, 5.0), st.floats(1e-6, 1e6), st.sampled_from([0.3, 1.0, 1e-6, 1e6])
+)
+
+
+def sphere_mesh(rings: int, segments: int) -> tuple[np.ndarray, np.ndarray]:
+    """A UV sphere around +Y: vertex (j, k) at polar angle pi j / rings from +Y and longitude
+    2 pi k / segments (longitude 0 towards +Z, 90 degrees towards +X); poles are single
+    vertices. Faces wind counter-clockwise seen from outside.
+
+    Returns vertices (n, 3) and faces (m, 3).
+    """
+    polar = np.linspace(0.0, np.pi, rings + 1)[1:-1]
+    longitude = 2.0 * np.pi * np.arange(segments) / segments
+    a, lam = np.meshgrid(polar, longitude, indexing="ij")
+    ring_points = np.stack(
+        [np.sin(a) * np.sin(lam), np.cos(a), np.sin(a) * np.cos(lam)], axis=-1
+    ).reshape(-1, 3)
+    vertices = np.vstack([[0.0, 1.0, 0.0], ring_points, [0.0, -1.0, 0.0]])
+    top, bottom = 0, len(vertices) - 1
+
+    def ring(j: int, k: int) -> int:
+        return 1 + j * segments + k % segments
+
+    faces = []
+    for k in range(segments):
+        faces.append([top, ring(0, k + 1), ring(0, k)])
+        faces.append([bottom, ring(rings - 2, k), ring(rings - 2, k + 1)])
+        for j in range(rings - 2):
+            faces.append([ring(j, k), ring(j, k + 1), ring(j + 1, k)])
+            faces.append([ring(j + 1, k), ring(j, k + 1), ring(j + 1, k + 1)])
+    # The rows above run clockwise seen from outside; reverse them.
+    return vertices, np.ascontiguousarray(np.array(faces, dtype=np.int64)[:, ::-1])
+
+
+def grid_mesh(xs: np.ndarray, ys: np.ndarray, z: float) -> tuple[np.ndarray, np.ndarray]:
+    """A triangulated grid in the plane ``z``; each cell split along its (0,0)-(1,1) diagonal,
+    faces counter-clockwise seen from +Z.
+
+    Returns vertices (len(xs) * len(ys), 3) and faces (m, 3).
+    """
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    vertices = np.stack([gx, gy, np.full_like(gx, z)], axis=-1).reshape(-1, 3)
+    ny = len(ys)
+    faces = []
+    for i in range(len(xs) - 1):
+        for j in range(ny - 1):
+            a, b, c, d = i * ny + j, (i + 1) * ny + j, (i + 1) * ny + j + 1, i * ny + j + 1
+            faces.append([a, b, c])
+            faces.append([a, c, d])
+    return vertices, np.array(faces, dtype=np.int64)

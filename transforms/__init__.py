@@ -1,0 +1,81 @@
+"""meshflat's transform core: distorted-pole spherical coordinates over numpy arrays.
+
+Pure numpy (and scipy's sparse graphs); no web or file I/O. Every formula follows
+``shared/spec/MATH.md``: ``theta`` is the polar angle from local ``+Z``, ``phi`` the azimuth
+from ``+X`` towards ``+Y``, in the local frame ``q = R (p - c)``.
+
+>>> import numpy as np
+>>> from transforms import Chart, Frame, PoleCap, world_to_angles
+>>> frame = Frame.from_pole_up(pole=[0, 0, 1], up=[0, 1, 0])
+>>> chart = Chart.distorted(PoleCap.from_sigma(0.3))
+>>> theta, phi, r = world_to_angles(np.array([[1.0, 0.0, -1.0]]), frame, chart)
+>>> bool(-np.pi < phi[0] < 0)          # far from the pole: no seam, no singular point
+True
+"""
+
+from .cap import RHO_MAX, RHO_MIN, SIGMA_MAX, SIGMA_MIN, PoleCap, check_rho, check_sigma
+from .chart import LAYOUT_ORIENTATION, Chart, Method, angles_to_world, world_to_angles
+from .errors import TransformInputError
+from .faces import DEGENERATE_RTOL, FaceMeasures, measure_faces
+from .frames import Frame, check_rotation
+from .margins import arcs_to_point, arcs_to_seam
+from .metrics import (
+    Distortion,
+    FaceDistortion,
+    Summary,
+    distortion,
+    face_distortion,
+    weighted_quantile,
+)
+from .predicates import orient3d_sign
+from .region import FlatRegion, assess_region, flatten_region
+from .separable import separable_forward, separable_inverse, separable_residual
+from .spherical import cartesian_to_spherical, spherical_to_cartesian
+from .topology import RegionEdges, region_edges
+from .validation import RegionValidation, validate
+from .warp import distorted_forward, distorted_inverse, pole_warp
+
+__all__ = [
+    "DEGENERATE_RTOL",
+    "LAYOUT_ORIENTATION",
+    "RHO_MAX",
+    "RHO_MIN",
+    "SIGMA_MAX",
+    "SIGMA_MIN",
+    "Chart",
+    "Distortion",
+    "FaceDistortion",
+    "FaceMeasures",
+    "FlatRegion",
+    "Frame",
+    "Method",
+    "PoleCap",
+    "RegionEdges",
+    "RegionValidation",
+    "Summary",
+    "TransformInputError",
+    "angles_to_world",
+    "arcs_to_point",
+    "arcs_to_seam",
+    "assess_region",
+    "cartesian_to_spherical",
+    "check_rho",
+    "check_rotation",
+    "check_sigma",
+    "distorted_forward",
+    "distorted_inverse",
+    "distortion",
+    "face_distortion",
+    "flatten_region",
+    "measure_faces",
+    "orient3d_sign",
+    "pole_warp",
+    "region_edges",
+    "separable_forward",
+    "separable_inverse",
+    "separable_residual",
+    "spherical_to_cartesian",
+    "validate",
+    "weighted_quantile",
+    "world_to_angles",
+]

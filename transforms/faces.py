@@ -1,0 +1,288 @@
+"""Per-face measurements of a region, in 3D and in the ``(phi, theta)`` layout, made in one
+pass over cache-sized blocks of faces and shared by :mod:`.validation` and :mod:`.metrics`.
+
+Everything here is per face and elementwise, so the pass works block by block (whole blocks
+vectorised): the temporaries of a block stay in cache and are reused, instead of some thirty
+arrays of the region's size.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .arrays import as_faces, as_points
+from .cap import PoleCap
+from .errors import TransformInputError
+from .parallel import map_blocks
+from .predicates import orient3d_sign_components
+
+#: A triangle is degenerate when twice its area is at most this times the sum of its two
+#: squared edges at corner 0 (a height below about 1e-12 of its edges), in 3D or in the
+#: layout.
+DEGENERATE_RTOL = 1e-12
+
+_EPSILON = 2.0**-53
+#: |fl(c0 . (e1 x e2)) - det[c0, c1, c2]| <= _ORIENT_BOUND * (|e1|^2 + |e2|^2) when every
+#: coordinate is below 1 in magnitude: about 7 roundings on products bounded by
+#: |c0|_1 |e1|_1 |e2|_1 <= 3 * 1.5 (|e1|^2 + |e2|^2); 64 leaves a margin over 31.5.
+_ORIENT_BOUND = 64.0 * _EPSILON
+#: Below this the products may be subnormal and the bound no longer holds.
+_TINY = 1e-250
+
+
+@dataclass(frozen=True, eq=False)
+class FaceMeasures:
+    """What one pass over a region's faces measured. Arrays are ``(m,)``, one per face in
+    the order of ``faces``.
+
+    Attributes
+    ----------
+    faces : (m, 3) int, vertex indices
+    vertices : (3, n) float, the vertices in the local frame scaled by ``scale``, as rows
+    scale : float, a power of two taking the largest coordinate below 1 (exact scaling: no
+        sign, direction or ratio changes, and no product overflows or underflows)
+    orientation : int8, exact sign of ``det[c0, c1, c2]`` with the centre at the origin: +1
+        when the winding is counter-clockwise seen from outside
+    double_area : float, ``|(c1 - c0) x (c2 - c0)|`` in scaled units
+    layout_double_area : float, twice the signed area in the ``(phi, theta)`` plane
+    degenerate : bool, zero area in 3D or in the layout (``DEGENERATE_RTOL``)
+    phi_span : float, ``max(phi) - min(phi)`` over the corners
+    contains_north, contains_south : bool, the ray from the centre through that singular
+        point of ``cap`` meets the closed triangle (exactly)
+    stretch_max, stretch_min : float, singular values ``s1 >= s2`` of the affine map from the
+        triangle to its unscaled layout triangle (meaningless where degenerate)
+    cap : PoleCap, the cap the singular points came from
+    """
+
+    faces: np.ndarray
+    vertices: np.ndarray
+    scale: float
+    orientation: np.ndarray
+    double_area: np.ndarray
+    layout_double_area: np.ndarray
+    degenerate: np.ndarray
+    phi_span: np.ndarray
+    contains_north: np.ndarray
+    contains_south: np.ndarray
+    stretch_max: np.ndarray
+    stretch_min: np.ndarray
+    cap: PoleCap
+
+    def __len__(self) -> int:
+        return len(self.faces)
+
+
+def measure_faces(
+    vertices_local, faces, theta, phi, cap: PoleCap, threads: int = 1
+) -> FaceMeasures:
+    """Measure every face of a region.
+
+    Parameters
+    ----------
+    vertices_local : (n, 3) float, vertices in the local frame (centre at the origin)
+    faces : (m, 3) int, indices into ``vertices_local``; at least one face
+    theta, phi : (n,) float, the vertices' layout coordinates
+    cap : PoleCap, the chart's cap (its singular points are tested)
+    threads : int, threads to spread the blocks over
+
+    Returns
+    -------
+    FaceMeasures
+
+    Raises
+    ------
+    TransformInputError
+        No faces, a face index out of range, or ``theta``/``phi`` of the wrong length.
+    """
+    vertices = as_points(vertices_local, "vertices")
+    faces = as_faces(faces, len(vertices))
+    if len(faces) == 0:
+        raise TransformInputError("faces", "the region has no faces")
+    theta = np.asarray(theta, dtype=np.float64)
+    phi = np.asarray(phi, dtype=np.float64)
+    if theta.shape != (len(vertices),) or phi.shape != (len(vertices),):
+        raise TransformInputError(
+            "theta",
+            f"theta and phi need one value per vertex ({len(vertices)}), "
+            f"got {theta.shape} and {phi.shape}",
+        )
+    largest = float(np.abs(vertices).max())
+    scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
+    rows = np.ascontiguousarray(vertices.T)
+    rows *= scale
+
+    m = len(faces)
+    out = {
+        "orientation": np.empty(m, dtype=np.int8),
+        "double_area": np.empty(m),
+        "layout_double_area": np.empty(m),
+        "degenerate": np.empty(m, dtype=bool),
+        "phi_span": np.empty(m),
+        "contains_north": np.empty(m, dtype=bool),
+        "contains_south": np.empty(m, dtype=bool),
+        "stretch_max": np.empty(m),
+        "stretch_min": np.empty(m),
+    }
+    singular = (cap.north, cap.south)
+    sides = _sides_of_singular_lines(rows, cap)
+
+    def measure(block: slice) -> None:
+        ids = np.ascontiguousarray(faces[block].T)
+        corners = np.empty((3, 3, ids.shape[1]))  # (axis, corner, face)
+        layout = np.empty((2, 3, ids.shape[1]))  # (phi|theta, corner, face)
+        for axis in range(3):
+            np.take(rows[axis], ids, out=corners[axis])
+        np.take(phi, ids, out=layout[0])
+        np.take(theta, ids, out=layout[1])
+        face_sides = np.bitwise_or.reduce(np.take(sides, ids), axis=0)
+        _measure_block(corners, layout, singular, face_sides, {k: v[block] for k, v in out.items()})
+
+    map_blocks(measure, m, threads)
+    return FaceMeasures(faces=faces, vertices=rows, scale=scale, cap=cap, **out)
+
+
+def _measure_block(
+    corners: np.ndarray, layout: np.ndarray, singular, face_sides: np.ndarray, out: dict
+) -> None:
+    """Fill ``out`` (views into the per-face arrays) for one block of faces."""
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    normal = np.empty_like(e1)
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
+        np.multiply(e1[j], e2[k], out=normal[i])
+        normal[i] -= e1[k] * e2[j]
+    double_area = np.sqrt(_dot(normal, normal), out=out["double_area"])
+    g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    f1 = layout[:, 1] - layout[:, 0]
+    f2 = layout[:, 2] - layout[:, 0]
+    layout_area = np.multiply(f1[0], f2[1], out=out["layout_double_area"])
+    layout_area -= f1[1] * f2[0]
+    h11, h22 = _dot(f1, f1), _dot(f2, f2)
+
+    # Orientation seen from the centre: c0 . (e1 x e2) = det[c0, c1, c2], exact where the
+    # rounding bound leaves its sign in doubt.
+    det = _dot(corners[:, 0], normal)
+    orientation = out["orientation"]
+    np.sign(det, out=orientation, casting="unsafe")
+    reference = g11 + g22
+    unsure = np.flatnonzero((np.abs(det) <= _ORIENT_BOUND * reference) | (reference < _TINY))
+    if unsure.size:
+        (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = corners[:, :, unsure]
+        orientation[unsure] = orient3d_sign_components(x0, y0, z0, x1, y1, z1, x2, y2, z2)
+
+    degenerate = np.less_equal(double_area, DEGENERATE_RTOL * reference, out=out["degenerate"])
+    degenerate |= np.abs(layout_area) <= DEGENERATE_RTOL * (h11 + h22)
+    phi = layout[0]
+    np.subtract(
+        np.maximum(np.maximum(phi[0], phi[1]), phi[2]),
+        np.minimum(np.minimum(phi[0], phi[1]), phi[2]),
+        out=out["phi_span"],
+    )
+    _contains_singular_points(
+        corners, orientation, singular, face_sides, out["contains_north"], out["contains_south"]
+    )
+
+    # Singular values of the affine map from the triangle (in its own plane) to its layout
+    # triangle. In the orthonormal basis (e1 / |e1|, its normal in the plane) the 3D edges are
+    # columns [[p, q], [0, r]]; J = F [[p, q], [0, r]]^-1 with F the layout edges. Then
+    # s1 = sqrt(E^2 + H^2) + sqrt(F^2 + G^2) from J's conformal and anti-conformal parts, and
+    # s2 = |det J| / s1: sums of squares, accurate even for a similarity (s1 = s2).
+    # Meaningless (inf or NaN) on degenerate faces, which the metrics skip.
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        p = np.sqrt(g11)
+        shear = g12 / g11  # q / p
+        inverse_p = 1.0 / p
+        inverse_r = p / double_area
+        a = f1[0] * inverse_p
+        c = f1[1] * inverse_p
+        b = f2[0] - shear * f1[0]
+        b *= inverse_r
+        d = f2[1] - shear * f1[1]
+        d *= inverse_r
+        conformal_part = _norm2(a + d, c - b)
+        s1 = np.add(conformal_part, _norm2(a - d, c + b), out=out["stretch_max"])
+        s1 *= 0.5
+        np.divide(np.abs(layout_area) / double_area, s1, out=out["stretch_min"])
+
+
+def _norm2(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``sqrt(x^2 + y^2)`` for values far from overflow (faster than ``np.hypot``)."""
+    x *= x
+    x += y * y
+    return np.sqrt(x, out=x)
+
+
+#: Bits of a vertex's side code: for the plane x = 0 and, for each singular point s, the
+#: plane through the centre holding s and the x axis, whether the vertex is on the
+#: non-negative and on the non-positive side (both when within _SIDE_SLACK of the plane).
+_X_BITS = 0b000011
+_NORTH_BITS = 0b001100
+_SOUTH_BITS = 0b110000
+#: Far above the rounding of a plane distance (~1e-15 for coordinates below 1).
+_SIDE_SLACK = 1e-13
+
+
+def _sides_of_singular_lines(rows: np.ndarray, cap: PoleCap) -> np.ndarray:
+    """(n,) uint8: each vertex's side code (see ``_X_BITS``) for the two planes through each
+    singular line (the line through the centre and a singular point).
+
+    Both singular points ``(0, cos rho, +-sin rho)`` lie in the plane ``x = 0``; the second
+    plane for each has normal ``x_axis x s = (0, -+sin rho, cos rho)``. A triangle all on one
+    side of a plane through a line cannot meet that line, so only faces whose corners' codes
+    cover both sides of both planes need the exact test.
+    """
+    x, y, z = rows
+    _, cos_rho, sin_rho = cap.north
+    codes = np.zeros(x.shape, dtype=np.uint8)
+    for distance, bits in (
+        (x, _X_BITS),
+        (cos_rho * z - sin_rho * y, _NORTH_BITS),
+        (cos_rho * z + sin_rho * y, _SOUTH_BITS),
+    ):
+        low_bit = bits & -bits
+        codes |= np.where(distance >= -_SIDE_SLACK, low_bit, 0).astype(np.uint8)
+        codes |= np.where(distance <= _SIDE_SLACK, low_bit << 1, 0).astype(np.uint8)
+    return codes
+
+
+def _contains_singular_points(
+    corners, orientation, singular, face_sides, north_out, south_out
+) -> None:
+    """Whether the ray from the centre through each singular point meets each closed triangle.
+
+    Only faces whose corners lie on both sides of both planes through the singular line (see
+    :func:`_sides_of_singular_lines`) can; for them, with ``e_ij = det[s, c_i, c_j]`` over the
+    three edges and ``d = det[c0, c1, c2]``, exactly, the ray along ``s`` hits when all
+    ``e_ij >= 0`` and ``d > 0``, or all ``e_ij <= 0`` and ``d < 0`` (their sum is ``s . n``;
+    the hit is at ``t = d / (s . n) > 0``).
+    """
+    pairs = ((0, 1), (1, 2), (2, 0))
+    for point, hit, bits in zip(
+        singular, (north_out, south_out), (_NORTH_BITS, _SOUTH_BITS), strict=True
+    ):
+        hit[:] = False
+        both = _X_BITS | bits
+        rows = np.flatnonzero((face_sides & both) == both)
+        if rows.size == 0:
+            continue
+        sx, sy, sz = point
+        cx, cy, cz = corners[:, :, rows]
+        signs = [
+            orient3d_sign_components(sx, sy, sz, cx[i], cy[i], cz[i], cx[j], cy[j], cz[j])
+            for i, j in pairs
+        ]
+        d = orientation[rows]
+        all_nonnegative = (signs[0] >= 0) & (signs[1] >= 0) & (signs[2] >= 0)
+        all_nonpositive = (signs[0] <= 0) & (signs[1] <= 0) & (signs[2] <= 0)
+        hit[rows] = (all_nonnegative & (d > 0)) | (all_nonpositive & (d < 0))
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot product of (d, b) arrays."""
+    out = a[0] * b[0]
+    for i in range(1, len(a)):
+        out += a[i] * b[i]
+    return out

@@ -1,0 +1,204 @@
+"""The local frame every formula works in: ``q = R (p - c)`` (MATH.md, "Frames and names").
+
+``c`` is the centre the region is star-shaped from; ``R`` is a proper rotation whose rows
+are the local axes written in world coordinates. Local ``+Y`` is the warp's fixed pole, the
+centre of the forbidden cap.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .arrays import as_points, as_vector
+from .errors import TransformInputError
+
+#: How far from orthonormal with determinant +1 a matrix may be and still count as a rotation.
+ROTATION_TOLERANCE = 1e-9
+
+#: Smallest sine of the angle between ``pole`` and ``up`` that still fixes the roll.
+MIN_POLE_UP_SINE = 1e-9
+
+
+class Frame:
+    """A rigid change of coordinates from the world frame to the local frame.
+
+    Immutable; build one with a named constructor:
+
+    >>> frame = Frame.from_pole_up(pole=[0, 0, -1], up=[0, 1, 0], center=[0, 1.5, 0])
+    >>> frame.to_local([[0, 1.5, -2]])        # the pole direction lands on local +Y
+    array([[0., 2., 0.]])
+
+    Attributes
+    ----------
+    rotation : (3, 3) float
+        World-to-local rotation ``R`` (rows are the local axes in world coordinates).
+    center : (3,) float
+        The centre ``c`` in world coordinates.
+    """
+
+    __slots__ = ("_center", "_rotation")
+
+    def __init__(self, rotation: np.ndarray, center: np.ndarray) -> None:
+        # Private: the named constructors check their input before calling this.
+        self._rotation = np.array(rotation, dtype=np.float64)
+        self._center = np.array(center, dtype=np.float64)
+        self._rotation.flags.writeable = False
+        self._center.flags.writeable = False
+
+    # -- named constructors ------------------------------------------------------------
+
+    @classmethod
+    def identity(cls, center=(0.0, 0.0, 0.0)) -> Frame:
+        """The world axes, moved to ``center``."""
+        return cls(np.eye(3), as_vector(center, "center"))
+
+    @classmethod
+    def from_matrix(cls, rotation, center=(0.0, 0.0, 0.0)) -> Frame:
+        """A frame from a world-to-local rotation matrix (rows = local axes).
+
+        Parameters
+        ----------
+        rotation : (3, 3) float
+            Must be orthonormal and have determinant +1, each within ``ROTATION_TOLERANCE``.
+        center : (3,) float
+
+        Raises
+        ------
+        TransformInputError
+            Not a 3x3 finite matrix, not orthonormal, or a reflection (determinant -1).
+        """
+        return cls(check_rotation(rotation), as_vector(center, "center"))
+
+    @classmethod
+    def from_pole_up(cls, pole, up, center=(0.0, 0.0, 0.0)) -> Frame:
+        """A frame whose local ``+Y`` is the world direction ``pole``.
+
+        The part of ``up`` orthogonal to ``pole`` becomes local ``+Z``; local ``+X`` completes
+        a right-handed frame.
+
+        Parameters
+        ----------
+        pole : (3,) float, non-zero world direction
+        up : (3,) float, non-zero world direction not parallel to ``pole``
+        center : (3,) float
+
+        Raises
+        ------
+        TransformInputError
+            A zero vector, or ``up`` parallel to ``pole``.
+        """
+        pole_v = as_vector(pole, "pole")
+        up_v = as_vector(up, "up")
+        for name, vector in (("pole", pole_v), ("up", up_v)):
+            if not np.linalg.norm(vector) > 0:
+                raise TransformInputError(name, "must be a non-zero direction")
+        y_axis = pole_v / np.linalg.norm(pole_v)
+        up_unit = up_v / np.linalg.norm(up_v)
+        z_axis = up_unit - np.dot(up_unit, y_axis) * y_axis
+        sine = np.linalg.norm(z_axis)
+        if not sine > MIN_POLE_UP_SINE:
+            raise TransformInputError(
+                "up",
+                f"must not be parallel to pole (sine of their angle {sine:.3g} "
+                f"<= {MIN_POLE_UP_SINE:g})",
+            )
+        z_axis /= sine
+        x_axis = np.cross(y_axis, z_axis)
+        return cls(np.stack([x_axis, y_axis, z_axis]), as_vector(center, "center"))
+
+    # -- views -------------------------------------------------------------------------
+
+    @property
+    def rotation(self) -> np.ndarray:
+        return self._rotation
+
+    @property
+    def center(self) -> np.ndarray:
+        return self._center
+
+    @property
+    def pole(self) -> np.ndarray:
+        """(3,) float: the world direction of local ``+Y``."""
+        return self._rotation[1]
+
+    def __repr__(self) -> str:
+        return f"Frame(rotation={self._rotation.tolist()}, center={self._center.tolist()})"
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Frame):
+            return NotImplemented
+        return bool(
+            np.array_equal(self._rotation, other._rotation)
+            and np.array_equal(self._center, other._center)
+        )
+
+    __hash__ = None  # mutable-looking arrays inside; equality is by value
+
+    # -- maps --------------------------------------------------------------------------
+
+    def to_local(self, points) -> np.ndarray:
+        """World points to local coordinates, ``q = R (p - c)``.
+
+        Parameters
+        ----------
+        points : (n, 3) float, world frame
+
+        Returns
+        -------
+        (n, 3) float, local frame
+        """
+        return np.ascontiguousarray(self.local_rows(as_points(points)).T)
+
+    def local_rows(self, points: np.ndarray) -> np.ndarray:
+        """Local coordinates of already checked ``(n, 3)`` points as rows ``x, y, z`` (3, n).
+
+        The centre is subtracted before rotating, so points near it keep their precision.
+        """
+        return self._rotation @ (points - self._center).T
+
+    def to_world(self, points_local) -> np.ndarray:
+        """Local points back to the world frame, ``p = R^T q + c``.
+
+        Parameters
+        ----------
+        points_local : (n, 3) float
+
+        Returns
+        -------
+        (n, 3) float, world frame
+        """
+        q = as_points(points_local, "points_local")
+        return q @ self._rotation + self._center
+
+
+def check_rotation(rotation) -> np.ndarray:
+    """Return ``rotation`` as a (3, 3) float64 array if it is a proper rotation.
+
+    Raises
+    ------
+    TransformInputError
+        Not 3x3 and finite, ``R R^T`` differs from ``I`` by more than ``ROTATION_TOLERANCE``,
+        or the determinant is not +1 within that tolerance (a reflection).
+    """
+    try:
+        matrix = np.asarray(rotation, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TransformInputError("rotation", "must be a 3x3 matrix of numbers") from None
+    if matrix.shape != (3, 3):
+        raise TransformInputError("rotation", f"must be a 3x3 matrix, got shape {matrix.shape}")
+    if not np.isfinite(matrix).all():
+        raise TransformInputError("rotation", "has a NaN or Inf entry")
+    deviation = float(np.abs(matrix @ matrix.T - np.eye(3)).max())
+    if deviation > ROTATION_TOLERANCE:
+        raise TransformInputError(
+            "rotation",
+            f"is not orthonormal: R R^T differs from I by {deviation:.3g} "
+            f"(limit {ROTATION_TOLERANCE:g})",
+        )
+    determinant = float(np.linalg.det(matrix))
+    if abs(determinant - 1.0) > ROTATION_TOLERANCE:
+        raise TransformInputError(
+            "rotation",
+            f"has determinant {determinant:.6g}, not +1: a reflection, not a rotation",
+        )
+    return matrix

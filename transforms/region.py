@@ -1,0 +1,121 @@
+"""A region of a mesh flattened in one call: frame, chart, per-face measurements, validation
+and distortion metrics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .arrays import as_faces, as_points
+from .cap import PoleCap
+from .chart import Chart
+from .faces import measure_faces
+from .frames import Frame
+from .metrics import Distortion, distortion
+from .parallel import run_all
+from .validation import RegionValidation, validate
+
+
+@dataclass(frozen=True)
+class FlatRegion:
+    """A flattened region.
+
+    Attributes
+    ----------
+    vertex_ids : (k,) int, ascending: the rows of the input vertices the region uses
+    theta, phi, r : (k,) float, their coordinates (``theta`` polar, ``phi`` azimuth)
+    faces : (m, 3) int, the region's faces as positions in ``vertex_ids``, in input order
+    validation : RegionValidation, face lists by position in the region's face list
+    distortion : Distortion
+    """
+
+    vertex_ids: np.ndarray
+    theta: np.ndarray
+    phi: np.ndarray
+    r: np.ndarray
+    faces: np.ndarray
+    validation: RegionValidation
+    distortion: Distortion
+
+
+def flatten_region(
+    vertices,
+    faces,
+    frame: Frame,
+    chart: Chart,
+    winding: int | None = None,
+    threads: int = 1,
+) -> FlatRegion:
+    """Flatten the faces of a mesh region and check the result.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float, the mesh's vertices in the world frame
+    faces : (m, 3) int, the region's faces as indices into ``vertices``; at least one
+    frame : Frame, the centre and rotation
+    chart : Chart, the method and its cap
+    winding : +1 or -1 to fix which way normals point (see :func:`.validation.validate`)
+    threads : int, threads to share the work
+
+    Returns
+    -------
+    FlatRegion
+
+    Raises
+    ------
+    TransformInputError
+        Bad coordinates or indices, a region vertex at the centre (named by its row in
+        ``vertices``), no faces, or only degenerate faces.
+    """
+    vertices = as_points(vertices, "vertices")
+    faces = as_faces(faces, len(vertices))
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.ravel()] = True
+    vertex_ids = np.flatnonzero(used)
+    position = np.empty(len(vertices), dtype=np.int64)
+    position[vertex_ids] = np.arange(len(vertex_ids))
+    compact = position[faces]
+    local = frame.to_local(vertices[vertex_ids])
+    theta, phi, r = chart.forward(local, threads, "vertices", "vertex", vertex_ids)
+    validation, metrics = assess_region(local, compact, theta, phi, chart.cap, winding, threads)
+    return FlatRegion(
+        vertex_ids=vertex_ids,
+        theta=theta,
+        phi=phi,
+        r=r,
+        faces=compact,
+        validation=validation,
+        distortion=metrics,
+    )
+
+
+def assess_region(
+    vertices_local,
+    faces,
+    theta,
+    phi,
+    cap: PoleCap,
+    winding: int | None = None,
+    threads: int = 1,
+) -> tuple[RegionValidation, Distortion]:
+    """Validation and distortion metrics of a region already in the local frame.
+
+    Parameters
+    ----------
+    vertices_local : (n, 3) float, vertices in the local frame
+    faces : (m, 3) int, the region's faces as indices into ``vertices_local``
+    theta, phi : (n,) float, the vertices' coordinates from the chart
+    cap : PoleCap, the chart's cap
+    winding : +1 or -1 to fix which way normals point (see :func:`.validation.validate`)
+    threads : int, threads to share the work (validation and metrics also run side by side)
+
+    Returns
+    -------
+    (RegionValidation, Distortion)
+    """
+    measures = measure_faces(vertices_local, faces, theta, phi, cap, threads)
+    validation, metrics = run_all(
+        [lambda: validate(measures, winding, threads), lambda: distortion(measures)], threads
+    )
+    return validation, metrics

@@ -1,0 +1,135 @@
+"""The pole warp ``W_sigma`` (paper eq. 3) and distorted-pole coordinates (MATH.md, "The pole
+warp W_sigma").
+
+``W_sigma`` is stereographic projection from ``+Y``, scaling by ``sigma``, and projection
+back. On the unit sphere it has the singularity-free form
+
+    D = sigma^2 (1 + y) + (1 - y)
+    W(x, y, z) = (2 sigma x / D,  (sigma^2 (1 + y) - (1 - y)) / D,  2 sigma z / D)
+
+which this module uses everywhere. ``W_{1/sigma}`` is its inverse (Theorem 1).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .arrays import as_angles, as_points
+from .cap import check_sigma
+from .errors import TransformInputError, listed_rows
+from .spherical import angles, check_radii, radii, unit_vectors
+
+
+def pole_warp(directions, sigma: float) -> np.ndarray:
+    """``W_sigma`` of the given directions, in the stable form.
+
+    Parameters
+    ----------
+    directions : (n, 3) float, non-zero (each row is normalised first)
+    sigma : float, in ``[cap.SIGMA_MIN, cap.SIGMA_MAX]``
+
+    Returns
+    -------
+    (n, 3) float, unit vectors: ``+Y`` and ``-Y`` are fixed, ``W_1`` is the identity.
+
+    Raises
+    ------
+    TransformInputError
+        A zero or non-finite direction, or ``sigma`` out of range.
+    """
+    sigma = check_sigma(sigma)
+    u = as_points(directions, "directions")
+    norms = np.linalg.norm(u, axis=1)
+    if not (norms > 0).all():
+        text, rows = listed_rows(~(norms > 0), "direction")
+        raise TransformInputError("directions", f"{text}: zero vector has no direction", rows)
+    x, y, z = (u / norms[:, None]).T
+    s2 = sigma * sigma
+    # Near a pole 1 +- y cancels; on the sphere (1 + y)(1 - y) = x^2 + z^2 gives it exactly.
+    xz2 = x * x + z * z
+    with np.errstate(divide="ignore", invalid="ignore"):
+        one_plus_y = np.where(y < 0.0, xz2 / (1.0 - y), 1.0 + y)
+        one_minus_y = np.where(y > 0.0, xz2 / (1.0 + y), 1.0 - y)
+    denominator = s2 * one_plus_y + one_minus_y  # >= 2 min(sigma^2, 1) > 0 on the sphere
+    warped = (
+        np.stack([2.0 * sigma * x, s2 * one_plus_y - one_minus_y, 2.0 * sigma * z], axis=1)
+        / denominator[:, None]
+    )
+    # Exact arithmetic gives |W| = 1; renormalising removes the rounding the division adds.
+    return warped / np.linalg.norm(warped, axis=1)[:, None]
+
+
+def distorted_forward(points, sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Distorted-pole coordinates: ``(theta, phi) = sph(W_sigma(q / |q|))``, ``r = |q|``.
+
+    Parameters
+    ----------
+    points : (n, 3) float, local frame
+    sigma : float
+
+    Returns
+    -------
+    theta : (n,) float, in ``[0, pi]``
+    phi : (n,) float, in ``(-pi, pi]``
+    r : (n,) float
+
+    Raises
+    ------
+    TransformInputError
+        Non-finite coordinates, a point at the centre, or ``sigma`` out of range.
+    """
+    sigma = check_sigma(sigma)
+    x, y, z = as_points(points).T
+    r = radii(x, y, z)
+    check_radii(r)
+    return (*warped_angles(x, y, z, r, sigma), r)
+
+
+def warped_angles(
+    x: np.ndarray, y: np.ndarray, z: np.ndarray, r: np.ndarray, sigma: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 1's angles of ``W_sigma(q / r)`` for already checked local coordinates.
+
+    Multiplying the stable form by ``r D > 0`` changes no angle, so with
+    ``a = 2 sigma x``, ``b = (sigma^2 - 1) r + (sigma^2 + 1) y``, ``c = 2 sigma z``
+    the angles are ``theta = atan2(sqrt(a^2 + b^2), c)``, ``phi = atan2(b, a)``: no division,
+    no normalisation, and for ``sigma = 1`` exactly eq. 1 (``a, b, c = 2 x, 2 y, 2 z``).
+
+    Parameters
+    ----------
+    x, y, z : (n,) float, local coordinates
+    r : (n,) float, ``|q| > 0``
+    sigma : float, checked
+
+    Returns
+    -------
+    theta, phi : (n,) float
+    """
+    s2 = sigma * sigma
+    a = x * (2.0 * sigma)
+    b = y * (s2 + 1.0)
+    if s2 != 1.0:
+        b += r * (s2 - 1.0)
+    c = z * (2.0 * sigma)
+    return angles(a, b, c)
+
+
+def distorted_inverse(theta, phi, r=1.0, sigma: float = 0.3) -> np.ndarray:
+    """Back from distorted-pole coordinates: direction of ``(theta, phi)``, then
+    ``W_{1/sigma}``, then times ``r`` (the paper's last methodology step, with eq. 1's true
+    inverse).
+
+    Parameters
+    ----------
+    theta : (n,) float, in ``[0, pi]``
+    phi : (n,) float, in ``[-pi, pi]``
+    r : (n,) float or scalar, ``>= 0``
+    sigma : float
+
+    Returns
+    -------
+    (n, 3) float, local frame
+    """
+    sigma = check_sigma(sigma)
+    theta, phi, r = as_angles(theta, phi, r)
+    return pole_warp(unit_vectors(theta, phi), 1.0 / sigma) * r[:, None]

@@ -3,15 +3,24 @@
 from __future__ import annotations
 
 import io
+import os
 from functools import cache
 
 import numpy as np
 import pytest
 import trimesh
+from hypothesis import settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from service.samples import SAMPLES
+
+# Local runs explore new examples each time; CI (HYPOTHESIS_PROFILE=ci) replays a fixed,
+# larger set so a red build always means the same thing. No timing deadlines: speed is the
+# benchmarks' business.
+settings.register_profile("dev", deadline=None)
+settings.register_profile("ci", deadline=None, derandomize=True, max_examples=300)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
 
 
 @cache

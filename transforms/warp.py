@@ -91,9 +91,11 @@ def warped_angles(
     """Eq. 1's angles of ``W_sigma(q / r)`` for already checked local coordinates.
 
     Multiplying the stable form by ``r D > 0`` changes no angle, so with
-    ``a = 2 sigma x``, ``b = (sigma^2 - 1) r + (sigma^2 + 1) y``, ``c = 2 sigma z``
-    the angles are ``theta = atan2(sqrt(a^2 + b^2), c)``, ``phi = atan2(b, a)``: no division,
-    no normalisation, and for ``sigma = 1`` exactly eq. 1 (``a, b, c = 2 x, 2 y, 2 z``).
+    ``a = 2 sigma x``, ``b = sigma^2 (r + y) - (r - y)``, ``c = 2 sigma z`` the angles are
+    ``theta = atan2(sqrt(a^2 + b^2), c)``, ``phi = atan2(b, a)``: no division by ``D``, no
+    normalisation, and for ``sigma = 1`` exactly eq. 1 (``a, b, c = 2 x, 2 y, 2 z``). Near
+    ``-Y`` the sum ``r + y`` cancels; there it is ``(x^2 + z^2) / (r - y)`` instead (and
+    ``r - y`` likewise near ``+Y``), which keeps full precision for any sigma.
 
     Parameters
     ----------
@@ -105,13 +107,19 @@ def warped_angles(
     -------
     theta, phi : (n,) float
     """
-    s2 = sigma * sigma
     a = x * (2.0 * sigma)
-    b = y * (s2 + 1.0)
-    if s2 != 1.0:
-        b += r * (s2 - 1.0)
     c = z * (2.0 * sigma)
-    return angles(a, b, c)
+    if sigma == 1.0:
+        return angles(a, y * 2.0, c)
+    across = x * x
+    across += z * z  # x^2 + z^2 = (r + y)(r - y)
+    plus, minus = r + y, r - y
+    with np.errstate(divide="ignore", invalid="ignore"):
+        plus = np.where(y < 0.0, across / minus, plus)
+        minus = np.where(y > 0.0, across / plus, minus)
+    plus *= sigma * sigma
+    plus -= minus
+    return angles(a, plus, c)
 
 
 def distorted_inverse(theta, phi, r=1.0, sigma: float = 0.3) -> np.ndarray:

@@ -7,10 +7,14 @@ median of several runs after a warm-up:
 * the separable forward transform;
 * validation (per-face measurements, flags, margins, loops) plus distortion metrics;
 
-and, in the same run on the same points, VTK's ``vtkTextureMapToSphere`` (the peer). Prints a
-Markdown table; ``--write-docs`` also records it in ``docs/benchmarks.md``.
+and, in the same run on the same points, VTK's ``vtkTextureMapToSphere`` (the peer). It runs
+twice, in child processes: once with glibc's default allocator settings and once with the
+settings the service starts with (:func:`service.allocator.keep_large_blocks`: large blocks
+stay in the process instead of going back to the kernel, so numpy's temporaries do not fault
+in fresh zeroed pages on every call). Prints Markdown tables; ``--write-docs`` also records them in
+``docs/benchmarks.md``.
 
-    python -m benchmarks.transforms_bench [--subdivisions 3] [--runs 7] [--write-docs]
+    python -m benchmarks.transforms_bench [--subdivisions 3] [--runs 11] [--write-docs]
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import io
 import os
 import platform
 import statistics
+import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -29,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from service.allocator import keep_large_blocks
 from service.samples import SAMPLES
 from transforms import Chart, Frame, PoleCap, assess_region, world_to_angles
 
@@ -117,11 +123,39 @@ def machine() -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--subdivisions", type=int, default=3, help="4^k times the faces")
-    parser.add_argument("--runs", type=int, default=7, help="timed runs per step (median)")
+    parser.add_argument("--runs", type=int, default=11, help="timed runs per step (median)")
     parser.add_argument("--write-docs", action="store_true", help="record in docs/benchmarks.md")
+    parser.add_argument("--child", choices=["default", "service"], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.child:
+        if args.child == "service" and not keep_large_blocks():
+            raise SystemExit("the service's allocator settings need glibc")
+        print(measure(args.subdivisions, args.runs))
+        return 0
 
-    vertices, faces = load_mesh(args.subdivisions)
+    sections = []
+    for allocator, title in (
+        ("default", "glibc's default allocator settings"),
+        ("service", "the service's allocator settings (service/allocator.py)"),
+    ):
+        child = [sys.executable, "-m", "benchmarks.transforms_bench", "--child", allocator]
+        child += ["--subdivisions", str(args.subdivisions), "--runs", str(args.runs)]
+        table = subprocess.run(child, check=True, capture_output=True, text=True).stdout
+        sections.append(f"### With {title}\n\n{table.strip()}")
+    report = "\n\n".join(sections)
+    print(report)
+    if args.write_docs:
+        text = DOCS.read_text() if DOCS.exists() else f"# Benchmarks\n\n{BEGIN}\n{END}\n"
+        head, rest = text.split(BEGIN, 1)
+        _, tail = rest.split(END, 1)
+        DOCS.write_text(f"{head}{BEGIN}\n{report}\n{END}{tail}")
+        print(f"\nrecorded in {DOCS}", file=sys.stderr)
+    return 0
+
+
+def measure(subdivisions: int, runs: int) -> str:
+    """Run every step and the peer; return the Markdown table."""
+    vertices, faces = load_mesh(subdivisions)
     centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
     frame = Frame.from_pole_up(pole=[0.0, -1.0, 0.0], up=[0.0, 0.0, 1.0], center=centre)
     cap = PoleCap.from_sigma(0.3)
@@ -132,8 +166,9 @@ def main(argv: list[str] | None = None) -> int:
     run_vtk, vtk_coordinates, vtk_version = vtk_peer(vertices, faces, centre)
     # The peer must compute what we think it computes: VTK's t is eq. 1's polar angle / pi.
     standard_theta, _, _ = world_to_angles(vertices, Frame.identity(centre), Chart.standard())
-    assert np.allclose(vtk_coordinates()[:, 1], 1.0 - standard_theta / np.pi, atol=1e-5) or (
-        np.allclose(vtk_coordinates()[:, 1], standard_theta / np.pi, atol=1e-5)
+    t = vtk_coordinates()[:, 1]
+    assert np.allclose(t, standard_theta / np.pi, atol=1e-5) or np.allclose(
+        t, 1.0 - standard_theta / np.pi, atol=1e-5
     ), "vtkTextureMapToSphere did not produce the spherical map"
 
     steps: list[tuple[str, int, Callable[[], object]]] = [
@@ -148,21 +183,20 @@ def main(argv: list[str] | None = None) -> int:
             lambda: assess_region(local, faces, theta, phi, cap, threads=2),
         ),
     ]
-    vtk_times = timed(run_vtk, args.runs)
+    vtk_times = timed(run_vtk, runs)
     rows = []
     for name, threads, work in steps:
-        ours = timed(work, args.runs)
-        vtk_again = timed(run_vtk, args.runs)  # the peer again, under the same conditions
-        vtk_times += vtk_again
-        rows.append((name, threads, ours, vtk_again))
+        ours = timed(work, runs)
+        peer = timed(run_vtk, runs)  # the peer again, under the same conditions
+        vtk_times += peer
+        rows.append((name, threads, ours, peer))
 
-    vtk_median = statistics.median(vtk_times)
     lines = [
-        f"Mesh: `lee-perry-smith.obj` subdivided {args.subdivisions} times: "
-        f"{len(vertices):,} vertices, {len(faces):,} faces. "
-        f"Median of {args.runs} runs after a warm-up; VTK {vtk_version} "
-        f"`vtkTextureMapToSphere` (plain spherical map, same points) re-timed after each step, "
-        f"median over all its runs {vtk_median * 1e3:.1f} ms.",
+        f"Mesh: `lee-perry-smith.obj` subdivided {subdivisions} times: "
+        f"{len(vertices):,} vertices, {len(faces):,} faces. Median of {runs} runs after a "
+        f"warm-up. Peer: VTK {vtk_version} `vtkTextureMapToSphere` (plain spherical map) on "
+        f"the same points, re-timed after each step (median over all its runs "
+        f"{statistics.median(vtk_times) * 1e3:.1f} ms).",
         "",
         "| step | threads | meshflat median (ms) | min (ms) | VTK median (ms) "
         "| ratio to VTK | target | met |",
@@ -172,25 +206,17 @@ def main(argv: list[str] | None = None) -> int:
         median, peer_median = statistics.median(ours), statistics.median(peer)
         ratio = median / peer_median
         target = TARGETS.get(name)
+        met = f"<= {target:g}x | {'yes' if ratio <= target else 'no'} |" if target else "- | - |"
         lines.append(
             f"| {name} | {threads} | {median * 1e3:.1f} | {min(ours) * 1e3:.1f} | "
-            f"{peer_median * 1e3:.1f} | {ratio:.2f}x | "
-            + (f"<= {target:g}x | {'yes' if ratio <= target else 'no'} |" if target else "- | - |")
+            f"{peer_median * 1e3:.1f} | {ratio:.2f}x | {met}"
         )
     lines += [
         "",
         f"Machine: {machine()}. Python {platform.python_version()}, numpy {np.__version__}. "
         f"Run {datetime.datetime.now(datetime.UTC).strftime('%Y-%m-%d %H:%M UTC')}.",
     ]
-    table = "\n".join(lines)
-    print(table)
-    if args.write_docs:
-        text = DOCS.read_text() if DOCS.exists() else f"# Benchmarks\n\n{BEGIN}\n{END}\n"
-        head, rest = text.split(BEGIN, 1)
-        _, tail = rest.split(END, 1)
-        DOCS.write_text(f"{head}{BEGIN}\n{table}\n{END}{tail}")
-        print(f"\nrecorded in {DOCS}", file=sys.stderr)
-    return 0
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

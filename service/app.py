@@ -11,6 +11,7 @@ from fastapi import FastAPI
 from pydantic import BaseModel
 from starlette.concurrency import run_in_threadpool
 
+from .allocator import keep_large_blocks
 from .selfcheck import run_self_check
 
 logger = logging.getLogger("meshflat")
@@ -23,7 +24,10 @@ if not logger.handlers:
 
 @asynccontextmanager
 async def lifespan(_: FastAPI) -> AsyncIterator[None]:
-    """Flatten a bundled scan once at start-up, off the event loop, and log the outcome."""
+    """Tune the allocator, then flatten a bundled scan once, off the event loop, and log the
+    outcome."""
+    if not keep_large_blocks():
+        logger.info("allocator: not glibc, default settings kept")
     check = await run_in_threadpool(run_self_check)
     (logger.info if check.ok else logger.error)(str(check))
     yield

@@ -49,7 +49,7 @@ class FaceMeasures:
     double_area : float, ``|(c1 - c0) x (c2 - c0)|`` in scaled units
     layout_double_area : float, twice the signed area in the ``(phi, theta)`` plane
     degenerate : bool, zero area in 3D or in the layout (``DEGENERATE_RTOL``)
-    phi_span : float, ``max(phi) - min(phi)`` over the corners
+    crosses_seam : bool, the corners' ``phi`` span more than ``pi`` (MATH.md's seam test)
     contains_north, contains_south : bool, the ray from the centre through that singular
         point of ``cap`` meets the closed triangle (exactly)
     stretch_max, stretch_min : float, singular values ``s1 >= s2`` of the affine map from the
@@ -64,7 +64,7 @@ class FaceMeasures:
     double_area: np.ndarray
     layout_double_area: np.ndarray
     degenerate: np.ndarray
-    phi_span: np.ndarray
+    crosses_seam: np.ndarray
     contains_north: np.ndarray
     contains_south: np.ndarray
     stretch_max: np.ndarray
@@ -120,7 +120,7 @@ def measure_faces(
         "double_area": np.empty(m),
         "layout_double_area": np.empty(m),
         "degenerate": np.empty(m, dtype=bool),
-        "phi_span": np.empty(m),
+        "crosses_seam": np.empty(m, dtype=bool),
         "contains_north": np.empty(m, dtype=bool),
         "contains_south": np.empty(m, dtype=bool),
         "stretch_max": np.empty(m),
@@ -176,11 +176,9 @@ def _measure_block(
     degenerate = np.less_equal(double_area, DEGENERATE_RTOL * reference, out=out["degenerate"])
     degenerate |= np.abs(layout_area) <= DEGENERATE_RTOL * (h11 + h22)
     phi = layout[0]
-    np.subtract(
-        np.maximum(np.maximum(phi[0], phi[1]), phi[2]),
-        np.minimum(np.minimum(phi[0], phi[1]), phi[2]),
-        out=out["phi_span"],
-    )
+    span = np.maximum(np.maximum(phi[0], phi[1]), phi[2])
+    span -= np.minimum(np.minimum(phi[0], phi[1]), phi[2])
+    np.greater(span, math.pi, out=out["crosses_seam"])
     _contains_singular_points(
         corners, orientation, singular, face_sides, out["contains_north"], out["contains_south"]
     )

@@ -89,7 +89,8 @@ def face_distortion(measures: FaceMeasures) -> FaceDistortion:
     TransformInputError
         Every face is degenerate.
     """
-    measured = np.flatnonzero(~measures.degenerate)
+    degenerate = measures.degenerate
+    measured = np.flatnonzero(~degenerate) if degenerate.any() else np.arange(len(measures))
     if measured.size == 0:
         raise TransformInputError(
             "faces", "every face of the region has zero area in 3D or in the layout"

@@ -90,7 +90,7 @@ def validate(
     orientation = measures.orientation
     if winding is None:
         winding = -1 if int(orientation.sum(dtype=np.int64)) < 0 else 1
-    seam = measures.phi_span > math.pi
+    seam = measures.crosses_seam
     folded = (LAYOUT_ORIENTATION * winding) * measures.layout_double_area < 0
     folded &= ~measures.degenerate
     backfacing = orientation != winding  # winding * orientation <= 0, orientation in {-1, 0, 1}

@@ -13,15 +13,15 @@ and ``theta`` up (``LAYOUT_ORIENTATION = -1``).
 from __future__ import annotations
 
 from enum import StrEnum
+from functools import partial
 
 import numpy as np
 
 from .arrays import as_points
 from .cap import PoleCap
 from .frames import Frame
-from .parallel import map_blocks
 from .separable import separable_angles, separable_inverse
-from .spherical import angles, check_radii, radii, spherical_to_cartesian
+from .spherical import AngleKernel, eq1_angles, points_to_angles, spherical_to_cartesian
 from .warp import distorted_inverse, warped_angles
 
 #: Sign of a front-facing triangle's signed area in the (phi, theta) layout, every method.
@@ -132,29 +132,16 @@ class Chart:
         self, points: np.ndarray, frame: Frame | None, threads: int, naming: tuple
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The map on checked ``(n, 3)`` points, moved to the local frame first when ``frame``
-        is given, block by block so the temporaries stay in cache. ``naming`` is
-        ``(field, noun, row_ids)`` for errors."""
-        field, noun, row_ids = naming
-        n = len(points)
-        theta, phi, r = np.empty(n), np.empty(n), np.empty(n)
+        is given. ``naming`` is ``(field, noun, row_ids)`` for errors."""
+        local_rows = None if frame is None else frame.local_rows
+        return points_to_angles(points, self._kernel(), local_rows, threads, *naming)
 
-        def forward(block: slice) -> None:
-            if frame is None:
-                x, y, z = np.ascontiguousarray(points[block].T)
-            else:
-                x, y, z = frame.local_rows(points[block])
-            radius = radii(x, y, z)
-            check_radii(radius, field, noun, block.start, row_ids)
-            r[block] = radius
-            if self._method is Method.STANDARD:
-                theta[block], phi[block] = angles(x, y, z)
-            elif self._method is Method.DISTORTED:
-                theta[block], phi[block] = warped_angles(x, y, z, radius, self._cap.sigma)
-            else:
-                theta[block], phi[block] = separable_angles(x, y, z, radius, self._cap.rho)
-
-        map_blocks(forward, n, threads)
-        return theta, phi, r
+    def _kernel(self) -> AngleKernel:
+        if self._method is Method.STANDARD:
+            return eq1_angles
+        if self._method is Method.DISTORTED:
+            return partial(warped_angles, sigma=self._cap.sigma)
+        return partial(separable_angles, rho=self._cap.rho)
 
     def inverse(self, theta, phi, r=1.0) -> np.ndarray:
         """``(theta, phi, r)`` back to local points.

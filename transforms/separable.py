@@ -28,12 +28,13 @@ in ``rtsafe``): the bracket at least halves every second step, so it always conv
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 
 from .arrays import as_angles, as_points
 from .cap import check_rho
-from .spherical import check_radii, half_open_azimuth, radii
+from .spherical import half_open_azimuth, points_to_angles
 
 #: Stop when a bisection step is below this (radians).
 THETA_TOLERANCE = 1e-15
@@ -62,11 +63,7 @@ def separable_forward(points, rho: float) -> tuple[np.ndarray, np.ndarray, np.nd
     TransformInputError
         Non-finite coordinates, a point at the centre, or ``rho`` out of range.
     """
-    rho = check_rho(rho)
-    x, y, z = as_points(points).T
-    r = radii(x, y, z)
-    check_radii(r)
-    return (*separable_angles(x, y, z, r, rho), r)
+    return points_to_angles(as_points(points), partial(separable_angles, rho=check_rho(rho)))
 
 
 def separable_angles(

@@ -7,13 +7,22 @@ not the inverse of eq. 1; :func:`spherical_to_cartesian` is.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from .arrays import as_angles, as_points
 from .errors import TransformInputError, listed_rows
+from .parallel import map_blocks
 
 #: A point closer than this to the centre has no direction: the centre is on the surface.
 MIN_RADIUS = 1e-100
+
+#: Computes ``(theta, phi)`` from rows ``x, y, z`` of checked local coordinates and their
+#: distances ``r`` from the centre (each ``(n,)`` float).
+AngleKernel = Callable[
+    [np.ndarray, np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]
+]
 
 
 def cartesian_to_spherical(points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -34,11 +43,56 @@ def cartesian_to_spherical(points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     TransformInputError
         A non-finite coordinate, or a point at the centre (``r = 0``).
     """
-    x, y, z = as_points(points).T
-    r = radii(x, y, z)
-    check_radii(r)
-    theta, phi = angles(x, y, z)
+    return points_to_angles(as_points(points), eq1_angles)
+
+
+def points_to_angles(
+    points: np.ndarray,
+    kernel: AngleKernel,
+    local_rows: Callable[[np.ndarray], np.ndarray] | None = None,
+    threads: int = 1,
+    field: str = "points",
+    noun: str = "point",
+    row_ids: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Run an angle kernel over checked points, block by block so temporaries stay in cache.
+
+    Parameters
+    ----------
+    points : (n, 3) float, checked (``arrays.as_points``)
+    kernel : AngleKernel, e.g. :func:`eq1_angles` or ``warp.warped_angles`` with its sigma
+    local_rows : maps a block of points to local rows ``(3, b)``; ``None`` when the points
+        are already local
+    threads : int, threads to spread the blocks over
+    field, noun, row_ids : how the error for a point at the centre names the input, a row,
+        and each row's id (see :func:`check_radii`)
+
+    Returns
+    -------
+    theta, phi, r : (n,) float
+    """
+    n = len(points)
+    theta, phi, r = np.empty(n), np.empty(n), np.empty(n)
+
+    def run(block: slice) -> None:
+        if local_rows is None:
+            x, y, z = np.ascontiguousarray(points[block].T)
+        else:
+            x, y, z = local_rows(points[block])
+        radius = radii(x, y, z)
+        check_radii(radius, field, noun, block.start, row_ids)
+        r[block] = radius
+        theta[block], phi[block] = kernel(x, y, z, radius)
+
+    map_blocks(run, n, threads)
     return theta, phi, r
+
+
+def eq1_angles(
+    x: np.ndarray, y: np.ndarray, z: np.ndarray, r: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 1 as an :data:`AngleKernel` (``r`` is not needed)."""
+    return angles(x, y, z)
 
 
 def spherical_to_cartesian(theta, phi, r=1.0) -> np.ndarray:

@@ -12,12 +12,14 @@ which this module uses everywhere. ``W_{1/sigma}`` is its inverse (Theorem 1).
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from .arrays import as_angles, as_points
 from .cap import check_sigma
 from .errors import TransformInputError, listed_rows
-from .spherical import angles, check_radii, radii, unit_vectors
+from .spherical import angles, points_to_angles, unit_vectors
 
 
 def pole_warp(directions, sigma: float) -> np.ndarray:
@@ -78,11 +80,7 @@ def distorted_forward(points, sigma: float) -> tuple[np.ndarray, np.ndarray, np.
     TransformInputError
         Non-finite coordinates, a point at the centre, or ``sigma`` out of range.
     """
-    sigma = check_sigma(sigma)
-    x, y, z = as_points(points).T
-    r = radii(x, y, z)
-    check_radii(r)
-    return (*warped_angles(x, y, z, r, sigma), r)
+    return points_to_angles(as_points(points), partial(warped_angles, sigma=check_sigma(sigma)))
 
 
 def warped_angles(

@@ -21,9 +21,10 @@ from .conftest import grid_mesh, load_sample
 
 
 def stretched_layout(a: float, b: float, z: float = 1.0):
-    """A planar grid whose layout is (phi, theta) = (a x, b y): singular values a and b."""
-    vertices, faces = grid_mesh(np.linspace(-1, 1, 7), np.linspace(-1, 1, 5), z)
-    return vertices, faces, b * vertices[:, 1] + 2.0, a * vertices[:, 0]
+    """A planar grid whose layout is (phi, theta) = (a x, b y) + const: singular values a and
+    b (the grid is small enough for theta to stay in [0, pi] and phi in [-pi, pi])."""
+    vertices, faces = grid_mesh(np.linspace(-0.2, 0.2, 7), np.linspace(-0.2, 0.2, 5), z)
+    return vertices, faces, b * vertices[:, 1] + 1.5, a * vertices[:, 0]
 
 
 @pytest.mark.parametrize(("a", "b"), [(1.0, 1.0), (2.0, 1.0), (0.5, 3.0), (0.01, 0.01)])

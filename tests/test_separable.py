@@ -57,14 +57,14 @@ def test_many_directions_converge_and_round_trip():
         theta, phi, r = separable_forward(u * 3.0, rho)
         assert np.isfinite(theta).all() and np.isfinite(phi).all()
         assert np.abs(separable_residual(np.pi / 2 - theta, u, rho)).max() < 1e-12
-        back = separable_inverse(theta, phi, r, rho)
+        back = separable_inverse(theta, phi, r, rho=rho)
         assert np.abs(back - u * 3.0).max() < 1e-11
 
 
 @given(directions, rhos, st.floats(1e-3, 1e3))
 def test_inverse_round_trip(u, rho, scale):
     theta, phi, r = separable_forward(u * scale, rho)
-    back = separable_inverse(theta, phi, r, rho)
+    back = separable_inverse(theta, phi, r, rho=rho)
     assert np.allclose(back, u * scale, atol=1e-11 * scale)
 
 

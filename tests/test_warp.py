@@ -103,7 +103,7 @@ def test_distorted_forward_is_eq1_of_the_warp(u, scale, sigma):
 @given(directions, st.floats(1e-3, 1e3), st.floats(0.01, 100.0))
 def test_distorted_round_trip(u, scale, sigma):
     theta, phi, r = distorted_forward(u * scale, sigma)
-    back = distorted_inverse(theta, phi, r, sigma)
+    back = distorted_inverse(theta, phi, r, sigma=sigma)
     assert np.allclose(back, u * scale, atol=1e-12 * scale * max(sigma, 1 / sigma))
 
 

@@ -10,6 +10,49 @@ from .errors import TransformInputError, listed_rows
 MAX_ABS_COORDINATE = 1e100
 
 
+def numeric_array(value, field: str, what: str, kinds: str = "iuf") -> np.ndarray:
+    """``value`` as a numpy array of real numbers (dtype kinds ``kinds``), or an error.
+
+    Refuses what numpy would convert quietly or fail on: ragged lists, strings, booleans,
+    complex numbers, objects, integers too large for a float.
+
+    Raises
+    ------
+    TransformInputError
+        Naming ``field`` and saying it must be ``what``.
+    """
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError, OverflowError):
+        raise TransformInputError(field, f"must be {what}") from None
+    if array.size and array.dtype.kind not in kinds:
+        raise TransformInputError(field, f"must be {what}, got {_kind_name(array)}")
+    return array
+
+
+def number(value, field: str) -> float:
+    """``value`` as a Python float: a real number, not a string or a boolean.
+
+    Raises
+    ------
+    TransformInputError
+        Not a real number, or too large for a float.
+    """
+    if isinstance(value, (bool, np.bool_, str, bytes)):
+        raise TransformInputError(field, f"must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise TransformInputError(field, f"must be a number, got {value!r}") from None
+    except OverflowError:
+        raise TransformInputError(field, "is too large for a 64-bit float") from None
+
+
+def _kind_name(array: np.ndarray) -> str:
+    names = {"b": "booleans", "c": "complex numbers", "U": "strings", "S": "bytes", "O": "objects"}
+    return names.get(array.dtype.kind, str(array.dtype))
+
+
 def as_points(points, field: str = "points") -> np.ndarray:
     """Return ``points`` as a C-contiguous ``(n, 3)`` float64 array of finite coordinates.
 
@@ -24,10 +67,7 @@ def as_points(points, field: str = "points") -> np.ndarray:
         Wrong shape, a NaN or Inf coordinate, or a magnitude above ``MAX_ABS_COORDINATE``;
         the message lists the offending rows.
     """
-    try:
-        array = np.ascontiguousarray(points, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TransformInputError(field, f"must be an (n, 3) array of numbers ({exc})") from None
+    array = numeric_array(points, field, "an (n, 3) array of numbers")
     if array.ndim != 2 or array.shape[1] != 3:
         raise TransformInputError(field, f"must have shape (n, 3), got {array.shape}")
     # One pass on the happy path: NaN fails the comparison, Inf exceeds the bound.
@@ -40,7 +80,7 @@ def as_points(points, field: str = "points") -> np.ndarray:
         raise TransformInputError(
             field, f"coordinate beyond +-{MAX_ABS_COORDINATE:g} in {text}", rows
         )
-    return array
+    return np.ascontiguousarray(array, dtype=np.float64)
 
 
 def as_vector(vector, field: str) -> np.ndarray:
@@ -51,10 +91,7 @@ def as_vector(vector, field: str) -> np.ndarray:
     TransformInputError
         Not three finite numbers within ``MAX_ABS_COORDINATE``.
     """
-    try:
-        array = np.asarray(vector, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TransformInputError(field, "must be three numbers [x, y, z]") from None
+    array = numeric_array(vector, field, "three numbers [x, y, z]").astype(np.float64)
     if array.shape != (3,):
         raise TransformInputError(
             field, f"must be three numbers [x, y, z], got shape {array.shape}"
@@ -82,10 +119,8 @@ def as_angles(theta, phi, r=1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     arrays = {}
     for name, value in (("theta", theta), ("phi", phi), ("r", r)):
-        try:
-            arrays[name] = np.atleast_1d(np.asarray(value, dtype=np.float64))
-        except (TypeError, ValueError):
-            raise TransformInputError(name, "must be a list of numbers") from None
+        array = numeric_array(value, name, "a list of numbers")
+        arrays[name] = np.atleast_1d(array.astype(np.float64))
         if arrays[name].ndim != 1:
             raise TransformInputError(
                 name, f"must be one-dimensional, got shape {arrays[name].shape}"
@@ -114,8 +149,31 @@ def as_angles(theta, phi, r=1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     )
 
 
+def unit_rows(vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``vectors`` scaled to unit length, and which rows are zero.
+
+    Each row is divided by its largest magnitude before its length is taken, so neither
+    tiny (1e-300) nor huge rows lose precision to underflow or overflow.
+
+    Parameters
+    ----------
+    vectors : (n, 3) float, finite
+
+    Returns
+    -------
+    units : (n, 3) float, unit rows (zero rows stay zero)
+    zero : (n,) bool
+    """
+    magnitude = np.abs(vectors)
+    largest = np.maximum(np.maximum(magnitude[:, 0], magnitude[:, 1]), magnitude[:, 2])
+    zero = largest == 0.0
+    scaled = vectors / np.where(zero, 1.0, largest)[:, None]
+    return scaled / np.where(zero, 1.0, np.linalg.norm(scaled, axis=1))[:, None], zero
+
+
 def as_faces(faces, n_vertices: int, field: str = "faces") -> np.ndarray:
-    """Return ``faces`` as a C-contiguous ``(m, 3)`` int64 array of vertex indices.
+    """Return ``faces`` as a C-contiguous ``(m, 3)`` array of vertex indices: int32 when the
+    indices fit (half the memory traffic of int64 in every pass over faces), else int64.
 
     Parameters
     ----------
@@ -128,12 +186,9 @@ def as_faces(faces, n_vertices: int, field: str = "faces") -> np.ndarray:
         Wrong shape, non-integer entries, or an index outside ``[0, n_vertices)``; the message
         lists the offending faces.
     """
-    array = np.asarray(faces)
+    array = numeric_array(faces, field, "an (m, 3) array of integer vertex indices", "iu")
     if array.ndim != 2 or array.shape[1] != 3:
         raise TransformInputError(field, f"must have shape (m, 3), got {array.shape}")
-    if array.size and not np.issubdtype(array.dtype, np.integer):
-        raise TransformInputError(field, f"must hold integer vertex indices, got {array.dtype}")
-    array = np.ascontiguousarray(array, dtype=np.int64)
     if array.size and (array.min() < 0 or array.max() >= n_vertices):
         bad = ((array < 0) | (array >= n_vertices)).any(axis=1)
         text, rows = listed_rows(bad, "face")
@@ -142,7 +197,7 @@ def as_faces(faces, n_vertices: int, field: str = "faces") -> np.ndarray:
             f"{text}: vertex index outside [0, {n_vertices}) (there are {n_vertices} vertices)",
             rows,
         )
-    return array
+    return np.ascontiguousarray(array, dtype=np.int32 if n_vertices < 2**31 else np.int64)
 
 
 #: Rows handled at a time by the blocked passes: temporaries stay in cache and are reused by

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from .arrays import number
 from .errors import TransformInputError
 
 #: Accepted range of sigma. Outside it sigma^2 loses the warp to rounding.
@@ -84,14 +85,17 @@ class PoleCap:
 
     @property
     def sigma(self) -> float:
+        """The warp parameter, ``tan(rho / 2)``."""
         return self._sigma
 
     @property
     def rho(self) -> float:
+        """The pole angle in radians, ``2 atan(sigma)``."""
         return self._rho
 
     @property
     def rho_deg(self) -> float:
+        """The pole angle in degrees."""
         return math.degrees(self._rho)
 
     @property
@@ -145,18 +149,18 @@ class PoleCap:
 
 
 def _half_angle_tan(rho: float) -> float:
-    """``tan(rho / 2)`` by the half-angle form without cancellation (exactly 1 at 90 degrees)."""
+    """``tan(rho / 2)`` by the half-angle form without cancellation (exactly 1 at 90 degrees),
+    kept in ``[SIGMA_MIN, SIGMA_MAX]`` (the ends of the rho range may round just outside)."""
     if rho <= math.pi / 2.0:
-        return math.sin(rho) / (1.0 + math.cos(rho))
-    return (1.0 - math.cos(rho)) / math.sin(rho)
+        sigma = math.sin(rho) / (1.0 + math.cos(rho))
+    else:
+        sigma = (1.0 - math.cos(rho)) / math.sin(rho)
+    return min(max(sigma, SIGMA_MIN), SIGMA_MAX)
 
 
 def _check_rho(value, field: str, to_radians: float) -> float:
     """``value * to_radians`` as a float in ``[RHO_MIN, RHO_MAX]``, or an error naming ``field``."""
-    try:
-        rho = float(value) * to_radians
-    except (TypeError, ValueError):
-        raise TransformInputError(field, "must be a number") from None
+    rho = number(value, field) * to_radians
     if not RHO_MIN <= rho <= RHO_MAX:
         low, high = RHO_MIN / to_radians, RHO_MAX / to_radians
         raise TransformInputError(
@@ -187,10 +191,7 @@ def check_sigma(sigma) -> float:
     TransformInputError
         Not a number, not finite, ``<= 0``, or outside the range.
     """
-    try:
-        value = float(sigma)
-    except (TypeError, ValueError):
-        raise TransformInputError("sigma", "must be a number") from None
+    value = number(sigma, "sigma")
     if not SIGMA_MIN <= value <= SIGMA_MAX:
         raise TransformInputError(
             "sigma", f"must be finite and in [{SIGMA_MIN:g}, {SIGMA_MAX:g}], got {value!r}"

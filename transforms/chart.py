@@ -1,4 +1,5 @@
-"""A chart: one of the three ways to give a direction its ``(theta, phi)``.
+"""A chart: one of the three ways to give a direction its ``(theta, phi)`` (MATH.md: eq. 1,
+"The pole warp W_sigma", "The alternative ("separable") approach").
 
 * ``standard``: eq. 1 alone; its cap is ``rho = 90`` degrees (``sigma = 1``).
 * ``distorted``: the pole warp ``W_sigma``, then eq. 1 (:mod:`.warp`).
@@ -19,6 +20,7 @@ import numpy as np
 
 from .arrays import as_points
 from .cap import PoleCap
+from .errors import TransformInputError
 from .frames import Frame
 from .separable import separable_angles, separable_inverse
 from .spherical import AngleKernel, eq1_angles, points_to_angles, spherical_to_cartesian
@@ -71,15 +73,22 @@ class Chart:
     @classmethod
     def from_method(cls, method: str | Method, cap: PoleCap | None = None) -> Chart:
         """A chart by method name; ``cap`` is ignored for ``standard`` and required otherwise."""
-        method = Method(method)
+        try:
+            method = Method(method)
+        except ValueError:
+            names = ", ".join(m.value for m in Method)
+            raise TransformInputError("method", f"must be one of {names}, got {method!r}") from None
         if method is Method.STANDARD:
             return cls.standard()
         if cap is None:
-            raise ValueError(f"method {method.value!r} needs a cap")
+            raise TransformInputError(
+                "sigma", f"method {method.value!r} needs sigma or a pole angle"
+            )
         return cls(method, cap)
 
     @property
     def method(self) -> Method:
+        """How directions get their angles."""
         return self._method
 
     @property
@@ -159,8 +168,8 @@ class Chart:
         if self._method is Method.STANDARD:
             return spherical_to_cartesian(theta, phi, r)
         if self._method is Method.DISTORTED:
-            return distorted_inverse(theta, phi, r, self._cap.sigma)
-        return separable_inverse(theta, phi, r, self._cap.rho)
+            return distorted_inverse(theta, phi, r, sigma=self._cap.sigma)
+        return separable_inverse(theta, phi, r, rho=self._cap.rho)
 
 
 def world_to_angles(
@@ -176,6 +185,8 @@ def world_to_angles(
     Parameters
     ----------
     points : (n, 3) float, world frame
+    frame : Frame, world to local
+    chart : Chart
     field, noun : how errors name the input and one of its rows
     threads : int, threads to spread the blocks over
 
@@ -193,6 +204,12 @@ def world_to_angles(
 
 def angles_to_world(theta, phi, r, frame: Frame, chart: Chart) -> np.ndarray:
     """``(theta, phi, r)`` back to world points: the chart's inverse, then the frame's.
+
+    Parameters
+    ----------
+    theta, phi, r : (n,) float (``r`` may be a scalar)
+    frame : Frame
+    chart : Chart
 
     Returns
     -------

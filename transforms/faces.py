@@ -1,5 +1,6 @@
 """Per-face measurements of a region, in 3D and in the ``(phi, theta)`` layout, made in one
-pass over cache-sized blocks of faces and shared by :mod:`.validation` and :mod:`.metrics`.
+pass over cache-sized blocks of faces and shared by :mod:`.validation` and :mod:`.metrics`
+(MATH.md: "Validation a region needs" and "Distortion").
 
 Everything here is per face and elementwise, so the pass works block by block (whole blocks
 vectorised): the temporaries of a block stay in cache and are reused, instead of some thirty
@@ -9,28 +10,28 @@ arrays of the region's size.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from .arrays import as_faces, as_points
+from .arrays import as_angles, as_faces, as_points
 from .cap import PoleCap
 from .errors import TransformInputError
 from .parallel import map_blocks
-from .predicates import orient3d_sign_components
+from .predicates import EPSILON, orient3d_sign_components
 
 #: A triangle is degenerate when twice its area is at most this times the sum of its two
 #: squared edges at corner 0 (a height below about 1e-12 of its edges), in 3D or in the
 #: layout.
 DEGENERATE_RTOL = 1e-12
 
-_EPSILON = 2.0**-53
 #: |fl(c0 . (e1 x e2)) - det[c0, c1, c2]| <= _ORIENT_BOUND * (|e1|^2 + |e2|^2) when every
 #: coordinate is below 1 in magnitude: about 7 roundings on products bounded by
-#: |c0|_1 |e1|_1 |e2|_1 <= 3 * 1.5 (|e1|^2 + |e2|^2); 64 leaves a margin over 31.5.
-_ORIENT_BOUND = 64.0 * _EPSILON
-#: Below this the products may be subnormal and the bound no longer holds.
-_TINY = 1e-250
+#: |c0|_1 |e1|_1 |e2|_1 <= 3 * 1.5 (|e1|^2 + |e2|^2); 64 leaves a margin over 31.5. The
+#: absolute slack covers products that underflow.
+_ORIENT_BOUND = 64.0 * EPSILON
+_ORIENT_SLACK = 1e-290
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,8 +43,9 @@ class FaceMeasures:
     ----------
     faces : (m, 3) int, vertex indices
     vertices : (3, n) float, the vertices in the local frame scaled by ``scale``, as rows
-    scale : float, a power of two taking the largest coordinate below 1 (exact scaling: no
-        sign, direction or ratio changes, and no product overflows or underflows)
+    scale : float, a power of two taking the largest coordinate below 1, so no square or
+        product overflows (coordinates below 2^-1022 of the largest would lose bits; the
+        exact tests therefore read the unscaled coordinates)
     orientation : int8, exact sign of ``det[c0, c1, c2]`` with the centre at the origin: +1
         when the winding is counter-clockwise seen from outside
     double_area : float, ``|(c1 - c0) x (c2 - c0)|`` in scaled units
@@ -54,6 +56,7 @@ class FaceMeasures:
         point of ``cap`` meets the closed triangle (exactly)
     stretch_max, stretch_min : float, singular values ``s1 >= s2`` of the affine map from the
         triangle to its unscaled layout triangle (meaningless where degenerate)
+    longest_edge : float, each face's longest 3D edge, in scaled units
     cap : PoleCap, the cap the singular points came from
     """
 
@@ -69,6 +72,7 @@ class FaceMeasures:
     contains_south: np.ndarray
     stretch_max: np.ndarray
     stretch_min: np.ndarray
+    longest_edge: np.ndarray
     cap: PoleCap
 
     def __len__(self) -> int:
@@ -101,13 +105,10 @@ def measure_faces(
     faces = as_faces(faces, len(vertices))
     if len(faces) == 0:
         raise TransformInputError("faces", "the region has no faces")
-    theta = np.asarray(theta, dtype=np.float64)
-    phi = np.asarray(phi, dtype=np.float64)
-    if theta.shape != (len(vertices),) or phi.shape != (len(vertices),):
+    theta, phi, _ = as_angles(theta, phi)
+    if theta.shape != (len(vertices),):
         raise TransformInputError(
-            "theta",
-            f"theta and phi need one value per vertex ({len(vertices)}), "
-            f"got {theta.shape} and {phi.shape}",
+            "theta", f"theta and phi need one value per vertex ({len(vertices)}), got {theta.shape}"
         )
     largest = float(np.abs(vertices).max())
     scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
@@ -125,6 +126,7 @@ def measure_faces(
         "contains_south": np.empty(m, dtype=bool),
         "stretch_max": np.empty(m),
         "stretch_min": np.empty(m),
+        "longest_edge": np.empty(m),
     }
     singular = (cap.north, cap.south)
     sides = _sides_of_singular_lines(rows, cap)
@@ -138,16 +140,30 @@ def measure_faces(
         np.take(phi, ids, out=layout[0])
         np.take(theta, ids, out=layout[1])
         face_sides = np.bitwise_or.reduce(np.take(sides, ids), axis=0)
-        _measure_block(corners, layout, singular, face_sides, {k: v[block] for k, v in out.items()})
+
+        def unscaled(rows: np.ndarray) -> np.ndarray:
+            return vertices[ids[:, rows]].transpose(2, 0, 1)  # (axis, corner, k)
+
+        views = {k: v[block] for k, v in out.items()}
+        _measure_block(corners, layout, unscaled, singular, face_sides, views)
 
     map_blocks(measure, m, threads)
     return FaceMeasures(faces=faces, vertices=rows, scale=scale, cap=cap, **out)
 
 
 def _measure_block(
-    corners: np.ndarray, layout: np.ndarray, singular, face_sides: np.ndarray, out: dict
+    corners: np.ndarray,
+    layout: np.ndarray,
+    unscaled: Callable[[np.ndarray], np.ndarray],
+    singular,
+    face_sides: np.ndarray,
+    out: dict,
 ) -> None:
-    """Fill ``out`` (views into the per-face arrays) for one block of faces."""
+    """Fill ``out`` (views into the per-face arrays) for one block of faces.
+
+    ``corners`` are scaled; ``unscaled(rows)`` gives the original corners of some of the
+    block's faces, ``(3, 3, k)``, for the exact tests.
+    """
     e1 = corners[:, 1] - corners[:, 0]
     e2 = corners[:, 2] - corners[:, 0]
     normal = np.empty_like(e1)
@@ -156,6 +172,8 @@ def _measure_block(
         normal[i] -= e1[k] * e2[j]
     double_area = np.sqrt(_dot(normal, normal), out=out["double_area"])
     g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
+    longest = np.maximum(np.maximum(g11, g22), g11 + g22 - 2.0 * g12, out=out["longest_edge"])
+    np.sqrt(longest, out=longest)
     f1 = layout[:, 1] - layout[:, 0]
     f2 = layout[:, 2] - layout[:, 0]
     layout_area = np.multiply(f1[0], f2[1], out=out["layout_double_area"])
@@ -168,9 +186,9 @@ def _measure_block(
     orientation = out["orientation"]
     np.sign(det, out=orientation, casting="unsafe")
     reference = g11 + g22
-    unsure = np.flatnonzero((np.abs(det) <= _ORIENT_BOUND * reference) | (reference < _TINY))
+    unsure = np.flatnonzero(np.abs(det) <= _ORIENT_BOUND * reference + _ORIENT_SLACK)
     if unsure.size:
-        (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = corners[:, :, unsure]
+        (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = unscaled(unsure)
         orientation[unsure] = orient3d_sign_components(x0, y0, z0, x1, y1, z1, x2, y2, z2)
 
     degenerate = np.less_equal(double_area, DEGENERATE_RTOL * reference, out=out["degenerate"])
@@ -180,7 +198,13 @@ def _measure_block(
     span -= np.minimum(np.minimum(phi[0], phi[1]), phi[2])
     np.greater(span, math.pi, out=out["crosses_seam"])
     _contains_singular_points(
-        corners, orientation, singular, face_sides, out["contains_north"], out["contains_south"]
+        unscaled,
+        normal,
+        orientation,
+        singular,
+        face_sides,
+        out["contains_north"],
+        out["contains_south"],
     )
 
     # Singular values of the affine map from the triangle (in its own plane) to its layout
@@ -207,7 +231,8 @@ def _measure_block(
 
 
 def _norm2(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """``sqrt(x^2 + y^2)`` for values far from overflow (faster than ``np.hypot``)."""
+    """``sqrt(x^2 + y^2)`` for values far from overflow (faster than ``np.hypot``); ``x`` is
+    overwritten with the result."""
     x *= x
     x += y * y
     return np.sqrt(x, out=x)
@@ -247,15 +272,17 @@ def _sides_of_singular_lines(rows: np.ndarray, cap: PoleCap) -> np.ndarray:
 
 
 def _contains_singular_points(
-    corners, orientation, singular, face_sides, north_out, south_out
+    unscaled, normal, orientation, singular, face_sides, north_out, south_out
 ) -> None:
-    """Whether the ray from the centre through each singular point meets each closed triangle.
+    """Whether the ray from the centre through each singular point meets each closed triangle
+    (MATH.md: "contains a singular point").
 
     Only faces whose corners lie on both sides of both planes through the singular line (see
     :func:`_sides_of_singular_lines`) can; for them, with ``e_ij = det[s, c_i, c_j]`` over the
-    three edges and ``d = det[c0, c1, c2]``, exactly, the ray along ``s`` hits when all
+    three edges and ``d = det[c0, c1, c2]``, all exact, the ray along ``s`` hits when all
     ``e_ij >= 0`` and ``d > 0``, or all ``e_ij <= 0`` and ``d < 0`` (their sum is ``s . n``;
-    the hit is at ``t = d / (s . n) > 0``).
+    the hit is at ``t = d / (s . n) > 0``). When ``d = 0`` the plane of the triangle holds the
+    centre, and the ray can only meet it inside that plane: :func:`_ray_in_plane_hits`.
     """
     pairs = ((0, 1), (1, 2), (2, 0))
     for point, hit, bits in zip(
@@ -267,7 +294,7 @@ def _contains_singular_points(
         if rows.size == 0:
             continue
         sx, sy, sz = point
-        cx, cy, cz = corners[:, :, rows]
+        cx, cy, cz = unscaled(rows)
         signs = [
             orient3d_sign_components(sx, sy, sz, cx[i], cy[i], cz[i], cx[j], cy[j], cz[j])
             for i, j in pairs
@@ -276,6 +303,53 @@ def _contains_singular_points(
         all_nonnegative = (signs[0] >= 0) & (signs[1] >= 0) & (signs[2] >= 0)
         all_nonpositive = (signs[0] <= 0) & (signs[1] <= 0) & (signs[2] <= 0)
         hit[rows] = (all_nonnegative & (d > 0)) | (all_nonpositive & (d < 0))
+        in_plane = np.flatnonzero(all_nonnegative & all_nonpositive & (d == 0))
+        if in_plane.size:
+            corners = np.stack([cx, cy, cz])[:, :, in_plane]
+            hit[rows[in_plane]] = _ray_in_plane_hits(corners, normal[:, rows[in_plane]], point)
+
+
+def _ray_in_plane_hits(corners: np.ndarray, normal: np.ndarray, direction: np.ndarray):
+    """Exact ray test when the triangle, the centre and ``direction`` share a plane.
+
+    Dropping the coordinate along which the plane's normal is largest projects the plane to
+    2D without loss (the projection only drops a number). With ``w_i = s x c_i`` the side of
+    corner ``i`` of the line along ``s``, the ray meets the closed triangle where a corner lies
+    on the ray (``w_i = 0``, ``c_i . s > 0``) or where an edge crosses the line
+    (``w_i w_j < 0``) ahead of the centre, which is when ``c_i x c_j`` has the sign of ``w_j``.
+    All signs are exact (:func:`.predicates.orient3d_sign_components` with a third coordinate
+    of 1 computes 2D cross products).
+
+    Parameters
+    ----------
+    corners : (3, 3, k) float, ``[axis, corner, face]``, unscaled
+    normal : (3, k) float, the faces' normals (only their largest axis is used)
+    direction : (3,) float
+
+    Returns
+    -------
+    (k,) bool
+    """
+    drop = np.argmax(np.abs(normal), axis=0)
+    kept = np.array([[1, 2], [0, 2], [0, 1]])[drop]  # the two coordinates left, per face
+    k = corners.shape[2]
+    faces = np.arange(k)
+    u = corners[kept[:, 0], :, faces].T  # (corner, face)
+    v = corners[kept[:, 1], :, faces].T
+    su, sv = direction[kept[:, 0]], direction[kept[:, 1]]
+    zero, one = np.zeros(k), np.ones(k)
+
+    def cross(pu, pv, qu, qv):
+        return orient3d_sign_components(zero, zero, one, pu, pv, one, qu, qv, one)
+
+    side = [cross(su, sv, u[i], v[i]) for i in range(3)]
+    ahead = [cross(u[i], v[i], -sv, su) for i in range(3)]  # sign of c_i . s
+    hits = np.zeros(k, dtype=bool)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        hits |= (side[i] == 0) & (ahead[i] > 0)
+        crossing = side[i] * side[j] < 0
+        hits |= crossing & (cross(u[i], v[i], u[j], v[j]) == side[j])
+    return hits
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .arrays import as_points, as_vector
+from .arrays import as_points, as_vector, numeric_array, unit_rows
 from .errors import TransformInputError
 
 #: How far from orthonormal with determinant +1 a matrix may be and still count as a rotation.
@@ -87,33 +87,40 @@ class Frame:
         TransformInputError
             A zero vector, or ``up`` parallel to ``pole``.
         """
-        pole_v = as_vector(pole, "pole")
-        up_v = as_vector(up, "up")
-        for name, vector in (("pole", pole_v), ("up", up_v)):
-            if not np.linalg.norm(vector) > 0:
-                raise TransformInputError(name, "must be a non-zero direction")
-        y_axis = pole_v / np.linalg.norm(pole_v)
-        up_unit = up_v / np.linalg.norm(up_v)
-        z_axis = up_unit - np.dot(up_unit, y_axis) * y_axis
-        sine = np.linalg.norm(z_axis)
+        y_axis, zero = unit_rows(as_vector(pole, "pole")[None, :])
+        if zero[0]:
+            raise TransformInputError("pole", "must be a non-zero direction")
+        up_unit, zero = unit_rows(as_vector(up, "up")[None, :])
+        if zero[0]:
+            raise TransformInputError("up", "must be a non-zero direction")
+        y_axis, up_unit = y_axis[0], up_unit[0]
+        x_axis = np.cross(y_axis, up_unit)  # y x up: its length is the sine of their angle
+        sine = float(np.linalg.norm(x_axis))
         if not sine > MIN_POLE_UP_SINE:
             raise TransformInputError(
                 "up",
                 f"must not be parallel to pole (sine of their angle {sine:.3g} "
                 f"<= {MIN_POLE_UP_SINE:g})",
             )
-        z_axis /= sine
-        x_axis = np.cross(y_axis, z_axis)
-        return cls(np.stack([x_axis, y_axis, z_axis]), as_vector(center, "center"))
+        # For nearly parallel pole and up the cross product's rounding is large relative to
+        # its length; a second pass of Gram-Schmidt makes the axes orthonormal to ~1e-16.
+        x_axis /= sine
+        x_axis -= np.dot(x_axis, y_axis) * y_axis
+        x_axis /= np.linalg.norm(x_axis)
+        z_axis = np.cross(x_axis, y_axis)
+        rotation = check_rotation(np.stack([x_axis, y_axis, z_axis]))
+        return cls(rotation, as_vector(center, "center"))
 
     # -- views -------------------------------------------------------------------------
 
     @property
     def rotation(self) -> np.ndarray:
+        """(3, 3) float, read-only: world-to-local rotation ``R`` (rows are the local axes)."""
         return self._rotation
 
     @property
     def center(self) -> np.ndarray:
+        """(3,) float, read-only: the centre ``c`` in world coordinates."""
         return self._center
 
     @property
@@ -180,10 +187,7 @@ def check_rotation(rotation) -> np.ndarray:
         Not 3x3 and finite, ``R R^T`` differs from ``I`` by more than ``ROTATION_TOLERANCE``,
         or the determinant is not +1 within that tolerance (a reflection).
     """
-    try:
-        matrix = np.asarray(rotation, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TransformInputError("rotation", "must be a 3x3 matrix of numbers") from None
+    matrix = numeric_array(rotation, "rotation", "a 3x3 matrix of numbers").astype(np.float64)
     if matrix.shape != (3, 3):
         raise TransformInputError("rotation", f"must be a 3x3 matrix, got shape {matrix.shape}")
     if not np.isfinite(matrix).all():

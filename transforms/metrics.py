@@ -95,13 +95,14 @@ def face_distortion(measures: FaceMeasures) -> FaceDistortion:
         raise TransformInputError(
             "faces", "every face of the region has zero area in 3D or in the layout"
         )
-    double_area, layout_area = measures.double_area, measures.layout_double_area
+    double_area = measures.double_area
     stretch_max, stretch_min = measures.stretch_max, measures.stretch_min
     if measured.size < len(measures):
-        double_area, layout_area, stretch_max, stretch_min = (
-            v[measured] for v in (double_area, layout_area, stretch_max, stretch_min)
+        double_area, stretch_max, stretch_min = (
+            v[measured] for v in (double_area, stretch_max, stretch_min)
         )
-    squared_scale = double_area.sum() / np.abs(layout_area).sum()
+    # MATH.md: one factor gives the whole layout the region's 3D area (every face counts).
+    squared_scale = measures.double_area.sum() / np.abs(measures.layout_double_area).sum()
     conformal = np.empty(measured.size)
     area = np.empty(measured.size)
     isometric = np.empty(measured.size)
@@ -174,10 +175,16 @@ def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> floa
     """
     values = np.asarray(values, dtype=np.float64)
     weights = np.asarray(weights, dtype=np.float64)
+    if values.size == 0 or values.shape != weights.shape:
+        raise TransformInputError(
+            "values", f"need one weight per value and at least one value, got {values.shape}"
+        )
     target = q * weights.sum()
     if len(values) > _SORT_BELOW:
         stride = max(len(values) // _SAMPLE, 1)
         sample, sample_weights = values[::stride], weights[::stride]
+        if not sample_weights.sum() > 0:
+            return _histogram_quantile(values, weights, target)
         order = np.argsort(sample)
         share = np.cumsum(sample_weights[order]) / sample_weights.sum()
         picks = np.searchsorted(share, [q - _BRACKET, q + _BRACKET]).clip(0, len(order) - 1)

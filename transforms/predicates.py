@@ -1,21 +1,27 @@
-"""Exact orientation signs: which side of a plane through the centre a point lies on.
+"""Exact orientation signs: on which side of a plane through the centre a point lies (used by
+MATH.md's "exact ray-triangle test" and the back-facing test).
 
 ``orient3d_sign(a, b, c)`` is the sign of ``det[a, b, c] = a . (b x c)`` computed exactly for
-float64 input: a floating-point filter with a proven error bound decides almost every row, and
-the few rows too close to call are recomputed with integers (every float is an integer times a
-power of two, so the determinant of the scaled integers has the same sign).
+any finite float64 input. Each vector is first scaled by a power of two to a largest component
+in ``[0.5, 1)`` (the determinant is linear in each vector, so its sign is unchanged, and no
+product can overflow); a floating-point filter with a proven error bound then decides almost
+every row, and the few rows too close to call are recomputed from the original values with
+integers (every float is an integer times a power of two).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-_EPSILON = 2.0**-53
+from .errors import TransformInputError
+
+EPSILON = 2.0**-53
 #: |computed - exact| <= _ERROR_BOUND * permanent for the 3x3 determinant below (two products,
 #: a difference, a product and a sum of three: at most 6 roundings; margin to 8).
-_ERROR_BOUND = 8.0 * _EPSILON
-#: Below this permanent the products may be subnormal and the bound no longer holds.
-_TINY = 1e-280
+_ERROR_BOUND = 8.0 * EPSILON
+#: Covers products that underflow (each off by at most 2^-1074) and components flushed to zero
+#: by the scaling; with every entry below 1 their effect on the determinant is far smaller.
+_ABSOLUTE_SLACK = 1e-290
 
 
 def orient3d_sign(a, b, c) -> np.ndarray:
@@ -23,24 +29,39 @@ def orient3d_sign(a, b, c) -> np.ndarray:
 
     Parameters
     ----------
-    a, b, c : (n, 3) or (3,) float, broadcast against each other
+    a, b, c : (n, 3) or (3,) float, finite, broadcast against each other
 
     Returns
     -------
     (n,) int8 in {-1, 0, 1}: +1 when ``a, b, c`` form a right-handed triple
+
+    Raises
+    ------
+    TransformInputError
+        A NaN or Inf entry.
     """
     a, b, c = np.broadcast_arrays(
         np.atleast_2d(np.asarray(a, dtype=np.float64)),
         np.atleast_2d(np.asarray(b, dtype=np.float64)),
         np.atleast_2d(np.asarray(c, dtype=np.float64)),
     )
+    if not (np.isfinite(a).all() and np.isfinite(b).all() and np.isfinite(c).all()):
+        raise TransformInputError("points", "orientation needs finite coordinates")
     return orient3d_sign_components(
         a[:, 0], a[:, 1], a[:, 2], b[:, 0], b[:, 1], b[:, 2], c[:, 0], c[:, 1], c[:, 2]
     )
 
 
 def orient3d_sign_components(ax, ay, az, bx, by, bz, cx, cy, cz) -> np.ndarray:
-    """:func:`orient3d_sign` on coordinate rows (each ``(n,)`` float or a scalar)."""
+    """:func:`orient3d_sign` on coordinate rows (each ``(n,)`` float or a scalar, finite)."""
+    original = np.broadcast_arrays(
+        *(np.asarray(v, dtype=np.float64) for v in (ax, ay, az, bx, by, bz, cx, cy, cz))
+    )
+    shape = np.atleast_1d(original[0]).shape
+    original = [np.atleast_1d(v) for v in original]
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = (
+        _scaled(*original[i : i + 3]) for i in range(0, 9, 3)
+    )
     m1, m2 = by * cz, bz * cy
     m3, m4 = bz * cx, bx * cz
     m5, m6 = bx * cy, by * cx
@@ -50,14 +71,20 @@ def orient3d_sign_components(ax, ay, az, bx, by, bz, cx, cy, cz) -> np.ndarray:
         + np.abs(ay) * (np.abs(m3) + np.abs(m4))
         + np.abs(az) * (np.abs(m5) + np.abs(m6))
     )
-    sign = np.sign(det).astype(np.int8)
-    # A tiny permanent (products near or below the subnormal range) voids the bound.
-    unsure = (np.abs(det) <= _ERROR_BOUND * permanent) | (permanent < _TINY)
+    sign = np.sign(det).astype(np.int8).reshape(shape)
+    unsure = np.abs(det) <= _ERROR_BOUND * permanent + _ABSOLUTE_SLACK
     if unsure.any():
-        rows = np.flatnonzero(np.broadcast_to(unsure, sign.shape))
-        parts = [np.broadcast_to(v, sign.shape)[rows] for v in (ax, ay, az, bx, by, bz, cx, cy, cz)]
-        sign[rows] = _exact_sign(np.stack(parts, axis=1))
+        rows = np.flatnonzero(unsure)
+        sign[rows] = _exact_sign(np.stack([v[rows] for v in original], axis=1))
     return sign
+
+
+def _scaled(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The vector rows scaled by powers of two to a largest magnitude in [0.5, 1) (zero rows
+    stay zero)."""
+    largest = np.maximum(np.maximum(np.abs(x), np.abs(y)), np.abs(z))
+    exponent = np.frexp(largest)[1]
+    return tuple(np.ldexp(v, -exponent) for v in (x, y, z))
 
 
 def _exact_sign(entries: np.ndarray) -> np.ndarray:

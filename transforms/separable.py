@@ -32,13 +32,14 @@ from functools import partial
 
 import numpy as np
 
-from .arrays import as_angles, as_points
+from .arrays import as_angles, as_points, numeric_array, unit_rows
 from .cap import check_rho
+from .errors import TransformInputError, listed_rows
 from .spherical import half_open_azimuth, points_to_angles
 
 #: Stop when a bisection step is below this (radians).
 THETA_TOLERANCE = 1e-15
-#: Stop when a Halley step is below this times theta (the next would be ~1e-16 theta).
+#: Stop when a Halley step is below this times the distance to the nearer singular point.
 HALLEY_RTOL = 1e-6
 #: The bracket halves at least every second step; 2 * 53 steps reach the float spacing at pi.
 MAX_ITERATIONS = 120
@@ -124,17 +125,22 @@ def separable_theta(u_x: np.ndarray, s: np.ndarray, beta: np.ndarray, rho: float
             halley = 2.0 * g * slope / (2.0 * slope * slope - g * curvature)
         # Bisect when Halley's step leaves the bracket or does not halve the step before last.
         candidate = theta - halley
-        bisect = ~((candidate >= low) & (candidate <= high)) | (
-            np.abs(2.0 * halley) > np.abs(step_before)
+        # (or where G' <= 0: only next to a singular point, where the step is meaningless).
+        bisect = (
+            ~((candidate >= low) & (candidate <= high))
+            | (np.abs(2.0 * halley) > np.abs(step_before))
+            | (slope <= 0.0)
         )
         step_before = step
         step = np.where(bisect, 0.5 * (high - low), halley)
         exact = g == 0.0
         previous, theta = theta, np.where(bisect, low + step, candidate)
-        # After a Halley step of size d the error is about C d^3 with C ~ 1 / theta^2 (G'
-        # vanishes only at the singular points): d below HALLEY_RTOL * theta leaves ~1e-16
-        # theta. Bisection steps must reach THETA_TOLERANCE itself.
-        small = np.where(bisect, THETA_TOLERANCE, HALLEY_RTOL * np.maximum(theta, THETA_TOLERANCE))
+        # After a Halley step of size d the error is about C d^3 with C ~ 1 / t^2, t the
+        # distance to the nearer singular point (theta or pi - theta; G' vanishes only
+        # there): d below HALLEY_RTOL * t leaves ~1e-16 t. Bisection steps must reach
+        # THETA_TOLERANCE itself.
+        nearer = np.maximum(np.minimum(theta, math.pi - theta), THETA_TOLERANCE)
+        small = np.where(bisect, THETA_TOLERANCE, HALLEY_RTOL * nearer)
         done = (np.abs(step) < small) | exact
         if done.any():
             keep = ~done
@@ -180,7 +186,7 @@ def separable_residual(f, points, rho: float) -> np.ndarray:
     Parameters
     ----------
     f : (n,) float, chord parameter (``f = pi/2 - theta``)
-    points : (n, 3) float, local frame (normalised here)
+    points : (n, 3) float, local frame, not at the centre (normalised here)
     rho : float, pole angle in radians
 
     Returns
@@ -188,14 +194,18 @@ def separable_residual(f, points, rho: float) -> np.ndarray:
     (n,) float
     """
     rho = check_rho(rho)
-    u = as_points(points)
-    u = u / np.linalg.norm(u, axis=1)[:, None]
+    u, zero = unit_rows(as_points(points))
+    if zero.any():
+        text, rows = listed_rows(zero, "point")
+        raise TransformInputError("points", f"{text}: at the centre, no direction", rows)
+    f = numeric_array(f, "f", "a list of numbers").astype(np.float64)
+    if f.shape != (len(u),):
+        raise TransformInputError("f", f"needs one value per point ({len(u)}), got {f.shape}")
     k = 1.0 - 2.0 * rho / math.pi
-    f = np.asarray(f, dtype=np.float64)
     return u[:, 1] * np.sin(k * f) + u[:, 2] * np.cos(k * f) - np.sin(f)
 
 
-def separable_inverse(theta, phi, r=1.0, rho: float = 2.0 * math.atan(0.3)) -> np.ndarray:
+def separable_inverse(theta, phi, r=1.0, *, rho: float) -> np.ndarray:
     """Back from separable coordinates, in closed form.
 
     ``phi`` puts the point on the half-plane ``(u_x, u_y - cos rho) = t (cos phi, sin phi)``,

@@ -15,8 +15,9 @@ from .arrays import as_angles, as_points
 from .errors import TransformInputError, listed_rows
 from .parallel import map_blocks
 
-#: A point closer than this to the centre has no direction: the centre is on the surface.
-MIN_RADIUS = 1e-100
+#: A point closer than this to the centre has no usable direction (its squared distance
+#: would underflow): the centre is on the surface.
+MIN_RADIUS = 1e-150
 
 #: Computes ``(theta, phi)`` from rows ``x, y, z`` of checked local coordinates and their
 #: distances ``r`` from the centre (each ``(n,)`` float).

@@ -1,5 +1,5 @@
 """Edges of a region: its boundary, its boundary loops, and the edges where its outline seen
-from the centre can run.
+from the centre can run (MATH.md: "Validation a region needs", boundary loops and margins).
 """
 
 from __future__ import annotations
@@ -94,7 +94,11 @@ def region_edges(
         np.take(_VALUE_OF_SIDE_PLUS_ONE, side_plus_one, out=value[block])
 
     map_blocks(half_edges, m, threads)
-    sums = csr_matrix((value.ravel(), (low.ravel(), high.ravel())), shape=(n_vertices, n_vertices))
+    low, high, value = low.ravel(), high.ravel(), value.ravel()
+    loops = low == high  # an edge from a vertex to itself (a face repeating a vertex)
+    if loops.any():
+        low, high, value = low[~loops], high[~loops], value[~loops]
+    sums = csr_matrix((value, (low, high)), shape=(n_vertices, n_vertices))
     outline = np.flatnonzero(sums.data != _SMOOTH)
     boundary = outline[(sums.data[outline] & _COUNT_MASK) == 1]
     return RegionEdges(boundary=_pairs(sums, boundary), outline=_pairs(sums, outline))

@@ -5,12 +5,20 @@ For each face, by its position in the region's face list (the measurements come 
 
 * **contains a singular point**: the ray from the centre through a singular point hits the
   closed triangle, decided with exact orientation signs (:mod:`.predicates`);
-* **crosses the seam**: its vertices' ``phi`` span more than ``pi``;
+* **crosses the seam**: its vertices' ``phi`` span more than ``pi`` (MATH.md's test), or one
+  of its edges, seen from the centre, meets the seam arc: with ``rho < 90`` degrees an edge
+  between two corners outside the cap can dip into it and cross the seam twice, which the
+  span test cannot see;
 * **folded**: its orientation in the ``(phi, theta)`` layout is opposite to the orientation
   its outward side has seen from the centre, that is a flipped triangle in the 2D map (an
-  overhang or a non-star-shaped spot); faces with zero layout area are not called folded;
+  overhang or a non-star-shaped spot); faces with zero layout area are not called folded.
+  MATH.md's "its orientation seen from the centre" is read as the orientation of the face's
+  outward side: compared with the raw winding instead, an overhang's triangles, which the
+  map shows flipped over their neighbours, would not count as folded. Back-facing is the
+  3D cause, folded the 2D effect; folded also catches flips the layout makes by itself
+  (large triangles next to the cap);
 * **back-facing**: ``dot(centroid - c, outward normal) <= 0``, exactly;
-* **degenerate**: zero area in 3D or in the layout (relative to the longest edge,
+* **degenerate**: zero area in 3D or in the layout (relative to its edges,
   :data:`.faces.DEGENERATE_RTOL`).
 
 "Outward" is the file's winding, unless the region as a whole winds the other way round the
@@ -28,10 +36,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .arrays import unit_rows
 from .chart import LAYOUT_ORIENTATION
+from .errors import TransformInputError
 from .faces import FaceMeasures
 from .margins import arcs_to_point, arcs_to_seam
 from .topology import region_edges
+
+#: An edge that comes within this angle (radians) of the seam counts as meeting it.
+_SEAM_TOUCH = 1e-12
 
 
 @dataclass(frozen=True)
@@ -90,59 +103,106 @@ def validate(
     orientation = measures.orientation
     if winding is None:
         winding = -1 if int(orientation.sum(dtype=np.int64)) < 0 else 1
+    elif isinstance(winding, bool) or winding not in (1, -1):
+        raise TransformInputError("winding", f"must be +1, -1 or None, got {winding!r}")
     seam = measures.crosses_seam
     folded = (LAYOUT_ORIENTATION * winding) * measures.layout_double_area < 0
     folded &= ~measures.degenerate
     backfacing = orientation != winding  # winding * orientation <= 0, orientation in {-1, 0, 1}
 
     edges = region_edges(measures.faces, orientation, measures.vertices.shape[1], threads)
-    north_deg, south_deg, seam_deg = _margins_deg(
-        measures,
-        edges.outline,
-        measures.contains_north.any(),
-        measures.contains_south.any(),
-        seam.any(),
+    contains_north, contains_south = measures.contains_north.any(), measures.contains_south.any()
+    flagged = seam.any() or contains_north or contains_south
+    north, south, seam_distance = _outline_distances(
+        measures, edges.outline, not contains_north, not contains_south, not flagged
     )
+    if flagged or seam_distance == 0.0:
+        # The region meets the seam: also find faces an edge of which dips across it while
+        # their corners' phi do not straddle the cut (MATH.md's span test misses those).
+        seam = seam | _faces_meeting_seam(measures)
+    touches_seam = seam.any() or contains_north or contains_south
     return RegionValidation(
         singular_point_faces=np.flatnonzero(measures.contains_north | measures.contains_south),
         seam_faces=np.flatnonzero(seam),
         folded_faces=np.flatnonzero(folded),
         backfacing_faces=np.flatnonzero(backfacing),
         degenerate_faces=np.flatnonzero(measures.degenerate),
-        margin_deg_seam=seam_deg,
-        margin_deg_north=north_deg,
-        margin_deg_south=south_deg,
+        margin_deg_seam=0.0 if touches_seam else math.degrees(seam_distance),
+        margin_deg_north=0.0 if contains_north else math.degrees(north),
+        margin_deg_south=0.0 if contains_south else math.degrees(south),
         boundary_loops=edges.boundary_loops(),
         winding=winding,
     )
 
 
-def _margins_deg(
-    measures: FaceMeasures,
-    outline: np.ndarray,
-    touches_north: bool,
-    touches_south: bool,
-    touches_seam: bool,
+def _outline_distances(
+    measures: FaceMeasures, outline: np.ndarray, north: bool, south: bool, seam: bool
 ) -> tuple[float, float, float]:
-    """Degrees from the region's outline to the north and south singular points and the seam.
+    """Radians from the region's outline to the north and south singular points and the seam
+    (only those asked for; the others are 0).
 
     The distance from a closed set to a point or arc outside it is reached on the set's
-    boundary, and seen from the centre the region's boundary lies on its outline edges; when a
-    face contains the point (or crosses the seam) the margin is 0.
+    boundary, and seen from the centre the region's boundary lies on its outline edges. A
+    region with no outline is closed around the centre and covers every direction (0).
     """
     if len(outline) == 0:
-        # A closed region around the centre covers every direction.
         return 0.0, 0.0, 0.0
     cap = measures.cap
     ends = _unit_directions(measures.vertices, outline)
     a, b = ends[:, 0], ends[:, 1]
-    north = 0.0 if touches_north else float(arcs_to_point(a, b, cap.north).min())
-    south = 0.0 if touches_south else float(arcs_to_point(a, b, cap.south).min())
-    if touches_north or touches_south or touches_seam:
-        seam = 0.0
-    else:
-        seam = float(arcs_to_seam(a, b, cap).min())
-    return math.degrees(north), math.degrees(south), math.degrees(seam)
+    return (
+        float(arcs_to_point(a, b, cap.north).min()) if north else 0.0,
+        float(arcs_to_point(a, b, cap.south).min()) if south else 0.0,
+        float(arcs_to_seam(a, b, cap).min()) if seam else 0.0,
+    )
+
+
+def _faces_meeting_seam(measures: FaceMeasures) -> np.ndarray:
+    """(m,) bool: faces one of whose edges, seen from the centre, meets the seam arc (within
+    ``_SEAM_TOUCH`` radians).
+
+    Where an edge meets the seam, the meeting point lies within half the edge's angle of the
+    nearer end ``v``, and the edge's angle is at most ``2 asin(L / r_v)`` (directions of points
+    at least ``r_v`` from the centre and ``L`` apart differ by a chord of at most ``2 L / r_v``).
+    The seam lies on the circle at ``rho`` from ``+Y``, at ``x <= 0``. So only faces with a
+    corner ``v`` within ``asin(L / r_v)`` of that circle and of that side need the exact arc
+    test: found first with ``L`` the region's longest edge, per vertex, then with each
+    candidate face's own longest edge. Faces the span test flagged need no test.
+    """
+    faces, cap = measures.faces, measures.cap
+    rows = measures.vertices
+    cos_rho, sin_rho = math.cos(cap.rho), math.sin(cap.rho)
+
+    def near(vertex_ids, longest) -> np.ndarray:
+        # With h = sqrt(x^2 + z^2) and a the angle from +Y: r sin|a - rho| = |h cos rho -
+        # y sin rho| and r cos(a - rho) = y cos rho + h sin rho. "|a - rho| <= asin(L / r)"
+        # is then "|h cos rho - y sin rho| <= L, cos(a - rho) >= 0" (no trigonometry).
+        x, y, z = rows[:, vertex_ids]
+        h = np.sqrt(x * x + z * z)
+        reach = longest * (1.0 + 1e-9) + _SEAM_TOUCH * np.sqrt(h * h + y * y)
+        close = np.abs(h * cos_rho - y * sin_rho) <= reach
+        close &= y * cos_rho + h * sin_rho >= -reach
+        close &= x <= reach
+        return close
+
+    vertex_near = near(slice(None), float(measures.longest_edge.max()))
+    corners = faces.T
+    candidates = vertex_near[corners[0]] | vertex_near[corners[1]] | vertex_near[corners[2]]
+    candidates &= ~measures.crosses_seam
+    candidates = np.flatnonzero(candidates)
+    if candidates.size:
+        c = faces[candidates]
+        own = measures.longest_edge[candidates]
+        candidates = candidates[near(c[:, 0], own) | near(c[:, 1], own) | near(c[:, 2], own)]
+    meets = np.zeros(len(faces), dtype=bool)
+    if candidates.size:
+        c = faces[candidates]
+        ends = [unit_rows(np.ascontiguousarray(rows[:, c[:, i]].T))[0] for i in range(3)]
+        touch = np.zeros(candidates.size, dtype=bool)
+        for i, j in ((0, 1), (1, 2), (2, 0)):
+            touch |= arcs_to_seam(ends[i], ends[j], cap) <= _SEAM_TOUCH
+        meets[candidates] = touch
+    return meets
 
 
 def _unit_directions(vertices: np.ndarray, edges: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ from functools import partial
 
 import numpy as np
 
-from .arrays import as_angles, as_points
+from .arrays import as_angles, as_points, unit_rows
 from .cap import check_sigma
 from .errors import TransformInputError, listed_rows
 from .spherical import angles, points_to_angles, unit_vectors
@@ -40,18 +40,13 @@ def pole_warp(directions, sigma: float) -> np.ndarray:
         A zero or non-finite direction, or ``sigma`` out of range.
     """
     sigma = check_sigma(sigma)
-    u = as_points(directions, "directions")
-    norms = np.linalg.norm(u, axis=1)
-    if not (norms > 0).all():
-        text, rows = listed_rows(~(norms > 0), "direction")
+    u, zero = unit_rows(as_points(directions, "directions"))
+    if zero.any():
+        text, rows = listed_rows(zero, "direction")
         raise TransformInputError("directions", f"{text}: zero vector has no direction", rows)
-    x, y, z = (u / norms[:, None]).T
+    x, y, z = u.T
     s2 = sigma * sigma
-    # Near a pole 1 +- y cancels; on the sphere (1 + y)(1 - y) = x^2 + z^2 gives it exactly.
-    xz2 = x * x + z * z
-    with np.errstate(divide="ignore", invalid="ignore"):
-        one_plus_y = np.where(y < 0.0, xz2 / (1.0 - y), 1.0 + y)
-        one_minus_y = np.where(y > 0.0, xz2 / (1.0 + y), 1.0 - y)
+    one_plus_y, one_minus_y = _plus_minus(x, y, z, 1.0)
     denominator = s2 * one_plus_y + one_minus_y  # >= 2 min(sigma^2, 1) > 0 on the sphere
     warped = (
         np.stack([2.0 * sigma * x, s2 * one_plus_y - one_minus_y, 2.0 * sigma * z], axis=1)
@@ -109,18 +104,28 @@ def warped_angles(
     c = z * (2.0 * sigma)
     if sigma == 1.0:
         return angles(a, y * 2.0, c)
-    across = x * x
-    across += z * z  # x^2 + z^2 = (r + y)(r - y)
-    plus, minus = r + y, r - y
-    with np.errstate(divide="ignore", invalid="ignore"):
-        plus = np.where(y < 0.0, across / minus, plus)
-        minus = np.where(y > 0.0, across / plus, minus)
+    plus, minus = _plus_minus(x, y, z, r)
     plus *= sigma * sigma
     plus -= minus
     return angles(a, plus, c)
 
 
-def distorted_inverse(theta, phi, r=1.0, sigma: float = 0.3) -> np.ndarray:
+def _plus_minus(x, y, z, r) -> tuple[np.ndarray, np.ndarray]:
+    """``r + y`` and ``r - y`` without cancellation, for ``r = |(x, y, z)|``.
+
+    Near ``-Y`` the sum cancels and near ``+Y`` the difference; there each is the other's
+    complement ``(x^2 + z^2) / (r -+ y)`` (their product is ``x^2 + z^2``), exact to rounding.
+    """
+    across = x * x
+    across += z * z
+    plus, minus = r + y, r - y
+    with np.errstate(divide="ignore", invalid="ignore"):
+        plus = np.where(y < 0.0, across / minus, plus)
+        minus = np.where(y > 0.0, across / plus, minus)
+    return plus, minus
+
+
+def distorted_inverse(theta, phi, r=1.0, *, sigma: float) -> np.ndarray:
     """Back from distorted-pole coordinates: direction of ``(theta, phi)``, then
     ``W_{1/sigma}``, then times ``r`` (the paper's last methodology step, with eq. 1's true
     inverse).

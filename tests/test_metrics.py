@@ -125,3 +125,42 @@ def test_isometric_energy_has_an_interior_minimum_over_sigma():
     # Conformal distortion keeps falling as sigma shrinks while area distortion rises.
     assert d[0.05].conformal.mean < d[0.5].conformal.mean < d[1.0].conformal.mean
     assert d[0.05].area.mean > d[0.5].area.mean > d[1.0].area.mean
+
+
+@pytest.mark.parametrize("degenerate", [False, True])
+def test_summaries_agree_with_the_per_face_measures(degenerate):
+    vertices, faces = load_sample("nefertiti-lowres.obj")
+    centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    frame = Frame.from_pole_up([0.0, -1.0, 0.0], [0.0, 0.0, 1.0], center=centre)
+    chart = Chart.distorted(PoleCap.from_sigma(0.4))
+    local = frame.to_local(vertices)
+    theta, phi, _ = chart.forward(local)
+    if degenerate:
+        faces = np.vstack([faces, [[0, 0, 1], [5, 6, 5]]])
+    measures = measure_faces(local, faces, theta, phi, chart.cap)
+    summary = distortion(measures)
+    per_face = face_distortion(measures)
+    assert summary.measured_faces == len(per_face.faces) == len(faces) - 2 * degenerate
+    for name in ("conformal", "area", "isometric"):
+        values = getattr(per_face, name)
+        got = getattr(summary, name)
+        assert got.mean == pytest.approx(np.average(values, weights=per_face.weights), rel=1e-12)
+        assert got.max == values.max()
+        assert got.p95 == weighted_quantile(values, per_face.weights, 0.95)
+
+
+def test_a_misleading_sample_falls_back_to_the_exact_quantile(monkeypatch):
+    import transforms.metrics as metrics
+
+    monkeypatch.setattr(metrics, "_bracket", lambda sample, weights, q: (-2.0, -1.0))
+    vertices, faces = load_sample("nefertiti-lowres.obj")
+    centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    frame = Frame.from_pole_up([0.0, -1.0, 0.0], [0.0, 0.0, 1.0], center=centre)
+    chart = Chart.distorted(PoleCap.from_sigma(0.4))
+    local = frame.to_local(vertices)
+    theta, phi, _ = chart.forward(local)
+    measures = measure_faces(local, faces, theta, phi, chart.cap)
+    per_face = face_distortion(measures)
+    got = distortion(measures)
+    monkeypatch.undo()
+    assert got.isometric.p95 == weighted_quantile(per_face.isometric, per_face.weights, 0.95)

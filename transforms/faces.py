@@ -56,7 +56,7 @@ class FaceMeasures:
         point of ``cap`` meets the closed triangle (exactly)
     stretch_max, stretch_min : float, singular values ``s1 >= s2`` of the affine map from the
         triangle to its unscaled layout triangle (meaningless where degenerate)
-    longest_edge : float, each face's longest 3D edge, in scaled units
+    edge_bound : float, no 3D edge of any face is longer (scaled units; ``2 max |e1|, |e2|``)
     cap : PoleCap, the cap the singular points came from
     """
 
@@ -72,7 +72,7 @@ class FaceMeasures:
     contains_south: np.ndarray
     stretch_max: np.ndarray
     stretch_min: np.ndarray
-    longest_edge: np.ndarray
+    edge_bound: float
     cap: PoleCap
 
     def __len__(self) -> int:
@@ -126,7 +126,6 @@ def measure_faces(
         "contains_south": np.empty(m, dtype=bool),
         "stretch_max": np.empty(m),
         "stretch_min": np.empty(m),
-        "longest_edge": np.empty(m),
     }
     singular = (cap.north, cap.south)
     sides = _sides_of_singular_lines(rows, cap)
@@ -145,10 +144,14 @@ def measure_faces(
             return vertices[ids[:, rows]].transpose(2, 0, 1)  # (axis, corner, k)
 
         views = {k: v[block] for k, v in out.items()}
-        _measure_block(corners, layout, unscaled, singular, face_sides, views)
+        return _measure_block(corners, layout, unscaled, singular, face_sides, views)
 
-    map_blocks(measure, m, threads)
-    return FaceMeasures(faces=faces, vertices=rows, scale=scale, cap=cap, **out)
+    longest_legs = map_blocks(measure, m, threads)
+    # The third edge is at most the sum of the two at corner 0.
+    edge_bound = 2.0 * math.sqrt(max(longest_legs))
+    return FaceMeasures(
+        faces=faces, vertices=rows, scale=scale, cap=cap, edge_bound=edge_bound, **out
+    )
 
 
 def _measure_block(
@@ -158,8 +161,9 @@ def _measure_block(
     singular,
     face_sides: np.ndarray,
     out: dict,
-) -> None:
-    """Fill ``out`` (views into the per-face arrays) for one block of faces.
+) -> float:
+    """Fill ``out`` (views into the per-face arrays) for one block of faces; return the largest
+    squared edge at corner 0.
 
     ``corners`` are scaled; ``unscaled(rows)`` gives the original corners of some of the
     block's faces, ``(3, 3, k)``, for the exact tests.
@@ -172,8 +176,7 @@ def _measure_block(
         normal[i] -= e1[k] * e2[j]
     double_area = np.sqrt(_dot(normal, normal), out=out["double_area"])
     g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
-    longest = np.maximum(np.maximum(g11, g22), g11 + g22 - 2.0 * g12, out=out["longest_edge"])
-    np.sqrt(longest, out=longest)
+    longest_leg = float(np.maximum(g11, g22).max())
     f1 = layout[:, 1] - layout[:, 0]
     f2 = layout[:, 2] - layout[:, 0]
     layout_area = np.multiply(f1[0], f2[1], out=out["layout_double_area"])
@@ -228,6 +231,7 @@ def _measure_block(
         s1 = np.add(conformal_part, _norm2(a - d, c + b), out=out["stretch_max"])
         s1 *= 0.5
         np.divide(np.abs(layout_area) / double_area, s1, out=out["stretch_min"])
+    return longest_leg
 
 
 def _norm2(x: np.ndarray, y: np.ndarray) -> np.ndarray:

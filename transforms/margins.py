@@ -3,7 +3,8 @@ points and to the seam (MATH.md, "Validation a region needs": margins).
 
 Seen from the centre, a straight edge ``(a, b)`` projects to the minor great-circle arc between
 the unit directions ``a`` and ``b``. The seam is an arc of a small circle (angle ``rho`` from
-``+Y``, side ``x <= 0``). All inputs are ``(k, 3)`` unit directions; all outputs radians.
+``+Y``, side ``x <= 0``). Inputs are ``(k, 3)`` unit directions, outputs radians; inside, the
+arithmetic runs on coordinate rows (short ``(k, 3)`` rows are slow in numpy).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from .cap import PoleCap
 def angles_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(k,) float: angle between rows of ``u`` and ``v`` (``(k, 3)`` or ``(3,)``), accurate
     at 0 and pi (``atan2(|u x v|, u . v)``)."""
-    return np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.sum(u * v, axis=-1))
+    return _angle(_rows(u), _rows(v))
 
 
 def arcs_to_point(a: np.ndarray, b: np.ndarray, point: np.ndarray) -> np.ndarray:
@@ -33,21 +34,7 @@ def arcs_to_point(a: np.ndarray, b: np.ndarray, point: np.ndarray) -> np.ndarray
     -------
     (k,) float, radians in ``[0, pi]``
     """
-    normal = np.cross(a, b)
-    length = np.linalg.norm(normal, axis=1)
-    ends = np.minimum(angles_between(a, point), angles_between(b, point))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        unit_normal = normal / length[:, None]
-    off_plane = unit_normal @ point  # sine of the distance to the whole great circle
-    in_plane = point[None, :] - off_plane[:, None] * unit_normal
-    # The foot of the perpendicular lies on the arc when it is between a and b.
-    between = (
-        (length > 0)
-        & (np.sum(np.cross(a, point) * normal, axis=1) >= 0)
-        & (np.sum(np.cross(point, b) * normal, axis=1) >= 0)
-    )
-    to_circle = np.arctan2(np.abs(off_plane), np.linalg.norm(in_plane, axis=1))
-    return np.where(between, np.minimum(to_circle, ends), ends)
+    return _arcs_to_point(_rows(a), _rows(b), _rows(point))
 
 
 def arcs_to_seam(a: np.ndarray, b: np.ndarray, cap: PoleCap) -> np.ndarray:
@@ -69,21 +56,67 @@ def arcs_to_seam(a: np.ndarray, b: np.ndarray, cap: PoleCap) -> np.ndarray:
     -------
     (k,) float, radians
     """
-    to_singular = np.minimum(arcs_to_point(a, b, cap.north), arcs_to_point(a, b, cap.south))
-    return np.minimum(to_singular, _circle_part_distance(a, b, cap.rho))
+    a_rows, b_rows = _rows(a), _rows(b)
+    to_singular = np.minimum(
+        _arcs_to_point(a_rows, b_rows, _rows(cap.north)),
+        _arcs_to_point(a_rows, b_rows, _rows(cap.south)),
+    )
+    return np.minimum(to_singular, _circle_part_distance(a_rows, b_rows, cap.rho))
 
 
-def _circle_part_distance(a: np.ndarray, b: np.ndarray, rho: float) -> np.ndarray:
+def _rows(vectors: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Coordinate rows ``x, y, z`` of ``(k, 3)`` vectors (or scalars of a ``(3,)`` vector)."""
+    vectors = np.asarray(vectors, dtype=np.float64)
+    if vectors.ndim == 1:
+        return tuple(float(c) for c in vectors)
+    return tuple(np.ascontiguousarray(vectors.T))
+
+
+def _cross(p, q):
+    return (p[1] * q[2] - p[2] * q[1], p[2] * q[0] - p[0] * q[2], p[0] * q[1] - p[1] * q[0])
+
+
+def _dot(p, q):
+    return p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+
+
+def _norm(p):
+    return np.sqrt(_dot(p, p))
+
+
+def _angle(p, q):
+    return np.arctan2(_norm(_cross(p, q)), _dot(p, q))
+
+
+def _arcs_to_point(a, b, point) -> np.ndarray:
+    """:func:`arcs_to_point` on rows."""
+    normal = _cross(a, b)
+    length = _norm(normal)
+    ends = np.minimum(_angle(a, point), _angle(b, point))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unit_normal = tuple(c / length for c in normal)
+    off_plane = _dot(unit_normal, point)  # sine of the distance to the whole great circle
+    in_plane = tuple(p - off_plane * n for p, n in zip(point, unit_normal, strict=True))
+    # The foot of the perpendicular lies on the arc when it is between a and b.
+    between = (
+        (length > 0) & (_dot(_cross(a, point), normal) >= 0) & (_dot(_cross(point, b), normal) >= 0)
+    )
+    to_circle = np.arctan2(np.abs(off_plane), _norm(in_plane))
+    return np.where(between, np.minimum(to_circle, ends), ends)
+
+
+def _circle_part_distance(a, b, rho: float) -> np.ndarray:
     """(k,) float: least ``|angle(u, +Y) - rho|`` over the points of arc ``a -> b`` with
     ``x <= 0`` (inf where there are none)."""
-    span = angles_between(a, b)
+    span = _angle(a, b)
     # u(t) = a cos t + e sin t, 0 <= t <= span, with e the unit tangent at a towards b.
-    e = b - np.sum(a * b, axis=1)[:, None] * a
-    e_norm = np.linalg.norm(e, axis=1)
+    along = _dot(a, b)
+    e = tuple(q - along * p for p, q in zip(a, b, strict=True))
+    e_norm = _norm(e)
     with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.where(e_norm[:, None] > 0, e / e_norm[:, None], 0.0)
-    x_peak = np.arctan2(e[:, 0], a[:, 0])
-    y_peak = np.arctan2(e[:, 1], a[:, 1])
+        e = tuple(np.where(e_norm > 0, c / e_norm, 0.0) for c in e)
+    x_peak = np.arctan2(e[0], a[0])
+    y_peak = np.arctan2(e[1], a[1])
     t = np.stack(
         [
             np.zeros_like(span),
@@ -96,11 +129,12 @@ def _circle_part_distance(a: np.ndarray, b: np.ndarray, rho: float) -> np.ndarra
         axis=1,
     ) % (2.0 * math.pi)
     on_arc = t <= span[:, None]
-    u = a[:, None, :] * np.cos(t)[..., None] + e[:, None, :] * np.sin(t)[..., None]
-    on_seam_side = u[..., 0] <= 0.0
+    cos_t, sin_t = np.cos(t), np.sin(t)
+    u = [p[:, None] * cos_t + q[:, None] * sin_t for p, q in zip(a, e, strict=True)]
+    on_seam_side = u[0] <= 0.0
     on_seam_side[:, 4:] = True  # rounding may leave x slightly positive where it is zero
     usable = on_arc & on_seam_side
-    polar = np.arctan2(np.hypot(u[..., 0], u[..., 2]), u[..., 1])  # angle from +Y
+    polar = np.arctan2(np.sqrt(u[0] * u[0] + u[2] * u[2]), u[1])  # angle from +Y
     low = np.where(usable, polar, np.inf).min(axis=1)
     high = np.where(usable, polar, -np.inf).max(axis=1)
     crosses = (low <= rho) & (high >= rho)

@@ -115,10 +115,7 @@ def assess_region(
     (RegionValidation, Distortion)
     """
     measures = measure_faces(vertices_local, faces, theta, phi, cap, threads)
-    # With threads to spare the two run side by side, validation on the rest.
-    validation_threads = max(1, threads - 1)
     validation, metrics = run_all(
-        [lambda: validate(measures, winding, validation_threads), lambda: distortion(measures)],
-        threads,
+        [lambda: validate(measures, winding, threads), lambda: distortion(measures)], threads
     )
     return validation, metrics

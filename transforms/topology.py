@@ -80,21 +80,24 @@ def region_edges(
     """
     m = len(faces)
     index = np.int32 if n_vertices < 2**31 else np.int64  # what scipy would convert to
-    low = np.empty((m, 3), dtype=index)
-    high = np.empty((m, 3), dtype=index)
-    value = np.empty((m, 3), dtype=np.int64)
+    heads = faces.ravel()
+    tails = np.empty_like(heads)  # the other end of each half-edge: the next corner
+    tails[:-1] = heads[1:]
+    tails[2::3] = heads[::3]
+    turn = np.repeat(orientation, 3)
+    low = np.empty(3 * m, dtype=index)
+    high = np.empty(3 * m, dtype=index)
+    value = np.empty(3 * m, dtype=np.int64)
 
     def half_edges(block: slice) -> None:
-        heads = faces[block]
-        tails = np.ascontiguousarray(heads[:, [1, 2, 0]])  # fancy indexing returns F order
-        np.minimum(heads, tails, out=low[block], casting="unsafe")
-        np.maximum(heads, tails, out=high[block], casting="unsafe")
-        turn = orientation[block, None]
-        side_plus_one = 1 + turn * (1 - 2 * (heads > tails).view(np.int8))  # int8: 0, 1, 2
+        h, t = heads[block], tails[block]
+        np.minimum(h, t, out=low[block], casting="unsafe")
+        np.maximum(h, t, out=high[block], casting="unsafe")
+        side_plus_one = turn[block] * (1 - 2 * (h > t).view(np.int8))  # int8: -1, 0, 1
+        side_plus_one += 1
         np.take(_VALUE_OF_SIDE_PLUS_ONE, side_plus_one, out=value[block])
 
-    map_blocks(half_edges, m, threads)
-    low, high, value = low.ravel(), high.ravel(), value.ravel()
+    map_blocks(half_edges, 3 * m, threads)
     loops = low == high  # an edge from a vertex to itself (a face repeating a vertex)
     if loops.any():
         low, high, value = low[~loops], high[~loops], value[~loops]

@@ -41,10 +41,17 @@ from .chart import LAYOUT_ORIENTATION
 from .errors import TransformInputError
 from .faces import FaceMeasures
 from .margins import arcs_to_point, arcs_to_seam
+from .parallel import run_all
 from .topology import region_edges
 
 #: An edge that comes within this angle (radians) of the seam counts as meeting it.
 _SEAM_TOUCH = 1e-12
+_EDGES = ((0, 1), (1, 2), (2, 0))
+
+
+def _dot(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Column-wise dot product of (3, k) arrays."""
+    return p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
 
 
 @dataclass(frozen=True)
@@ -94,7 +101,7 @@ def validate(
         points of the chart's cap)
     winding : +1 or -1 to fix which way normals point; ``None`` decides from the region's
         signed solid angle (the sum of its faces' orientations seen from the centre)
-    threads : int, threads to share the edge classification
+    threads : int, threads for the independent parts
 
     Returns
     -------
@@ -110,16 +117,25 @@ def validate(
     folded &= ~measures.degenerate
     backfacing = orientation != winding  # winding * orientation <= 0, orientation in {-1, 0, 1}
 
-    edges = region_edges(measures.faces, orientation, measures.vertices.shape[1], threads)
     contains_north, contains_south = measures.contains_north.any(), measures.contains_south.any()
     flagged = seam.any() or contains_north or contains_south
+    # Where the region meets the seam, also find the faces an edge of which dips across it
+    # while their corners' phi do not straddle the cut (MATH.md's span test misses those).
+    # When faces are flagged already that search runs beside the edge classification.
+    edges, dipping = run_all(
+        [
+            lambda: region_edges(measures.faces, orientation, measures.vertices.shape[1]),
+            lambda: _faces_meeting_seam(measures) if flagged else None,
+        ],
+        threads,
+    )
     north, south, seam_distance = _outline_distances(
         measures, edges.outline, not contains_north, not contains_south, not flagged
     )
-    if flagged or seam_distance == 0.0:
-        # The region meets the seam: also find faces an edge of which dips across it while
-        # their corners' phi do not straddle the cut (MATH.md's span test misses those).
-        seam = seam | _faces_meeting_seam(measures)
+    if dipping is None and seam_distance == 0.0:
+        dipping = _faces_meeting_seam(measures)
+    if dipping is not None:
+        seam = seam | dipping
     touches_seam = seam.any() or contains_north or contains_south
     return RegionValidation(
         singular_point_faces=np.flatnonzero(measures.contains_north | measures.contains_south),
@@ -166,8 +182,8 @@ def _faces_meeting_seam(measures: FaceMeasures) -> np.ndarray:
     at least ``r_v`` from the centre and ``L`` apart differ by a chord of at most ``2 L / r_v``).
     The seam lies on the circle at ``rho`` from ``+Y``, at ``x <= 0``. So only faces with a
     corner ``v`` within ``asin(L / r_v)`` of that circle and of that side need the exact arc
-    test: found first with ``L`` the region's longest edge, per vertex, then with each
-    candidate face's own longest edge. Faces the span test flagged need no test.
+    test: found first with ``L`` a bound on every edge, per vertex, then with each candidate
+    face's own longest edge. Faces the span test flagged need no test.
     """
     faces, cap = measures.faces, measures.cap
     rows = measures.vertices
@@ -185,23 +201,27 @@ def _faces_meeting_seam(measures: FaceMeasures) -> np.ndarray:
         close &= x <= reach
         return close
 
-    vertex_near = near(slice(None), float(measures.longest_edge.max()))
-    corners = faces.T
-    candidates = vertex_near[corners[0]] | vertex_near[corners[1]] | vertex_near[corners[2]]
+    vertex_near = np.take(near(slice(None), measures.edge_bound), faces.ravel())
+    corner_near = vertex_near.reshape(-1, 3)
+    candidates = corner_near[:, 0] | corner_near[:, 1] | corner_near[:, 2]
     candidates &= ~measures.crosses_seam
     candidates = np.flatnonzero(candidates)
     if candidates.size:
         c = faces[candidates]
-        own = measures.longest_edge[candidates]
+        corner = [rows[:, c[:, i]] for i in range(3)]
+        own = np.sqrt(
+            np.maximum.reduce(
+                [_dot(corner[i] - corner[j], corner[i] - corner[j]) for i, j in _EDGES]
+            )
+        )
         candidates = candidates[near(c[:, 0], own) | near(c[:, 1], own) | near(c[:, 2], own)]
     meets = np.zeros(len(faces), dtype=bool)
     if candidates.size:
         c = faces[candidates]
-        ends = [unit_rows(np.ascontiguousarray(rows[:, c[:, i]].T))[0] for i in range(3)]
-        touch = np.zeros(candidates.size, dtype=bool)
-        for i, j in ((0, 1), (1, 2), (2, 0)):
-            touch |= arcs_to_seam(ends[i], ends[j], cap) <= _SEAM_TOUCH
-        meets[candidates] = touch
+        starts = unit_rows(np.ascontiguousarray(rows[:, c.T.ravel()].T))[0]  # edges 0, 1, 2
+        ends = np.concatenate([starts[c.shape[0] :], starts[: c.shape[0]]])  # corners 1, 2, 0
+        touch = (arcs_to_seam(starts, ends, cap) <= _SEAM_TOUCH).reshape(3, -1)
+        meets[candidates] = touch[0] | touch[1] | touch[2]
     return meets
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import os
+from fractions import Fraction
 from functools import cache
 
 import numpy as np
@@ -111,3 +112,14 @@ def grid_mesh(xs: np.ndarray, ys: np.ndarray, z: float) -> tuple[np.ndarray, np.
             faces.append([a, b, c])
             faces.append([a, c, d])
     return vertices, np.array(faces, dtype=np.int64)
+
+
+def exact_sign(a, b, c) -> int:
+    """Sign of det[a, b, c] in rational arithmetic (every float is a rational)."""
+    a, b, c = ([Fraction(float(v)) for v in row] for row in (a, b, c))
+    det = (
+        a[0] * (b[1] * c[2] - b[2] * c[1])
+        + a[1] * (b[2] * c[0] - b[0] * c[2])
+        + a[2] * (b[0] * c[1] - b[1] * c[0])
+    )
+    return (det > 0) - (det < 0)

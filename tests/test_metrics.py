@@ -127,17 +127,23 @@ def test_isometric_energy_has_an_interior_minimum_over_sigma():
     assert d[0.05].area.mean > d[0.5].area.mean > d[1.0].area.mean
 
 
-@pytest.mark.parametrize("degenerate", [False, True])
-def test_summaries_agree_with_the_per_face_measures(degenerate):
+def nefertiti_measures(extra_faces=()):
+    """Face measurements of the Nefertiti scan (with ``extra_faces`` appended)."""
     vertices, faces = load_sample("nefertiti-lowres.obj")
+    if len(extra_faces):
+        faces = np.vstack([faces, extra_faces])
     centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
     frame = Frame.from_pole_up([0.0, -1.0, 0.0], [0.0, 0.0, 1.0], center=centre)
     chart = Chart.distorted(PoleCap.from_sigma(0.4))
     local = frame.to_local(vertices)
     theta, phi, _ = chart.forward(local)
-    if degenerate:
-        faces = np.vstack([faces, [[0, 0, 1], [5, 6, 5]]])
-    measures = measure_faces(local, faces, theta, phi, chart.cap)
+    return measure_faces(local, faces, theta, phi, chart.cap)
+
+
+@pytest.mark.parametrize("degenerate", [False, True])
+def test_summaries_agree_with_the_per_face_measures(degenerate):
+    measures = nefertiti_measures([[0, 0, 1], [5, 6, 5]] if degenerate else [])
+    faces = measures.faces
     summary = distortion(measures)
     per_face = face_distortion(measures)
     assert summary.measured_faces == len(per_face.faces) == len(faces) - 2 * degenerate
@@ -153,13 +159,7 @@ def test_a_misleading_sample_falls_back_to_the_exact_quantile(monkeypatch):
     import transforms.metrics as metrics
 
     monkeypatch.setattr(metrics, "_bracket", lambda sample, weights, q: (-2.0, -1.0))
-    vertices, faces = load_sample("nefertiti-lowres.obj")
-    centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
-    frame = Frame.from_pole_up([0.0, -1.0, 0.0], [0.0, 0.0, 1.0], center=centre)
-    chart = Chart.distorted(PoleCap.from_sigma(0.4))
-    local = frame.to_local(vertices)
-    theta, phi, _ = chart.forward(local)
-    measures = measure_faces(local, faces, theta, phi, chart.cap)
+    measures = nefertiti_measures()
     per_face = face_distortion(measures)
     got = distortion(measures)
     monkeypatch.undo()

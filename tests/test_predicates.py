@@ -1,7 +1,5 @@
 """Exact orientation signs."""
 
-from fractions import Fraction
-
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
@@ -9,15 +7,7 @@ from hypothesis.extra import numpy as hnp
 
 from transforms import orient3d_sign
 
-
-def exact_sign(a, b, c) -> int:
-    a, b, c = ([Fraction(float(v)) for v in row] for row in (a, b, c))
-    det = (
-        a[0] * (b[1] * c[2] - b[2] * c[1])
-        + a[1] * (b[2] * c[0] - b[0] * c[2])
-        + a[2] * (b[0] * c[1] - b[1] * c[0])
-    )
-    return (det > 0) - (det < 0)
+from .conftest import exact_sign
 
 
 def test_nearly_coplanar_triples_match_exact_rationals():

@@ -2,7 +2,6 @@
 refused with TransformInputError."""
 
 import math
-from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -28,6 +27,8 @@ from transforms import (
     weighted_quantile,
 )
 from transforms.frames import check_rotation
+
+from .conftest import exact_sign
 
 
 def test_an_edge_dipping_across_the_seam_is_a_seam_crossing():
@@ -85,16 +86,6 @@ def test_the_singular_test_does_not_depend_on_far_away_faces():
     both = flatten_region(vertices, [[0, 1, 2], [3, 4, 5]], Frame.identity(), Chart.standard())
     assert len(alone.validation.singular_point_faces) == 0
     assert len(both.validation.singular_point_faces) == 0
-
-
-def exact_sign(a, b, c) -> int:
-    a, b, c = ([Fraction(float(v)) for v in row] for row in (a, b, c))
-    det = (
-        a[0] * (b[1] * c[2] - b[2] * c[1])
-        + a[1] * (b[2] * c[0] - b[0] * c[2])
-        + a[2] * (b[0] * c[1] - b[1] * c[0])
-    )
-    return (det > 0) - (det < 0)
 
 
 finite_floats = st.one_of(

@@ -22,8 +22,8 @@ from .parallel import map_blocks
 from .predicates import EPSILON, orient3d_sign_components
 
 #: A triangle is degenerate when twice its area is at most this times the sum of its two
-#: squared edges at corner 0 (a height below about 1e-12 of its edges), in 3D or in the
-#: layout.
+#: squared edges at corner 0 (a height below about 1e-12 of its edges), or when its layout
+#: squashes it to that degree (the smaller stretch at most this times the larger).
 DEGENERATE_RTOL = 1e-12
 
 #: |fl(c0 . (e1 x e2)) - det[c0, c1, c2]| <= _ORIENT_BOUND * (|e1|^2 + |e2|^2) when every
@@ -181,7 +181,6 @@ def _measure_block(
     f2 = layout[:, 2] - layout[:, 0]
     layout_area = np.multiply(f1[0], f2[1], out=out["layout_double_area"])
     layout_area -= f1[1] * f2[0]
-    h11, h22 = _dot(f1, f1), _dot(f2, f2)
 
     # Orientation seen from the centre: c0 . (e1 x e2) = det[c0, c1, c2], exact where the
     # rounding bound leaves its sign in doubt.
@@ -195,7 +194,6 @@ def _measure_block(
         orientation[unsure] = orient3d_sign_components(x0, y0, z0, x1, y1, z1, x2, y2, z2)
 
     degenerate = np.less_equal(double_area, DEGENERATE_RTOL * reference, out=out["degenerate"])
-    degenerate |= np.abs(layout_area) <= DEGENERATE_RTOL * (h11 + h22)
     phi = layout[0]
     span = np.maximum(np.maximum(phi[0], phi[1]), phi[2])
     span -= np.minimum(np.minimum(phi[0], phi[1]), phi[2])
@@ -230,7 +228,9 @@ def _measure_block(
         conformal_part = _norm2(a + d, c - b)
         s1 = np.add(conformal_part, _norm2(a - d, c + b), out=out["stretch_max"])
         s1 *= 0.5
-        np.divide(np.abs(layout_area) / double_area, s1, out=out["stretch_min"])
+        s2 = np.divide(np.abs(layout_area) / double_area, s1, out=out["stretch_min"])
+        # Degenerate in the layout: squashed flat (also NaN from a degenerate 3D triangle).
+        degenerate |= ~(s2 > DEGENERATE_RTOL * s1)
     return longest_leg
 
 

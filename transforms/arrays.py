@@ -189,7 +189,8 @@ def as_faces(faces, n_vertices: int, field: str = "faces") -> np.ndarray:
     array = numeric_array(faces, field, "an (m, 3) array of integer vertex indices", "iu")
     if array.ndim != 2 or array.shape[1] != 3:
         raise TransformInputError(field, f"must have shape (m, 3), got {array.shape}")
-    if array.size and (array.min() < 0 or array.max() >= n_vertices):
+    unsigned = np.dtype(f"u{array.dtype.itemsize}")  # negatives become huge: one pass
+    if array.size and int(array.view(unsigned).max()) >= n_vertices:
         bad = ((array < 0) | (array >= n_vertices)).any(axis=1)
         text, rows = listed_rows(bad, "face")
         raise TransformInputError(

@@ -16,13 +16,6 @@ async def client():
         yield c
 
 
-@pytest.mark.anyio
-async def test_healthz(client):
-    response = await client.get("/healthz")
-    assert response.status_code == 200
-    assert response.json() == {"status": "ok"}
-
-
 def test_committed_openapi_document_is_current():
     """Regenerate with `python -m service.openapi` when the API changes."""
     assert json.loads(DOCUMENT.read_text()) == json.loads(render())

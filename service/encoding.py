@@ -1,0 +1,71 @@
+"""JSON answers encoded straight from numpy arrays (orjson: no per-float Python work), and
+the Server-Timing header."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from contextlib import contextmanager
+
+import numpy as np
+import orjson
+from starlette.responses import Response
+
+JSON = "application/json"
+
+
+def encode(payload: dict) -> bytes:
+    """``payload`` as JSON bytes; numpy arrays become lists.
+
+    Raises
+    ------
+    ValueError
+        A NaN or Inf anywhere: an answer never carries one (it would be a bug).
+    """
+    _check_finite(payload)
+    return orjson.dumps(payload, option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+def _check_finite(value) -> None:
+    if isinstance(value, dict):
+        for item in value.values():
+            _check_finite(item)
+    elif isinstance(value, (list, tuple)):
+        for item in value:
+            if isinstance(item, (dict, list, tuple, float, np.ndarray)):
+                _check_finite(item)
+    elif isinstance(value, np.ndarray):
+        if value.dtype.kind == "f" and not np.isfinite(value).all():
+            raise ValueError("an answer would carry a NaN or Inf")
+    elif isinstance(value, float) and not np.isfinite(value):
+        raise ValueError("an answer would carry a NaN or Inf")
+
+
+class Timings:
+    """Named durations for a ``Server-Timing`` header (RFC-style ``name;dur=ms``)."""
+
+    def __init__(self) -> None:
+        self.durations: dict[str, float] = {}
+
+    @contextmanager
+    def measure(self, name: str):
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.durations[name] = self.durations.get(name, 0.0) + time.perf_counter() - start
+
+    def timed(self, name: str, call: Callable):
+        with self.measure(name):
+            return call()
+
+    def header(self) -> str:
+        return ", ".join(
+            f"{name};dur={seconds * 1e3:.1f}" for name, seconds in self.durations.items()
+        )
+
+
+def json_response(payload: dict, timings: Timings) -> Response:
+    """Encode (timed) and wrap with the Server-Timing header."""
+    body = timings.timed("encode", lambda: encode(payload))
+    return Response(body, media_type=JSON, headers={"Server-Timing": timings.header()})

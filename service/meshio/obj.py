@@ -1,0 +1,264 @@
+"""Wavefront OBJ: vertices, polygons (fan-triangulated in order) and group names, read from
+bytes with whole-file numpy passes (no loop over vertices or faces).
+
+Rules (the API documentation repeats them):
+
+* vertex ``i`` is the file's ``i``-th ``v`` line (0-based); ``vt``, ``vn`` and other lines
+  are ignored, as are the texture and normal parts of ``f`` references (``v/vt/vn``);
+* a polygon ``f a b c d ...`` becomes the triangles ``(a, b, c), (a, c, d), ...`` in that
+  order, so face ids count triangles in file order;
+* negative references count back from the last vertex defined so far (OBJ's rule);
+* a face belongs to the names of the ``g`` line (each name), the ``o`` line and the
+  ``usemtl`` line in force where it appears.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from .mesh import Limits, Mesh, MeshFormatError, check_counts
+
+_SPACE, _TAB, _CR, _LF, _HASH, _SLASH = 32, 9, 13, 10, 35, 47
+_REFERENCE_TAIL = re.compile(rb"/[^\s]*")  # the /vt/vn part of v/vt/vn
+
+
+def read_obj(data: bytes, limits: Limits) -> Mesh:
+    """Parse an OBJ file held in memory.
+
+    Raises
+    ------
+    MeshFormatError
+        No vertices or faces, unreadable numbers, references outside the vertex list,
+        polygons with fewer than three corners, or counts beyond ``limits``.
+    """
+    lines = _Lines(data)
+    data = lines.data  # comments blanked out
+    kind = lines.keywords()
+    vertex_lines = np.flatnonzero(kind == _VERTEX)
+    face_lines = np.flatnonzero(kind == _FACE)
+    if vertex_lines.size == 0:
+        raise MeshFormatError("no vertex ('v') lines: is this an OBJ file?")
+    if face_lines.size == 0:
+        raise MeshFormatError("no face ('f') lines: the file holds no polygons")
+    corners = lines.tokens[face_lines] - 1
+    check_counts(len(vertex_lines), int(np.maximum(corners - 2, 0).sum()), limits)
+
+    vertices = _read_vertices(data, lines, vertex_lines)
+    faces, face_of_line = _read_faces(data, lines, face_lines, vertex_lines)
+    groups = _read_groups(data, lines, kind, face_lines, face_of_line)
+    return Mesh(vertices=vertices, faces=faces, groups=groups, format="obj")
+
+
+_OTHER, _VERTEX, _FACE, _GROUP, _OBJECT, _MATERIAL = range(6)
+
+
+class _Lines:
+    """Line boundaries, first non-blank columns and token counts of an OBJ text.
+
+    Comments (``#`` to the end of the line) are blanked out first, in a copy, so every later
+    step can read whole runs of lines as one slice of ``data``.
+    """
+
+    def __init__(self, data: bytes) -> None:
+        buffer = np.frombuffer(data, dtype=np.uint8)
+        newlines = np.flatnonzero(buffer == _LF)
+        starts = np.concatenate(([0], newlines + 1))
+        ends = np.concatenate((newlines, [len(buffer)]))
+        keep = starts < ends  # drop the empty line after a final newline
+        self.starts, self.ends = starts[keep], ends[keep]
+        hashes = np.flatnonzero(buffer == _HASH)
+        if hashes.size:
+            line = np.searchsorted(self.starts, hashes, side="right") - 1
+            first_of_line = np.concatenate(([True], line[1:] != line[:-1]))
+            comment_starts = hashes[first_of_line]
+            comment_ends = self.ends[line[first_of_line]]
+            edges = np.zeros(len(buffer) + 1, dtype=np.int8)
+            edges[comment_starts] += 1
+            edges[comment_ends] -= 1  # ranges never overlap, so +-1 marks suffice
+            blanked = buffer.copy()
+            blanked[np.cumsum(edges[:-1], dtype=np.int8) > 0] = _SPACE
+            buffer = blanked
+            data = blanked.tobytes()
+        self.data, self.buffer = data, buffer
+        # Skip leading blanks (one pass per blank column, not per line).
+        self.first = self.starts.copy()
+        while True:
+            inside = self.first < self.ends
+            blank = np.zeros(len(self.first), dtype=bool)
+            blank[inside] = _is_blank(buffer[self.first[inside]])
+            if not blank.any():
+                break
+            self.first[blank] += 1
+        blank = _is_blank(buffer)
+        token_start = ~blank
+        token_start[1:] &= blank[:-1]
+        #: (lines,) int: whitespace-separated tokens per line, keyword included
+        self.tokens = np.add.reduceat(token_start.view(np.uint8), self.starts, dtype=np.int64)
+
+    def keywords(self) -> np.ndarray:
+        """(lines,) int: the kind of each line from its first token."""
+        buffer, first, ends = self.buffer, self.first, self.ends
+        kind = np.full(len(first), _OTHER, dtype=np.int8)
+
+        def char(offset: int) -> np.ndarray:
+            at = first + offset
+            out = np.zeros(len(first), dtype=np.uint8)
+            inside = at < ends
+            out[inside] = buffer[at[inside]]
+            return out
+
+        c0, c1 = char(0), char(1)
+        separated = _is_blank(c1) | (c1 == 0)
+        kind[(c0 == ord("v")) & separated] = _VERTEX
+        kind[(c0 == ord("f")) & separated] = _FACE
+        kind[(c0 == ord("g")) & separated] = _GROUP
+        kind[(c0 == ord("o")) & separated] = _OBJECT
+        word = np.ones(len(first), dtype=bool)
+        for offset, letter in enumerate(b"usemtl"):
+            word &= char(offset) == letter
+        word &= _is_blank(char(6)) | (char(6) == 0)
+        kind[word] = _MATERIAL
+        return kind
+
+
+def _is_blank(values: np.ndarray) -> np.ndarray:
+    return (values == _SPACE) | (values == _TAB) | (values == _CR) | (values == _LF)
+
+
+def _runs(line_ids: np.ndarray) -> list[tuple[int, int]]:
+    """Index ranges ``[i, j)`` into ``line_ids`` of consecutive line numbers."""
+    breaks = np.flatnonzero(np.diff(line_ids) != 1) + 1
+    bounds = np.concatenate(([0], breaks, [len(line_ids)]))
+    return list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
+
+
+def _numbers(data: bytes, lines: _Lines, line_ids: np.ndarray, dtype, what: str) -> np.ndarray:
+    """The numbers after the keyword on each of ``line_ids`` (their token counts minus one),
+    concatenated. Runs of consecutive lines are parsed as one block of text."""
+    keyword_length = 1
+    parts = []
+    for i, j in _runs(line_ids):
+        first, last = line_ids[i], line_ids[j - 1]
+        text = data[lines.starts[first] : lines.ends[last]]
+        # Drop each line's keyword (a single letter at its first non-blank column).
+        text = re.sub(rb"(?m)^[ \t]*[vf](?=[ \t])", b"", text)
+        if dtype is np.int64 and b"/" in text:
+            text = _REFERENCE_TAIL.sub(b"", text)
+        expected = int(lines.tokens[line_ids[i:j]].sum()) - keyword_length * (j - i)
+        try:
+            values = np.fromstring(text, dtype=dtype, sep=" ")
+        except ValueError:
+            values = None
+        if values is None or len(values) != expected:
+            raise MeshFormatError(
+                f"unreadable {what} between lines {first + 1} and {last + 1}: every token "
+                "after the keyword must be a number"
+            )
+        parts.append(values)
+    return np.concatenate(parts)
+
+
+def _read_vertices(data: bytes, lines: _Lines, vertex_lines: np.ndarray) -> np.ndarray:
+    """(n, 3) float: x, y, z of each ``v`` line (a 4th or more numbers are ignored)."""
+    per_line = lines.tokens[vertex_lines] - 1
+    short = np.flatnonzero(per_line < 3)
+    if short.size:
+        raise MeshFormatError(
+            f"vertex on line {vertex_lines[short[0]] + 1} has {per_line[short[0]]} numbers; "
+            "a vertex needs x, y and z"
+        )
+    values = _numbers(data, lines, vertex_lines, np.float64, "vertex coordinates")
+    if np.all(per_line == 3):
+        vertices = values.reshape(-1, 3)
+    else:
+        offsets = np.concatenate(([0], np.cumsum(per_line)[:-1]))
+        vertices = values[offsets[:, None] + np.arange(3)]
+    finite = np.isfinite(vertices).all(axis=1)
+    if not finite.all():
+        bad = int(np.flatnonzero(~finite)[0])
+        raise MeshFormatError(
+            f"vertex {bad} (line {vertex_lines[bad] + 1}) has a NaN or Inf coordinate"
+        )
+    return np.ascontiguousarray(vertices)
+
+
+def _read_faces(
+    data: bytes, lines: _Lines, face_lines: np.ndarray, vertex_lines: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(m, 3) int triangles in file order, and for each the index into ``face_lines``."""
+    corners = lines.tokens[face_lines] - 1
+    short = np.flatnonzero(corners < 3)
+    if short.size:
+        raise MeshFormatError(
+            f"face on line {face_lines[short[0]] + 1} has {corners[short[0]]} corners; "
+            "a face needs at least 3"
+        )
+    references = _numbers(data, lines, face_lines, np.int64, "face references")
+    # Resolve 1-based and negative (relative) references to 0-based vertex ids.
+    defined = np.searchsorted(vertex_lines, face_lines)  # vertices before each face line
+    line_of_reference = np.repeat(np.arange(len(face_lines)), corners)
+    ids = np.where(references > 0, references - 1, references + defined[line_of_reference])
+    bad = (references == 0) | (ids < 0) | (ids >= len(vertex_lines))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        line = face_lines[line_of_reference[k]] + 1
+        raise MeshFormatError(
+            f"face on line {line} refers to vertex {int(references[k])}, but the file has "
+            f"{len(vertex_lines)} vertices (references count from 1, or back from -1)"
+        )
+    # Fan triangulation: polygon (a, b, c, d, ...) -> (a, b, c), (a, c, d), ...
+    triangles = corners - 2
+    first_corner = np.concatenate(([0], np.cumsum(corners)[:-1]))
+    face_of_line = np.repeat(np.arange(len(face_lines)), triangles)
+    step = np.arange(len(face_of_line)) - np.repeat(
+        np.concatenate(([0], np.cumsum(triangles)[:-1])), triangles
+    )
+    base = first_corner[face_of_line]
+    faces = np.stack([ids[base], ids[base + step + 1], ids[base + step + 2]], axis=1)
+    return faces.astype(np.int64), face_of_line
+
+
+def _read_groups(
+    data: bytes,
+    lines: _Lines,
+    kind: np.ndarray,
+    face_lines: np.ndarray,
+    face_of_line: np.ndarray,
+) -> dict[str, np.ndarray]:
+    """Group name -> ascending face ids, from the g (each name), o and usemtl in force."""
+    pairs_face, pairs_name, names = [], [], {}
+    for code, split_names in ((_GROUP, True), (_OBJECT, False), (_MATERIAL, False)):
+        naming = np.flatnonzero(kind == code)
+        if naming.size == 0:
+            continue
+        # The names of each naming line (its text after the keyword).
+        line_names = []
+        for line in naming.tolist():
+            text = data[lines.first[line] : lines.ends[line]].decode("utf-8", "replace")
+            rest = text.split(None, 1)[1].strip() if len(text.split(None, 1)) > 1 else ""
+            line_names.append(rest.split() if split_names else ([rest] if rest else []))
+        # Which naming line is in force for each triangle (-1: none yet).
+        current = (np.searchsorted(naming, face_lines) - 1)[face_of_line]
+        named = current >= 0
+        for slot in range(max((len(n) for n in line_names), default=0)):
+            ids = np.array(
+                [names.setdefault(n[slot], len(names)) if slot < len(n) else -1 for n in line_names]
+            )
+            name_of_face = np.where(named, ids[np.maximum(current, 0)], -1)
+            has = np.flatnonzero(name_of_face >= 0)
+            pairs_face.append(has)
+            pairs_name.append(name_of_face[has])
+    if not names:
+        return {}
+    face = np.concatenate(pairs_face)
+    name = np.concatenate(pairs_name)
+    order = np.lexsort((face, name))
+    face, name = face[order], name[order]
+    bounds = np.searchsorted(name, np.arange(len(names) + 1))
+    return {
+        text: np.unique(face[bounds[i] : bounds[i + 1]])
+        for text, i in names.items()
+        if bounds[i + 1] > bounds[i]
+    }

@@ -1,0 +1,327 @@
+"""Request parameters: the pydantic models at the edge, and their resolution into the core's
+objects (a Frame, a Chart, the region's face ids)."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from transforms import Chart, Frame, PoleCap, TransformInputError
+
+from .meshio import Mesh
+from .problems import Problem, from_transform_error
+
+Number = Annotated[float, Field(allow_inf_nan=False)]
+Vector3 = Annotated[list[Number], Field(min_length=3, max_length=3)]
+Matrix3 = Annotated[list[Vector3], Field(min_length=3, max_length=3)]
+
+#: The paper's example.
+DEFAULT_SIGMA = 0.3
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class PoleUp(_Strict):
+    """The local frame from two world directions."""
+
+    pole: Vector3 = Field(description="World direction that becomes local +Y (the warp's pole).")
+    up: Vector3 = Field(description="World direction whose part orthogonal to pole becomes +Z.")
+
+
+class ChartParams(_Strict):
+    """How directions become angles: method, cap and frame rotation."""
+
+    method: Literal["distorted", "standard", "separable"] = Field(
+        "distorted",
+        description="distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the "
+        "paper's alternative.",
+    )
+    sigma: Number | None = Field(
+        None,
+        gt=0,
+        description="Warp parameter (> 0); the cap's angle is 2 atan(sigma). Default 0.3. "
+        "At most one of sigma and pole_angle_deg; standard takes neither.",
+    )
+    pole_angle_deg: Number | None = Field(
+        None, gt=0, lt=180, description="The cap's angle rho in degrees, 0 < rho < 180."
+    )
+    rotation: Matrix3 | PoleUp | None = Field(
+        None,
+        description="World-to-local rotation: a 3x3 matrix (rows), or {pole, up}. "
+        "Default: identity.",
+    )
+
+    @model_validator(mode="after")
+    def _one_cap(self) -> ChartParams:
+        if self.sigma is not None and self.pole_angle_deg is not None:
+            raise ValueError(
+                "sigma, pole_angle_deg: give one, not both (they set the same cap, "
+                "rho = 2 atan(sigma))"
+            )
+        if self.method == "standard" and (
+            self.sigma is not None or self.pole_angle_deg is not None
+        ):
+            raise ValueError(
+                "sigma, pole_angle_deg: method 'standard' has no warp, so it takes neither"
+            )
+        return self
+
+
+class PointsRequest(ChartParams):
+    """Points to transform."""
+
+    points: Annotated[list[Vector3], Field(min_length=1)] = Field(
+        description="World points [[x, y, z], ...]."
+    )
+    center: Vector3 = Field([0.0, 0.0, 0.0], description="The centre c, world coordinates.")
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "points": [[0.0, 0.0, -1.0], [1.0, 0.5, -0.2]],
+                    "method": "distorted",
+                    "sigma": 0.3,
+                    "rotation": {"pole": [0.0, 1.0, 0.0], "up": [0.0, 0.0, 1.0]},
+                }
+            ]
+        }
+    )
+
+
+class InverseRequest(ChartParams):
+    """Angles to turn back into points."""
+
+    theta: Annotated[list[Number], Field(min_length=1)] = Field(
+        description="Polar angles in [0, pi] (radians)."
+    )
+    phi: Annotated[list[Number], Field(min_length=1)] = Field(
+        description="Azimuths in [-pi, pi] (radians), one per theta."
+    )
+    r: list[Number] | Number | None = Field(
+        None, description="Distances from the centre (one per theta, or one for all); default 1."
+    )
+    center: Vector3 = Field([0.0, 0.0, 0.0], description="The centre c, world coordinates.")
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [{"theta": [1.2, 2.0], "phi": [-1.0, -2.5], "r": 1.0, "sigma": 0.3}]
+        }
+    )
+
+
+class Cone(_Strict):
+    axis: Vector3 = Field(description="World direction of the cone's axis (non-zero).")
+    half_angle_deg: Number = Field(gt=0, le=180, description="Half-angle in degrees.")
+
+
+class FacesRegion(_Strict):
+    faces: Annotated[list[int], Field(min_length=1)] = Field(
+        description="Triangle ids of the file, no repeats."
+    )
+
+
+class VerticesRegion(_Strict):
+    vertices: Annotated[list[int], Field(min_length=1)] = Field(
+        description="Vertex ids: the faces whose three vertices are all listed."
+    )
+
+
+class GroupsRegion(_Strict):
+    groups: Annotated[list[str], Field(min_length=1)] = Field(
+        description="OBJ g/o/usemtl names, glTF mesh or node names."
+    )
+
+
+class ConeRegion(_Strict):
+    cone: Cone = Field(
+        description="Faces whose centroid, seen from the centre, lies within half_angle_deg of "
+        "axis."
+    )
+
+
+Region = FacesRegion | VerticesRegion | GroupsRegion | ConeRegion
+
+
+class MeshParams(ChartParams):
+    """The JSON of the ``params`` field of /v1/flatten and /v1/validate."""
+
+    center: Vector3 | Literal["centroid", "bbox_center"] = Field(
+        "bbox_center",
+        description="The centre: world point, or the area-weighted centroid or bounding-box "
+        "centre of the region (of the whole mesh when the region is a cone).",
+    )
+    region: Region | None = Field(None, description="Which faces; null: the whole mesh.")
+    format: Literal["obj", "gltf", "glb", "ply", "stl"] | None = Field(
+        None, description="The file's format; default: from the file name's extension."
+    )
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "method": "distorted",
+                    "sigma": 0.3,
+                    "center": "bbox_center",
+                    "rotation": {"pole": [0.0, -1.0, 0.0], "up": [0.0, 0.0, 1.0]},
+                    "region": {"cone": {"axis": [0.0, 1.0, 0.0], "half_angle_deg": 60}},
+                }
+            ]
+        }
+    )
+
+
+# -- resolution ------------------------------------------------------------------------
+
+
+def chart_of(params: ChartParams) -> Chart:
+    """The chart the parameters name (sigma 0.3 when neither sigma nor a pole angle is set)."""
+    if params.method == "standard":
+        return Chart.standard()
+    if params.pole_angle_deg is not None:
+        cap = PoleCap.from_rho_deg(params.pole_angle_deg)
+    else:
+        cap = PoleCap.from_sigma(DEFAULT_SIGMA if params.sigma is None else params.sigma)
+    return Chart.from_method(params.method, cap)
+
+
+def frame_of(params: ChartParams, center: np.ndarray) -> Frame:
+    """The frame at ``center`` with the parameters' rotation (identity when none)."""
+    if params.rotation is None:
+        return Frame.identity(center)
+    if isinstance(params.rotation, PoleUp):
+        return Frame.from_pole_up(params.rotation.pole, params.rotation.up, center)
+    return Frame.from_matrix(params.rotation, center)
+
+
+def resolved(chart: Chart, frame: Frame) -> dict:
+    """The ``params`` block of an answer: everything as it was used."""
+    return {
+        "method": chart.method.value,
+        "sigma": chart.cap.sigma,
+        "pole_angle_deg": chart.cap.rho_deg,
+        "center": frame.center.tolist(),
+        "rotation": frame.rotation.tolist(),
+    }
+
+
+def region_faces(mesh: Mesh, params: MeshParams) -> tuple[np.ndarray, np.ndarray]:
+    """The region's face ids (ascending) and the centre, as the parameters ask.
+
+    Raises
+    ------
+    Problem
+        Ids out of range or repeated, unknown groups, a zero cone axis, or an empty region.
+    """
+    n_faces, n_vertices = len(mesh.faces), len(mesh.vertices)
+    region = params.region
+    if isinstance(region, ConeRegion):
+        center = _center(mesh, np.arange(n_faces), params.center)
+        faces = _cone(mesh, center, region.cone)
+    else:
+        if region is None:
+            faces = np.arange(n_faces)
+        elif isinstance(region, FacesRegion):
+            faces = np.sort(_ids(region.faces, n_faces, "params.region.faces", "face"))
+        elif isinstance(region, VerticesRegion):
+            listed = np.zeros(n_vertices, dtype=bool)
+            listed[_ids(region.vertices, n_vertices, "params.region.vertices", "vertex")] = True
+            faces = np.flatnonzero(listed[mesh.faces].all(axis=1))
+        else:
+            faces = _groups(mesh, region.groups)
+        center = _center(mesh, faces, params.center) if len(faces) else None
+    if len(faces) == 0:
+        raise Problem(422, "params.region selects no faces", "empty-region", "params.region")
+    return faces, center
+
+
+def _ids(values: list[int], limit: int, field: str, noun: str) -> np.ndarray:
+    ids = np.asarray(values, dtype=np.int64)
+    bad = np.flatnonzero((ids < 0) | (ids >= limit))
+    if bad.size:
+        plural = {"vertex": "vertices", "face": "faces"}[noun]
+        raise Problem(
+            422,
+            f"{field}: {noun} id {int(ids[bad[0]])} is outside [0, {limit}) (the mesh has "
+            f"{limit} {plural})",
+            "invalid-input",
+            field,
+            ids[bad[:5]].tolist(),
+        )
+    unique, counts = np.unique(ids, return_counts=True)
+    if (counts > 1).any():
+        repeated = unique[counts > 1]
+        raise Problem(
+            422,
+            f"{field}: {noun} id {int(repeated[0])} is listed more than once "
+            f"({len(repeated)} ids repeat)",
+            "invalid-input",
+            field,
+            repeated[:5].tolist(),
+        )
+    return ids
+
+
+def _groups(mesh: Mesh, names: list[str]) -> np.ndarray:
+    missing = [name for name in names if name not in mesh.groups]
+    if missing:
+        known = ", ".join(repr(name) for name in sorted(mesh.groups)[:20]) or "none"
+        raise Problem(
+            422,
+            f"params.region.groups: no group named {missing[0]!r}; the file's groups: {known}",
+            "invalid-input",
+            "params.region.groups",
+        )
+    return np.unique(np.concatenate([mesh.groups[name] for name in names]))
+
+
+def _center(mesh: Mesh, faces: np.ndarray, center) -> np.ndarray:
+    """A world point, or the area-weighted centroid or bounding-box centre of ``faces``."""
+    if not isinstance(center, str):
+        return np.asarray(center, dtype=np.float64)
+    corners = mesh.vertices[mesh.faces[faces]]  # (m, 3 corners, 3)
+    if center == "bbox_center":
+        used = corners.reshape(-1, 3)
+        return (used.min(axis=0) + used.max(axis=0)) / 2.0
+    areas = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    if not areas.sum() > 0:
+        raise Problem(
+            422,
+            "params.center: 'centroid' needs faces with area",
+            "invalid-input",
+            "params.center",
+        )
+    return (corners.mean(axis=1) * areas[:, None]).sum(axis=0) / areas.sum()
+
+
+def _cone(mesh: Mesh, center: np.ndarray, cone: Cone) -> np.ndarray:
+    axis = np.asarray(cone.axis, dtype=np.float64)
+    length = float(np.linalg.norm(axis))
+    if not length > 0:
+        raise Problem(
+            422,
+            "params.region.cone.axis: must be a non-zero direction",
+            "invalid-input",
+            "params.region.cone.axis",
+        )
+    centroids = mesh.vertices[mesh.faces].mean(axis=1) - center
+    distance = np.linalg.norm(centroids, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cosine = centroids @ (axis / length) / distance
+    inside = cosine >= math.cos(math.radians(cone.half_angle_deg)) - 1e-15
+    return np.flatnonzero(inside & (distance > 0))
+
+
+def checked(call, prefix: str = "params."):
+    """Run ``call``; a core input error about a parameter becomes a 422 naming it."""
+    try:
+        return call()
+    except TransformInputError as error:
+        raise from_transform_error(error, prefix) from None

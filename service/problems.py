@@ -1,0 +1,137 @@
+"""Errors as RFC 9457 problem details (``application/problem+json``).
+
+Every 4xx and 5xx the service sends has ``type``, ``title``, ``status`` and a ``detail`` that
+names the field, the face or vertex, and the limit; ``field`` and ``indices`` repeat the
+first two for programs.
+"""
+
+from __future__ import annotations
+
+import logging
+from http import HTTPStatus
+
+import orjson
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from pydantic import BaseModel, Field
+from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.responses import Response
+
+from transforms import TransformInputError
+
+from .meshio import MeshFormatError
+
+PROBLEM_JSON = "application/problem+json"
+logger = logging.getLogger("meshflat")
+
+
+class ProblemDetails(BaseModel):
+    """RFC 9457 problem details."""
+
+    type: str = Field(description="A URI naming the kind of problem.")
+    title: str = Field(description="Short summary of the kind of problem.")
+    status: int = Field(description="The HTTP status code.")
+    detail: str = Field(description="What is wrong here: the field, face or vertex, the limit.")
+    field: str | None = Field(None, description="The parameter or part at fault, if one is.")
+    indices: list[int] | None = Field(
+        None, description="The first offending vertex, face or point ids, if any."
+    )
+
+
+class Problem(Exception):
+    """An error answered as a problem: raise it anywhere a request is handled."""
+
+    def __init__(
+        self,
+        status: int,
+        detail: str,
+        kind: str = "invalid-request",
+        field: str | None = None,
+        indices: list[int] | tuple[int, ...] | None = None,
+        headers: dict[str, str] | None = None,
+    ) -> None:
+        super().__init__(detail)
+        self.status, self.detail, self.kind = status, detail, kind
+        self.field = field
+        self.indices = list(indices) if indices else None
+        self.headers = headers
+
+
+def problem_response(problem: Problem) -> Response:
+    body = {
+        "type": f"urn:meshflat:problem:{problem.kind}",
+        "title": HTTPStatus(problem.status).phrase,
+        "status": problem.status,
+        "detail": problem.detail,
+    }
+    if problem.field:
+        body["field"] = problem.field
+    if problem.indices:
+        body["indices"] = problem.indices
+    return Response(
+        orjson.dumps(body),
+        status_code=problem.status,
+        media_type=PROBLEM_JSON,
+        headers=problem.headers,
+    )
+
+
+def from_transform_error(error: TransformInputError, prefix: str = "") -> Problem:
+    """A core input error as a 422 problem; ``prefix`` places its field (``params.``)."""
+    return Problem(
+        422, f"{prefix}{error}", "invalid-input", f"{prefix}{error.field}", list(error.indices)
+    )
+
+
+def from_mesh_error(error: MeshFormatError) -> Problem:
+    kind = "mesh-too-large" if error.status == 413 else "unreadable-mesh"
+    return Problem(error.status, f"mesh: {error}", kind, "mesh")
+
+
+def _validation_detail(error: RequestValidationError) -> tuple[str, str | None]:
+    messages, first_field = [], None
+    for item in error.errors()[:5]:
+        location = ".".join(str(part) for part in item.get("loc", ()) if part != "body")
+        message = str(item.get("msg", "invalid")).removeprefix("Value error, ")
+        first_field = first_field or location or None
+        messages.append(f"{location}: {message}" if location else message)
+    more = len(error.errors()) - 5
+    if more > 0:
+        messages.append(f"and {more} more")
+    return "; ".join(messages), first_field
+
+
+def install(app: FastAPI) -> None:
+    """Register the handlers that turn every error into a problem response."""
+
+    @app.exception_handler(Problem)
+    async def on_problem(_: Request, exc: Problem) -> Response:
+        return problem_response(exc)
+
+    @app.exception_handler(TransformInputError)
+    async def on_transform_error(_: Request, exc: TransformInputError) -> Response:
+        return problem_response(from_transform_error(exc))
+
+    @app.exception_handler(MeshFormatError)
+    async def on_mesh_error(_: Request, exc: MeshFormatError) -> Response:
+        return problem_response(from_mesh_error(exc))
+
+    @app.exception_handler(RequestValidationError)
+    async def on_validation_error(_: Request, exc: RequestValidationError) -> Response:
+        detail, field = _validation_detail(exc)
+        return problem_response(Problem(422, detail, "invalid-request", field))
+
+    @app.exception_handler(StarletteHTTPException)
+    async def on_http_error(_: Request, exc: StarletteHTTPException) -> Response:
+        detail = exc.detail if isinstance(exc.detail, str) else HTTPStatus(exc.status_code).phrase
+        return problem_response(
+            Problem(exc.status_code, detail, "http-error", headers=getattr(exc, "headers", None))
+        )
+
+    @app.exception_handler(Exception)
+    async def on_unexpected(request: Request, exc: Exception) -> Response:
+        # Only the route and the exception type: never request content.
+        logger.error("unexpected %s on %s %s", type(exc).__name__, request.method, request.url.path)
+        return problem_response(
+            Problem(500, "the service failed unexpectedly; the error is logged", "internal-error")
+        )

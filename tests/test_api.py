@@ -1,0 +1,414 @@
+"""The HTTP API through httpx against the app, on the bundled scans, checked against the core
+on the same data."""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+
+import httpx
+import numpy as np
+import pytest
+import trimesh
+
+from service.app import create_app
+from service.samples import SAMPLES
+from service.settings import Settings
+from transforms import Chart, Frame, PoleCap, flatten_region, world_to_angles
+
+from .conftest import load_sample
+
+pytestmark = pytest.mark.anyio
+
+SCALP = {
+    "fsaverage-head.ply": {
+        "center": "bbox_center",
+        "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+        "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}},
+    },
+    "lee-perry-smith.glb": {
+        "center": [0.0, 1.2, -0.3],
+        "rotation": {"pole": [0, -1, 0], "up": [0, 0, 1]},
+        "region": {"cone": {"axis": [0, 1, 0], "half_angle_deg": 60}},
+    },
+}
+
+
+@pytest.fixture
+async def client():
+    app = create_app(Settings())
+    async with app.router.lifespan_context(app):
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as c:
+            yield c
+
+
+async def flatten(client, name, params=None, data=None, filename=None, endpoint="/v1/flatten"):
+    data = SAMPLES[name].path.read_bytes() if data is None else data
+    fields = {"params": json.dumps(params)} if params is not None else {}
+    return await client.post(endpoint, files={"mesh": (filename or name, data)}, data=fields)
+
+
+def problem(response, status, field=None):
+    assert response.status_code == status, response.text
+    assert response.headers["content-type"] == "application/problem+json"
+    body = response.json()
+    assert body["status"] == status and body["detail"] and body["type"].startswith("urn:")
+    if field is not None:
+        assert body.get("field") == field, body
+    return body
+
+
+# -- health and samples ------------------------------------------------------------------
+
+
+async def test_health_and_readiness(client):
+    assert (await client.get("/healthz")).json() == {"status": "ok"}
+    assert (await client.get("/readyz")).status_code == 200
+
+
+async def test_readiness_waits_for_the_self_check():
+    app = create_app(Settings())  # lifespan not run
+    transport = httpx.ASGITransport(app=app)
+    async with httpx.AsyncClient(transport=transport, base_url="http://m") as c:
+        problem(await c.get("/readyz"), 503)
+
+
+async def test_samples_are_listed_with_counts_and_credits(client):
+    listed = (await client.get("/v1/samples")).json()
+    assert [s["name"] for s in listed] == list(SAMPLES)
+    for sample in listed:
+        vertices, faces = load_sample(sample["name"])
+        assert sample["faces"] == len(faces) and sample["vertices"] == len(vertices)
+        assert sample["credit"] and sample["licence"]
+        download = await client.get(sample["url"])
+        assert download.status_code == 200
+        assert download.content == SAMPLES[sample["name"]].path.read_bytes()
+    problem(await client.get("/v1/samples/missing.obj"), 404, "name")
+
+
+# -- points ------------------------------------------------------------------------------
+
+
+async def test_points_match_the_core_and_invert(client):
+    rng = np.random.default_rng(20)
+    points = rng.normal(size=(500, 3)).tolist()
+    params = {
+        "sigma": 0.4,
+        "center": [0.1, 0.2, 0.3],
+        "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+    }
+    response = await client.post("/v1/points", json={"points": points, **params})
+    assert response.status_code == 200
+    assert {"parse", "compute", "encode"} <= {
+        part.split(";")[0].strip() for part in response.headers["server-timing"].split(",")
+    }
+    got = response.json()
+    frame = Frame.from_pole_up([0, 0, -1], [0, 1, 0], [0.1, 0.2, 0.3])
+    theta, phi, r = world_to_angles(points, frame, Chart.distorted(PoleCap.from_sigma(0.4)))
+    assert np.array_equal(got["theta"], theta) and np.array_equal(got["phi"], phi)
+    assert np.array_equal(got["r"], r)
+    back = await client.post(
+        "/v1/points/inverse",
+        json={"theta": got["theta"], "phi": got["phi"], "r": got["r"], **params},
+    )
+    assert back.status_code == 200
+    assert np.allclose(back.json()["points"], points, atol=1e-9)
+
+
+@pytest.mark.parametrize("method", ["standard", "separable", "distorted"])
+async def test_every_method_and_the_pole_angle(client, method):
+    params = (
+        {"method": method} if method == "standard" else {"method": method, "pole_angle_deg": 40}
+    )
+    response = await client.post("/v1/points", json={"points": [[1, -2, 0.5]], **params})
+    cap = PoleCap.from_rho_deg(40)
+    chart = Chart.standard() if method == "standard" else Chart.from_method(method, cap)
+    theta, phi, _ = chart.forward([[1, -2, 0.5]])
+    assert response.json()["theta"] == [theta[0]] and response.json()["phi"] == [phi[0]]
+
+
+@pytest.mark.parametrize(
+    ("body", "field"),
+    [
+        ({"points": [[0, 0, 0]]}, "points"),
+        ({"points": [[1, 0, 0]], "sigma": 0.3, "pole_angle_deg": 30}, None),
+        ({"points": [[1, 0, 0]], "method": "standard", "sigma": 0.3}, None),
+        ({"points": [[1, 0, 0]], "sigma": -1}, "sigma"),
+        ({"points": [[1, 0, 0]], "sigma": 1e9}, "sigma"),
+        ({"points": [[1, 0, 0]], "pole_angle_deg": 180}, "pole_angle_deg"),
+        ({"points": [[1, 0]]}, "points.0"),
+        ({"points": []}, "points"),
+        ({"points": [[1, 0, 0]], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}, "rotation"),
+        ({"points": [[1, 0, 0]], "rotation": {"pole": [0, 1, 0], "up": [0, 2, 0]}}, "up"),
+        ({"points": [[1, 0, 0]], "method": "conformal"}, "method"),
+        ({"points": [[1, 0, 0]], "extra": 1}, "extra"),
+    ],
+)
+async def test_bad_point_requests_name_the_field(client, body, field):
+    body = problem(await client.post("/v1/points", json=body), 422, field)
+    if field is None:
+        assert "sigma, pole_angle_deg" in body["detail"]
+
+
+async def test_nan_and_infinity_are_refused(client):
+    body = '{"points": [[1, 0, NaN]]}'
+    headers = {"content-type": "application/json"}
+    problem(await client.post("/v1/points", content=body, headers=headers), 422)
+
+
+async def test_inverse_checks_ranges(client):
+    response = await client.post("/v1/points/inverse", json={"theta": [4.0], "phi": [0.0]})
+    problem(response, 422, "theta")
+
+
+# -- flatten and validate ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", list(SCALP))
+async def test_flatten_a_scalp_matches_the_core(client, name):
+    params = SCALP[name]
+    response = await flatten(client, name, params)
+    assert response.status_code == 200, response.text
+    body = response.json()
+    vertices, faces = load_sample(name)
+    # The same computation straight from the core on the same file read by trimesh.
+    center = np.asarray(body["params"]["center"])
+    rotation = params["rotation"]
+    frame = Frame.from_pole_up(rotation["pole"], rotation["up"], center)
+    chart = Chart.distorted(PoleCap.from_sigma(0.3))
+    region = np.asarray(body["faces"]["ids"])
+    flat = flatten_region(vertices, faces[region], frame, chart)
+    assert body["vertices"]["ids"] == flat.vertex_ids.tolist()
+    assert np.array_equal(body["vertices"]["theta"], flat.theta)
+    assert np.array_equal(body["vertices"]["phi"], flat.phi)
+    assert body["faces"]["vertices"] == faces[region].tolist()
+    v = body["validation"]
+    assert v["seam_free"] and v["star_shaped"] and v["boundary_loops"] == 1
+    assert v["margin_deg"]["seam"] == pytest.approx(flat.validation.margin_deg_seam)
+    assert body["metrics"]["isometric"]["mean"] == pytest.approx(flat.distortion.isometric.mean)
+    assert body["params"]["sigma"] == 0.3
+    assert body["params"]["pole_angle_deg"] == pytest.approx(math.degrees(2 * math.atan(0.3)))
+    # The cone: faces whose centroid lies within 60/70 degrees of the axis, from the centre.
+    axis = np.asarray(params["region"]["cone"]["axis"], dtype=float)
+    directions = vertices[faces].mean(axis=1) - center
+    cosine = directions @ axis / np.linalg.norm(directions, axis=1) / np.linalg.norm(axis)
+    expected = np.flatnonzero(
+        cosine >= math.cos(math.radians(params["region"]["cone"]["half_angle_deg"]))
+    )
+    assert body["faces"]["ids"] == expected.tolist()
+
+
+async def test_obj_and_glb_of_one_scan_agree(client):
+    params = SCALP["lee-perry-smith.glb"]
+    glb = (await flatten(client, "lee-perry-smith.glb", params)).json()
+    obj = (await flatten(client, "lee-perry-smith.obj", params)).json()
+    assert glb["faces"] == obj["faces"] and glb["vertices"]["ids"] == obj["vertices"]["ids"]
+    assert np.allclose(glb["vertices"]["theta"], obj["vertices"]["theta"], atol=1e-6)
+
+
+async def test_nefertiti_comes_back_with_its_backfacing_faces(client):
+    response = await flatten(client, "nefertiti-lowres.obj", endpoint="/v1/validate")
+    assert response.status_code == 200
+    body = response.json()
+    assert set(body) == {"params", "validation", "metrics"}
+    assert not body["validation"]["star_shaped"]
+    vertices, faces = load_sample("nefertiti-lowres.obj")
+    center = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    flat = flatten_region(
+        vertices, faces, Frame.identity(center), Chart.distorted(PoleCap.from_sigma(0.3))
+    )
+    assert body["validation"]["backfacing_faces"] == flat.validation.backfacing_faces.tolist()
+    assert len(body["validation"]["backfacing_faces"]) > 0
+
+
+async def test_regions_by_faces_vertices_and_groups(client):
+    _, faces = load_sample("fsaverage-head.ply")
+    chosen = [5, 17, 400, 401, 402, 1000]
+    by_faces = (
+        await flatten(client, "fsaverage-head.ply", {"region": {"faces": chosen[::-1]}})
+    ).json()
+    assert by_faces["faces"]["ids"] == chosen
+    used = np.unique(faces[chosen])
+    by_vertices = await flatten(
+        client, "fsaverage-head.ply", {"region": {"vertices": used.tolist()}}
+    )
+    expected = np.flatnonzero(np.isin(faces, used).all(axis=1))
+    assert by_vertices.json()["faces"]["ids"] == expected.tolist()
+    text = (
+        b"v 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\nv 0.5 0.5 2\n"
+        b"g left\nf 1 2 3\ng right extra\nusemtl skin\nf 1 3 4\nf 3 4 5\n"
+    )
+    grouped = await flatten(
+        client,
+        "fsaverage-head.ply",
+        {"region": {"groups": ["right"]}, "center": [0.5, 0.5, 0]},
+        data=text,
+        filename="quad.obj",
+    )
+    assert grouped.status_code == 200, grouped.text
+    assert grouped.json()["faces"]["ids"] == [1, 2]
+    unknown = await flatten(
+        client, "x", {"region": {"groups": ["nose"]}}, data=text, filename="q.obj"
+    )
+    assert "'left'" in problem(unknown, 422, "params.region.groups")["detail"]
+
+
+@pytest.mark.parametrize(
+    ("region", "field", "says"),
+    [
+        ({"faces": [1, 2, 2]}, "params.region.faces", "more than once"),
+        ({"faces": [-1]}, "params.region.faces", "outside"),
+        ({"faces": [99999]}, "params.region.faces", "outside [0, 4062)"),
+        ({"vertices": [0]}, "params.region", "selects no faces"),
+        (
+            {"cone": {"axis": [0, 0, 0], "half_angle_deg": 10}},
+            "params.region.cone.axis",
+            "non-zero",
+        ),
+        ({"cone": {"axis": [0, 0, 1], "half_angle_deg": 0.0001}}, "params.region", "no faces"),
+        ({"faces": []}, "params.region", None),
+    ],
+)
+async def test_bad_regions(client, region, field, says):
+    response = await flatten(client, "fsaverage-head.ply", {"region": region})
+    body = problem(response, 422)
+    assert body["field"].startswith(field)
+    if says:
+        assert says in body["detail"]
+
+
+async def test_a_centre_on_a_vertex_names_it(client):
+    vertices, _ = load_sample("fsaverage-head.ply")
+    response = await flatten(client, "fsaverage-head.ply", {"center": vertices[123].tolist()})
+    body = problem(response, 422)
+    assert body["indices"] == [123] and "vertex 123" in body["detail"]
+
+
+@pytest.mark.parametrize(
+    ("params", "field"),
+    [
+        ({"sigma": 0}, "params.sigma"),
+        ({"sigma": 0.2, "pole_angle_deg": 10}, "params"),
+        ({"method": "standard", "pole_angle_deg": 10}, "params"),
+        ({"rotation": [[2, 0, 0], [0, 1, 0], [0, 0, 1]]}, "params.rotation"),
+        ({"center": "middle"}, "params.center"),
+        ({"format": "fbx"}, "params.format"),
+        ({"region": {"sphere": 1}}, "params.region"),
+    ],
+)
+async def test_bad_mesh_params_name_the_field(client, params, field):
+    body = problem(await flatten(client, "fsaverage-head.ply", params), 422)
+    assert body["field"].startswith(field)
+
+
+async def test_params_must_be_json(client):
+    response = await client.post(
+        "/v1/flatten",
+        files={"mesh": ("a.ply", SAMPLES["fsaverage-head.ply"].path.read_bytes())},
+        data={"params": "{sigma: 1"},
+    )
+    problem(response, 422, "params")
+
+
+@pytest.mark.parametrize(
+    ("data", "filename", "says"),
+    [
+        (b"", "empty.obj", "empty"),
+        (b"\x00\xff" * 100, "junk.obj", "no vertex"),
+        (b"v 0 0 0\nv 1 0 0\nf 1 2 9\n", "past.obj", "refers to vertex 9"),
+        (b"v 0 0 0\nv 1 0 0\nv 0 nan 1\nf 1 2 3\n", "nan.obj", "NaN"),
+        (b"glTF" + b"\x02\x00\x00\x00" + b"\xff\x00\x00\x00", "lie.glb", "declares"),
+        (b"solid x\nendsolid", "empty.stl", None),
+        (
+            b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000\nproperty float x\n"
+            b"property float y\nproperty float z\nend_header\n\x00\x00",
+            "short.ply",
+            "declares",
+        ),
+    ],
+)
+async def test_unreadable_files_are_422(client, data, filename, says):
+    body = problem(await flatten(client, "x", {}, data=data, filename=filename), 422, "mesh")
+    if says:
+        assert says in body["detail"]
+
+
+def gltf_with(uri: str) -> bytes:
+    return json.dumps(
+        {
+            "asset": {"version": "2.0"},
+            "buffers": [{"byteLength": 36, "uri": uri}],
+            "bufferViews": [{"buffer": 0, "byteLength": 36}],
+            "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3"}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        }
+    ).encode()
+
+
+async def test_gltf_reads_embedded_buffers_and_refuses_external_ones(client):
+    triangle = np.array([[1, 0, 1], [0, 1, 1], [-1, -1, 1]], dtype="<f4").tobytes()
+    uri = "data:application/octet-stream;base64," + base64.b64encode(triangle).decode()
+    ok = await flatten(client, "x", {"center": [0, 0, 0]}, data=gltf_with(uri), filename="t.gltf")
+    assert ok.status_code == 200, ok.text
+    assert ok.json()["faces"]["vertices"] == [[0, 1, 2]]
+    for external in ("triangle.bin", "file:///etc/passwd", "https://example.com/t.bin"):
+        body = problem(
+            await flatten(client, "x", {}, data=gltf_with(external), filename="t.gltf"), 422
+        )
+        assert external in body["detail"]
+
+
+async def test_stl_and_format_parameter(client):
+    vertices, faces = load_sample("fsaverage-head.ply")
+    stl = trimesh.Trimesh(vertices, faces, process=False).export(file_type="stl")
+    response = await flatten(client, "x", {"format": "stl"}, data=stl, filename="no-extension")
+    assert response.status_code == 200, response.text
+    assert len(response.json()["faces"]["ids"]) == len(faces)
+
+
+async def test_limits():
+    app = create_app(Settings(max_upload_bytes=100_000, max_faces=1000))
+    async with app.router.lifespan_context(app):
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://m") as c:
+            big = SAMPLES["lee-perry-smith.glb"].path.read_bytes()
+            problem(await flatten(c, "x", {}, data=big, filename="a.glb"), 413)
+
+            async def chunks():  # no Content-Length: counted as it streams in
+                for _ in range(150):
+                    yield b"x" * 1000
+
+            response = await c.post(
+                "/v1/flatten",
+                content=chunks(),
+                headers={"content-type": "multipart/form-data; boundary=b"},
+            )
+            problem(response, 413)
+            small = SAMPLES["fsaverage-head.ply"].path.read_bytes()
+            body = problem(await flatten(c, "x", {}, data=small, filename="a.ply"), 413, "mesh")
+            assert "MESHFLAT_MAX_FACES" in body["detail"]
+
+
+async def test_wrong_content_type(client):
+    response = await client.post("/v1/flatten", json={"mesh": "no"})
+    problem(response, 415)
+
+
+async def test_answers_never_reach_the_disk(client, tmp_path, monkeypatch):
+    """The body is parsed in memory: no temporary file is created while flattening."""
+    import tempfile
+
+    created = []
+    real = tempfile.SpooledTemporaryFile
+
+    def spy(*args, **kwargs):
+        created.append(args)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(tempfile, "SpooledTemporaryFile", spy)
+    monkeypatch.setattr(tempfile, "NamedTemporaryFile", spy)
+    monkeypatch.setattr(tempfile, "TemporaryFile", spy)
+    response = await flatten(client, "nefertiti-lowres.obj", {})
+    assert response.status_code == 200 and not created

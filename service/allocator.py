@@ -4,6 +4,11 @@ glibc hands blocks above its mmap threshold straight back to the kernel when the
 so every large numpy temporary of the next request is faulted in again as fresh zeroed pages.
 Keeping large blocks in the process lets requests reuse them; on 1M-face meshes that saves
 about a fifth of the validation time (docs/benchmarks.md measures both settings).
+
+Requests run in worker threads, and glibc gives each thread its own arena, whose heaps are
+capped at 64 MiB: larger blocks (a million-face answer is 74 MB of JSON) go to fresh mmaps on
+every request whatever the thresholds say, which tripled the encode time. One arena for the
+whole process keeps the settings above in force for every thread.
 """
 
 from __future__ import annotations
@@ -14,13 +19,17 @@ import ctypes.util
 #: mallopt parameters (glibc's malloc.h).
 _M_TRIM_THRESHOLD = -1
 _M_MMAP_THRESHOLD = -3
+_M_ARENA_MAX = -8
 #: Blocks up to 1 GiB come from the heap, and the heap is not trimmed below 2 GiB - 1.
 MMAP_THRESHOLD = 1 << 30
 TRIM_THRESHOLD = (1 << 31) - 1
 
 
 def keep_large_blocks() -> bool:
-    """Apply the settings above; False where the C library is not glibc."""
+    """Apply the settings above; False where the C library is not glibc.
+
+    Call it before any worker thread allocates: a thread keeps the arena it first used.
+    """
     name = ctypes.util.find_library("c")
     try:
         libc = ctypes.CDLL(name)
@@ -28,6 +37,9 @@ def keep_large_blocks() -> bool:
     except (OSError, AttributeError, TypeError):
         return False
     mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
-    return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD)) and bool(
-        mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD)
+    settings = (
+        (_M_ARENA_MAX, 1),
+        (_M_MMAP_THRESHOLD, MMAP_THRESHOLD),
+        (_M_TRIM_THRESHOLD, TRIM_THRESHOLD),
     )
+    return all([bool(mallopt(parameter, value)) for parameter, value in settings])

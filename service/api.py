@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from functools import cache
 
 import numpy as np
@@ -16,6 +17,7 @@ from .encoding import Timings, json_response
 from .meshio import Mesh, MeshFormatError, format_of, read_mesh
 from .multipart import parse_form
 from .params import (
+    MESH_PARAMS_EXAMPLE,
     InverseRequest,
     MeshParams,
     PointsRequest,
@@ -25,7 +27,7 @@ from .params import (
     region_faces,
     resolved,
 )
-from .problems import Problem, from_mesh_error, from_transform_error
+from .problems import Problem, from_mesh_error, from_transform_error, validation_problem
 from .samples import SAMPLES
 from .schemas import (
     PROBLEMS,
@@ -61,9 +63,7 @@ MULTIPART_BODY = {
                             "contentMediaType": "application/json",
                             "contentSchema": {"$ref": "#/components/schemas/MeshParams"},
                             "description": "JSON, as the MeshParams schema; default {}.",
-                            "example": '{"sigma": 0.3, "center": "bbox_center", '
-                            '"rotation": {"pole": [0, -1, 0], "up": [0, 0, 1]}, '
-                            '"region": {"cone": {"axis": [0, 1, 0], "half_angle_deg": 60}}}',
+                            "example": json.dumps(MESH_PARAMS_EXAMPLE),
                         },
                     },
                 },
@@ -132,7 +132,11 @@ def _sample_info(name: str) -> SampleInfo:
 @router.get("/v1/samples", tags=["samples"], summary="The bundled sample meshes")
 async def samples() -> list[SampleInfo]:
     """Real scans bundled with the service, with their face counts and credits."""
-    return await run_in_threadpool(lambda: [_sample_info(name) for name in SAMPLES])
+    return await run_in_threadpool(sample_infos)
+
+
+def sample_infos() -> list[SampleInfo]:
+    return [_sample_info(name) for name in SAMPLES]
 
 
 _MEDIA_TYPES = {
@@ -181,20 +185,21 @@ async def points(body: PointsRequest, request: Request) -> Response:
     ``theta`` the polar angle from local +Z, ``phi`` the azimuth from +X towards +Y."""
     settings = settings_of(request)
     _check_count(len(body.points), settings.max_points, "points")
+    return await run_in_threadpool(answer_points, body, settings)
 
-    def work() -> Response:
-        timings = Timings()
-        with timings.measure("parse"):
-            points = np.asarray(body.points, dtype=np.float64)
-        with timings.measure("compute"):
-            chart = checked(lambda: chart_of(body), "")
-            frame = checked(lambda: frame_of(body, np.asarray(body.center)), "")
-            theta, phi, r = checked(
-                lambda: world_to_angles(points, frame, chart, threads=settings.threads), ""
-            )
-        return json_response({"theta": theta, "phi": phi, "r": r}, timings)
 
-    return await run_in_threadpool(work)
+def answer_points(body: PointsRequest, settings: Settings) -> Response:
+    """The /v1/points answer (CPU-bound: run it off the event loop)."""
+    timings = Timings()
+    with timings.measure("parse"):
+        points = np.asarray(body.points, dtype=np.float64)
+    with timings.measure("compute"):
+        chart = checked(lambda: chart_of(body), "")
+        frame = checked(lambda: frame_of(body, np.asarray(body.center)), "")
+        theta, phi, r = checked(
+            lambda: world_to_angles(points, frame, chart, threads=settings.threads), ""
+        )
+    return json_response({"theta": theta, "phi": phi, "r": r}, timings)
 
 
 @router.post(
@@ -208,17 +213,18 @@ async def points_inverse(body: InverseRequest, request: Request) -> Response:
     """Coordinates back to world points, with the same parameters as /v1/points."""
     settings = settings_of(request)
     _check_count(len(body.theta), settings.max_points, "theta")
+    return await run_in_threadpool(answer_inverse, body, settings)
 
-    def work() -> Response:
-        timings = Timings()
-        with timings.measure("compute"):
-            chart = checked(lambda: chart_of(body), "")
-            frame = checked(lambda: frame_of(body, np.asarray(body.center)), "")
-            r = 1.0 if body.r is None else body.r
-            world = checked(lambda: angles_to_world(body.theta, body.phi, r, frame, chart), "")
-        return json_response({"points": world}, timings)
 
-    return await run_in_threadpool(work)
+def answer_inverse(body: InverseRequest, settings: Settings) -> Response:
+    """The /v1/points/inverse answer (CPU-bound: run it off the event loop)."""
+    timings = Timings()
+    with timings.measure("compute"):
+        chart = checked(lambda: chart_of(body), "")
+        frame = checked(lambda: frame_of(body, np.asarray(body.center)), "")
+        r = 1.0 if body.r is None else body.r
+        world = checked(lambda: angles_to_world(body.theta, body.phi, r, frame, chart), "")
+    return json_response({"points": world}, timings)
 
 
 def _check_count(count: int, limit: int, field: str) -> None:
@@ -267,10 +273,12 @@ async def _mesh_job(request: Request, full: bool) -> Response:
     settings = settings_of(request)
     body = await request.body()
     content_type = request.headers.get("content-type", "")
-    return await run_in_threadpool(_run_mesh_job, body, content_type, settings, full)
+    return await run_in_threadpool(run_mesh_job, body, content_type, settings, full)
 
 
-def _run_mesh_job(body: bytes, content_type: str, settings: Settings, full: bool) -> Response:
+def run_mesh_job(body: bytes, content_type: str, settings: Settings, full: bool) -> Response:
+    """The /v1/flatten (``full``) or /v1/validate answer to a multipart body (CPU-bound: run
+    it off the event loop)."""
     timings = Timings()
     with timings.measure("parse"):
         form = parse_form(body, content_type)
@@ -294,13 +302,7 @@ def _mesh_params(form) -> MeshParams:
     try:
         return MeshParams.model_validate_json(bytes(form["params"].data))
     except ValidationError as error:
-        first = error.errors()[0]
-        location = ".".join(str(p) for p in first.get("loc", ()))
-        message = str(first.get("msg", "invalid")).removeprefix("Value error, ")
-        field = f"params.{location}" if location else "params"
-        more = len(error.errors()) - 1
-        detail = f"{field}: {message}" + (f" (and {more} more problems)" if more else "")
-        raise Problem(422, detail, "invalid-request", field) from None
+        raise validation_problem(error.errors(), "params") from None
 
 
 def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: bool) -> dict:

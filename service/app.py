@@ -16,7 +16,9 @@ from . import problems
 from .allocator import keep_large_blocks
 from .api import router
 from .bodylimit import BodySizeLimit
+from .examples import add_examples
 from .params import MeshParams
+from .problems import ProblemDetails
 from .selfcheck import run_self_check
 from .settings import Settings
 
@@ -76,7 +78,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
 
 def _openapi(app: FastAPI) -> dict:
-    """FastAPI's document plus the MeshParams schema, which the multipart bodies refer to."""
+    """FastAPI's document plus the MeshParams schema, which the multipart bodies refer to,
+    and answers computed for the request examples."""
     if app.openapi_schema is None:
         document = get_openapi(
             title=app.title,
@@ -86,12 +89,13 @@ def _openapi(app: FastAPI) -> dict:
             routes=app.routes,
         )
         _, definitions = models_json_schema(
-            [(MeshParams, "validation")], ref_template="#/components/schemas/{model}"
+            [(MeshParams, "validation"), (ProblemDetails, "serialization")],
+            ref_template="#/components/schemas/{model}",
         )
         document.setdefault("components", {}).setdefault("schemas", {}).update(
             definitions.get("$defs", {})
         )
-        app.openapi_schema = document
+        app.openapi_schema = add_examples(document)
     return app.openapi_schema
 
 

@@ -148,6 +148,16 @@ class ConeRegion(_Strict):
 Region = FacesRegion | VerticesRegion | GroupsRegion | ConeRegion
 
 
+#: A scalp-like region: the faces within 60 degrees of +Y, the cap around -Y (the neck).
+MESH_PARAMS_EXAMPLE = {
+    "method": "distorted",
+    "sigma": 0.3,
+    "center": "bbox_center",
+    "rotation": {"pole": [0.0, -1.0, 0.0], "up": [0.0, 0.0, 1.0]},
+    "region": {"cone": {"axis": [0.0, 1.0, 0.0], "half_angle_deg": 60.0}},
+}
+
+
 class MeshParams(ChartParams):
     """The JSON of the ``params`` field of /v1/flatten and /v1/validate."""
 
@@ -161,19 +171,7 @@ class MeshParams(ChartParams):
         None, description="The file's format; default: from the file name's extension."
     )
 
-    model_config = ConfigDict(
-        json_schema_extra={
-            "examples": [
-                {
-                    "method": "distorted",
-                    "sigma": 0.3,
-                    "center": "bbox_center",
-                    "rotation": {"pole": [0.0, -1.0, 0.0], "up": [0.0, 0.0, 1.0]},
-                    "region": {"cone": {"axis": [0.0, 1.0, 0.0], "half_angle_deg": 60}},
-                }
-            ]
-        }
-    )
+    model_config = ConfigDict(json_schema_extra={"examples": [MESH_PARAMS_EXAMPLE]})
 
 
 # -- resolution ------------------------------------------------------------------------
@@ -284,10 +282,15 @@ def _center(mesh: Mesh, faces: np.ndarray, center) -> np.ndarray:
     """A world point, or the area-weighted centroid or bounding-box centre of ``faces``."""
     if not isinstance(center, str):
         return np.asarray(center, dtype=np.float64)
-    corners = mesh.vertices[mesh.faces[faces]]  # (m, 3 corners, 3)
     if center == "bbox_center":
-        used = corners.reshape(-1, 3)
-        return (used.min(axis=0) + used.max(axis=0)) / 2.0
+        used = np.zeros(len(mesh.vertices), dtype=bool)
+        used[mesh.faces[faces].ravel()] = True
+        points = mesh.vertices[used]
+        # Column by column: a reduction down the rows of an (n, 3) array is ten times slower.
+        low = np.array([points[:, k].min() for k in range(3)])
+        high = np.array([points[:, k].max() for k in range(3)])
+        return (low + high) / 2.0
+    corners = mesh.vertices[mesh.faces[faces]]  # (m, 3 corners, 3)
     areas = 0.5 * np.linalg.norm(
         np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
     )

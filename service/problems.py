@@ -88,17 +88,19 @@ def from_mesh_error(error: MeshFormatError) -> Problem:
     return Problem(error.status, f"mesh: {error}", kind, "mesh")
 
 
-def _validation_detail(error: RequestValidationError) -> tuple[str, str | None]:
+def validation_problem(errors: list[dict], prefix: str = "") -> Problem:
+    """A 422 naming up to five invalid fields (pydantic's errors); ``prefix`` places them
+    (``params`` for the multipart JSON field)."""
     messages, first_field = [], None
-    for item in error.errors()[:5]:
-        location = ".".join(str(part) for part in item.get("loc", ()) if part != "body")
+    for item in errors[:5]:
+        parts = [str(part) for part in item.get("loc", ()) if part != "body"]
+        location = ".".join(([prefix] if prefix else []) + parts)
         message = str(item.get("msg", "invalid")).removeprefix("Value error, ")
         first_field = first_field or location or None
         messages.append(f"{location}: {message}" if location else message)
-    more = len(error.errors()) - 5
-    if more > 0:
-        messages.append(f"and {more} more")
-    return "; ".join(messages), first_field
+    if len(errors) > 5:
+        messages.append(f"and {len(errors) - 5} more")
+    return Problem(422, "; ".join(messages), "invalid-request", first_field)
 
 
 def install(app: FastAPI) -> None:
@@ -118,8 +120,7 @@ def install(app: FastAPI) -> None:
 
     @app.exception_handler(RequestValidationError)
     async def on_validation_error(_: Request, exc: RequestValidationError) -> Response:
-        detail, field = _validation_detail(exc)
-        return problem_response(Problem(422, detail, "invalid-request", field))
+        return problem_response(validation_problem(exc.errors()))
 
     @app.exception_handler(StarletteHTTPException)
     async def on_http_error(_: Request, exc: StarletteHTTPException) -> Response:

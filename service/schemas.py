@@ -7,8 +7,6 @@ from typing import Literal
 
 from pydantic import BaseModel, Field
 
-from .problems import ProblemDetails
-
 
 class ResolvedParams(BaseModel):
     method: Literal["distorted", "standard", "separable"]
@@ -109,8 +107,11 @@ class SampleInfo(BaseModel):
 
 PROBLEMS = {
     status: {
-        "model": ProblemDetails,
-        "content": {"application/problem+json": {}},
+        # Problems are only ever application/problem+json (the schema is added to the
+        # document's components by service.app).
+        "content": {
+            "application/problem+json": {"schema": {"$ref": "#/components/schemas/ProblemDetails"}}
+        },
         "description": text,
     }
     for status, text in (

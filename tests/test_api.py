@@ -412,3 +412,44 @@ async def test_answers_never_reach_the_disk(client, tmp_path, monkeypatch):
     monkeypatch.setattr(tempfile, "TemporaryFile", spy)
     response = await flatten(client, "nefertiti-lowres.obj", {})
     assert response.status_code == 200 and not created
+
+
+# -- the OpenAPI examples are answers ------------------------------------------------------
+
+
+async def test_openapi_examples_are_what_the_service_answers(client):
+    from service.examples import icosahedron_obj
+    from service.params import MESH_PARAMS_EXAMPLE
+
+    document = (await client.get("/openapi.json")).json()
+
+    def example(path, status, media="application/json"):
+        (operation,) = document["paths"][path].values()
+        return operation["responses"][status]["content"][media]["example"]
+
+    def close(answer, shown):
+        if isinstance(shown, dict):
+            assert answer.keys() == shown.keys()
+            for key in shown:
+                close(answer[key], shown[key])
+        elif isinstance(shown, list):
+            assert len(answer) == len(shown)
+            for a, b in zip(answer, shown, strict=True):
+                close(a, b)
+        elif isinstance(shown, float):
+            assert answer == pytest.approx(shown, abs=1e-6)
+        else:
+            assert answer == shown
+
+    ico = icosahedron_obj()
+    for endpoint in ("/v1/flatten", "/v1/validate"):
+        answer = await flatten(client, "", MESH_PARAMS_EXAMPLE, ico, "icosahedron.obj", endpoint)
+        close(answer.json(), example(endpoint, "200"))
+    for path in ("/v1/points", "/v1/points/inverse"):
+        (operation,) = document["paths"][path].values()
+        request = operation["requestBody"]["content"]["application/json"]["example"]
+        close((await client.post(path, json=request)).json(), example(path, "200"))
+    bad = dict(MESH_PARAMS_EXAMPLE, region={"faces": [3, 20]})
+    answer = problem(await flatten(client, "", bad, ico, "icosahedron.obj"), 422)
+    assert answer == example("/v1/flatten", "422", "application/problem+json")
+    assert (await client.get("/v1/samples")).json() == example("/v1/samples", "200")

@@ -278,12 +278,14 @@ def _read_document(document: dict, binary, limits: Limits, fmt: str) -> Mesh:
         vertices.append(points)
         faces.append(triangles + offset)
         ids = np.arange(face_offset, face_offset + len(triangles))
-        for name in (
+        # A set: a node often shares its mesh's name. Primitives come in ascending id order,
+        # so each group's ids stay ascending and distinct without sorting.
+        names = {
             _name(document, "meshes", mesh_index),
             _name(document, "nodes", node_index) if node_index >= 0 else None,
-        ):
-            if name:
-                groups.setdefault(name, []).append(ids)
+        }
+        for name in names - {None}:
+            groups.setdefault(name, []).append(ids)
         offset += len(points)
         face_offset += len(triangles)
     vertices = np.ascontiguousarray(np.concatenate(vertices))
@@ -293,7 +295,7 @@ def _read_document(document: dict, binary, limits: Limits, fmt: str) -> Mesh:
     return Mesh(
         vertices=vertices,
         faces=np.ascontiguousarray(np.concatenate(faces)),
-        groups={name: np.unique(np.concatenate(parts)) for name, parts in groups.items()},
+        groups={name: np.concatenate(parts) for name, parts in groups.items()},
         format=fmt,
     )
 
@@ -335,6 +337,8 @@ def _mesh_instances(doc: _Document) -> list[tuple[int, int, np.ndarray]]:
     else:
         children = {c for node in nodes if isinstance(node, dict) for c in node.get("children", [])}
         roots = [i for i in range(len(nodes)) if i not in children]
+        if not roots:
+            raise MeshFormatError("the glTF has no scene and no root node (every node is a child)")
     instances: list[tuple[int, int, np.ndarray]] = []
     stack = [(index, np.eye(4), 0) for index in reversed(roots)]
     seen: set[int] = set()

@@ -14,14 +14,11 @@ Rules (the API documentation repeats them):
 
 from __future__ import annotations
 
-import re
-
 import numpy as np
 
 from .mesh import Limits, Mesh, MeshFormatError, check_counts
 
 _SPACE, _TAB, _CR, _LF, _HASH, _SLASH = 32, 9, 13, 10, 35, 47
-_REFERENCE_TAIL = re.compile(rb"/[^\s]*")  # the /vt/vn part of v/vt/vn
 
 
 def read_obj(data: bytes, limits: Limits) -> Mesh:
@@ -45,8 +42,9 @@ def read_obj(data: bytes, limits: Limits) -> Mesh:
     corners = lines.tokens[face_lines] - 1
     check_counts(len(vertex_lines), int(np.maximum(corners - 2, 0).sum()), limits)
 
-    vertices = _read_vertices(data, lines, vertex_lines)
-    faces, face_of_line = _read_faces(data, lines, face_lines, vertex_lines)
+    numbers = lines.numbers_only(vertex_lines, face_lines)
+    vertices = _read_vertices(numbers, lines, vertex_lines)
+    faces, face_of_line = _read_faces(numbers, lines, face_lines, vertex_lines)
     groups = _read_groups(data, lines, kind, face_lines, face_of_line)
     return Mesh(vertices=vertices, faces=faces, groups=groups, format="obj")
 
@@ -74,13 +72,8 @@ class _Lines:
             first_of_line = np.concatenate(([True], line[1:] != line[:-1]))
             comment_starts = hashes[first_of_line]
             comment_ends = self.ends[line[first_of_line]]
-            edges = np.zeros(len(buffer) + 1, dtype=np.int8)
-            edges[comment_starts] += 1
-            edges[comment_ends] -= 1  # ranges never overlap, so +-1 marks suffice
-            blanked = buffer.copy()
-            blanked[np.cumsum(edges[:-1], dtype=np.int8) > 0] = _SPACE
-            buffer = blanked
-            data = blanked.tobytes()
+            buffer = _blanked(buffer, comment_starts, comment_ends)
+            data = buffer.tobytes()
         self.data, self.buffer = data, buffer
         # Skip leading blanks (one pass per blank column, not per line).
         self.first = self.starts.copy()
@@ -96,6 +89,24 @@ class _Lines:
         token_start[1:] &= blank[:-1]
         #: (lines,) int: whitespace-separated tokens per line, keyword included
         self.tokens = np.add.reduceat(token_start.view(np.uint8), self.starts, dtype=np.int64)
+
+    def numbers_only(self, vertex_lines: np.ndarray, face_lines: np.ndarray) -> bytes:
+        """The text with the ``v`` and ``f`` keywords and the ``/vt/vn`` tails of face
+        references blanked out, so runs of those lines parse as plain numbers."""
+        buffer = self.buffer.copy()
+        keyword_lines = np.concatenate((vertex_lines, face_lines))
+        buffer[self.first[keyword_lines]] = _SPACE
+        slashes = np.flatnonzero(buffer == _SLASH)
+        on_face_line = np.zeros(len(self.starts), dtype=bool)
+        on_face_line[face_lines] = True
+        # Only on face lines: a slash elsewhere (a vertex, a name) is not a reference tail.
+        slashes = slashes[on_face_line[np.searchsorted(self.starts, slashes, "right") - 1]]
+        if slashes.size:
+            blanks = np.append(np.flatnonzero(_is_blank(buffer)), len(buffer))
+            tail_ends = blanks[np.searchsorted(blanks, slashes)]
+            first_of_tail = np.concatenate(([True], tail_ends[1:] != tail_ends[:-1]))
+            buffer = _blanked(buffer, slashes[first_of_tail], tail_ends[first_of_tail])
+        return buffer.tobytes()
 
     def keywords(self) -> np.ndarray:
         """(lines,) int: the kind of each line from its first token."""
@@ -123,6 +134,16 @@ class _Lines:
         return kind
 
 
+def _blanked(buffer: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """A copy of ``buffer`` with the disjoint ranges ``[starts, ends)`` set to spaces."""
+    edges = np.zeros(len(buffer) + 1, dtype=np.int8)
+    edges[starts] += 1
+    edges[ends] -= 1  # the ranges never overlap, so +-1 marks suffice
+    blanked = buffer.copy()
+    blanked[np.cumsum(edges[:-1], dtype=np.int8) > 0] = _SPACE
+    return blanked
+
+
 def _is_blank(values: np.ndarray) -> np.ndarray:
     return (values == _SPACE) | (values == _TAB) | (values == _CR) | (values == _LF)
 
@@ -136,17 +157,13 @@ def _runs(line_ids: np.ndarray) -> list[tuple[int, int]]:
 
 def _numbers(data: bytes, lines: _Lines, line_ids: np.ndarray, dtype, what: str) -> np.ndarray:
     """The numbers after the keyword on each of ``line_ids`` (their token counts minus one),
-    concatenated. Runs of consecutive lines are parsed as one block of text."""
-    keyword_length = 1
+    concatenated, from ``data`` as :meth:`_Lines.numbers_only` leaves it. Runs of consecutive
+    lines are parsed as one block of text."""
     parts = []
     for i, j in _runs(line_ids):
         first, last = line_ids[i], line_ids[j - 1]
         text = data[lines.starts[first] : lines.ends[last]]
-        # Drop each line's keyword (a single letter at its first non-blank column).
-        text = re.sub(rb"(?m)^[ \t]*[vf](?=[ \t])", b"", text)
-        if dtype is np.int64 and b"/" in text:
-            text = _REFERENCE_TAIL.sub(b"", text)
-        expected = int(lines.tokens[line_ids[i:j]].sum()) - keyword_length * (j - i)
+        expected = int(lines.tokens[line_ids[i:j]].sum()) - (j - i)  # less the keywords
         try:
             values = np.fromstring(text, dtype=dtype, sep=" ")
         except ValueError:

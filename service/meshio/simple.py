@@ -26,13 +26,17 @@ def read_ply(data: bytes, limits: Limits) -> Mesh:
     if not data.startswith(b"ply") or end < 0:
         raise MeshFormatError("not a PLY file: no 'ply' ... 'end_header' header")
     header = data[:end].decode("ascii", "replace").splitlines()
-    fmt = next((line.split()[1] for line in header if line.startswith("format ")), None)
+    fmt = None
     elements: list[tuple[str, int, list[list[str]]]] = []
     for line in header:
         words = line.split()
-        if words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
+        if words[:1] == ["format"] and len(words) >= 2:
+            fmt = fmt or words[1]
+        elif words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
             elements.append((words[1], int(words[2]), []))
         elif words[:1] == ["property"] and elements:
+            if len(words) < 3 or (words[1] == "list" and len(words) < 5):
+                raise MeshFormatError(f"the PLY header line {line.strip()!r} is incomplete")
             elements[-1][2].append(words[1:])
     counts = {name: count for name, count, _ in elements}
     check_counts(counts.get("vertex", 0), counts.get("face", 0), limits)

@@ -1,0 +1,274 @@
+"""The mesh readers: the file's own order, OBJ's and glTF's rules, and clear refusals."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import struct
+
+import numpy as np
+import pytest
+import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from service.meshio import Limits, MeshFormatError, read_mesh
+from service.samples import SAMPLES
+
+LIMITS = Limits()
+
+
+def obj(text: str) -> bytes:
+    return text.encode()
+
+
+# -- OBJ ------------------------------------------------------------------------------------
+
+
+def test_obj_fans_polygons_in_file_order_and_ignores_texture_and_normal_references():
+    data = obj(
+        "# a comment with / slashes and f 1 2 3\n"
+        "v 0 0 0\nv 1 0 0\r\n  v 1 1 0 1.0\n\tv 0 1 0\nv 0 2 0\n"
+        "vt 0.5 0.5\nvn 0 0 1\n"
+        "f 1/1/1 2/1/1 3/1/1 4/1/1   # a quad\n"
+        "f 1//1 3//1 5//1\n"
+        "f 2/1 3/1 4/1 5/1 1/1\n"
+        "f -5 -4 -3"  # no final newline, relative references
+    )
+    mesh = read_mesh(data, "obj", LIMITS)
+    np.testing.assert_array_equal(
+        mesh.vertices, [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 2, 0]]
+    )
+    np.testing.assert_array_equal(
+        mesh.faces,
+        [[0, 1, 2], [0, 2, 3], [0, 2, 4], [1, 2, 3], [1, 3, 4], [1, 4, 0], [0, 1, 2]],
+    )
+
+
+def test_obj_negative_references_count_back_from_the_vertices_defined_so_far():
+    data = obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\nv 5 5 5\nf -1 -3 -4\n")
+    np.testing.assert_array_equal(read_mesh(data, "obj", LIMITS).faces, [[0, 1, 2], [3, 1, 0]])
+
+
+def test_obj_groups_follow_g_o_and_usemtl():
+    data = obj(
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n"
+        "f 1 2 3\n"
+        "o head\ng scalp left\nusemtl skin/dark\nf 1 2 3 4\n"
+        "g face\nf 2 3 4\n"
+    )
+    groups = {name: ids.tolist() for name, ids in read_mesh(data, "obj", LIMITS).groups.items()}
+    assert groups == {
+        "head": [1, 2, 3],
+        "scalp": [1, 2],
+        "left": [1, 2],
+        "skin/dark": [1, 2, 3],
+        "face": [3],
+    }
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("f 1 2 3\n", "no vertex"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no face"),
+        ("v 0 0 0\nv 1 0 0\nf 1 2\n", "line 3 has 2 corners"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "refers to vertex 4, but the file has 3"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "refers to vertex 0"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 1 2\n", "refers to vertex -4"),
+        ("v 0 0 0\nv 1 x 0\nv 0 1 0\nf 1 2 3\n", "unreadable vertex coordinates"),
+        ("v 0 0 0\nv 1/2 0 0\nv 0 1 0\nf 1 2 3\n", "unreadable vertex coordinates"),
+        ("v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n", "line 2 has 2 numbers"),
+        ("v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n", r"vertex 2 \(line 3\) has a NaN"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3.5\n", "unreadable face references"),
+    ],
+)
+def test_obj_errors_say_where(text, says):
+    with pytest.raises(MeshFormatError, match=says):
+        read_mesh(obj(text), "obj", LIMITS)
+
+
+def test_obj_counts_are_checked_before_reading():
+    data = obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3 4\n")
+    with pytest.raises(MeshFormatError, match="2 triangles; the limit is 1") as caught:
+        read_mesh(data, "obj", Limits(max_faces=1))
+    assert caught.value.status == 413
+
+
+def test_obj_sample_matches_trimesh():
+    sample = SAMPLES["nefertiti-lowres.obj"].path.read_bytes()
+    ours = read_mesh(sample, "obj", LIMITS)
+    peer = trimesh.load(io.BytesIO(sample), file_type="obj", process=False, force="mesh")
+    np.testing.assert_array_equal(ours.vertices, peer.vertices)
+    np.testing.assert_array_equal(ours.faces, peer.faces)
+
+
+# -- glTF -----------------------------------------------------------------------------------
+
+
+def gltf(nodes, meshes, accessors, binary: bytes, scenes=None) -> dict:
+    document = {
+        "asset": {"version": "2.0"},
+        "nodes": nodes,
+        "meshes": meshes,
+        "accessors": accessors,
+        "bufferViews": [{"buffer": 0, "byteLength": len(binary)}],
+        "buffers": [
+            {
+                "byteLength": len(binary),
+                "uri": "data:application/octet-stream;base64," + base64.b64encode(binary).decode(),
+            }
+        ],
+    }
+    if scenes is not None:
+        document["scenes"] = scenes
+    return document
+
+
+def glb(document: dict, binary: bytes) -> bytes:
+    document = dict(document, buffers=[{"byteLength": len(binary)}])
+    text = json.dumps(document).encode()
+    text += b" " * (-len(text) % 4)
+    binary += b"\0" * (-len(binary) % 4)
+    chunks = struct.pack("<II", len(text), 0x4E4F534A) + text
+    chunks += struct.pack("<II", len(binary), 0x004E4942) + binary
+    return struct.pack("<III", 0x46546C67, 2, 12 + len(chunks)) + chunks
+
+
+SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype="<f4")
+
+
+def square_document(indices, mode=4, nodes=None, scenes=None):
+    """One mesh of the unit square with ``indices`` (uint16) drawn in ``mode``."""
+    index_bytes = np.asarray(indices, dtype="<u2").tobytes()
+    index_bytes += b"\0" * (-len(index_bytes) % 4)
+    binary = SQUARE.tobytes() + index_bytes
+    accessors = [
+        {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3"},
+        {
+            "bufferView": 0,
+            "byteOffset": SQUARE.nbytes,
+            "componentType": 5123,
+            "count": len(indices),
+            "type": "SCALAR",
+        },
+    ]
+    meshes = [{"name": "square", "primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}]
+    meshes[0]["primitives"][0]["mode"] = mode
+    nodes = nodes if nodes is not None else [{"mesh": 0, "name": "node"}]
+    return gltf(nodes, meshes, accessors, binary, scenes), binary
+
+
+@pytest.mark.parametrize(
+    ("mode", "indices", "faces"),
+    [
+        (4, [0, 1, 2, 0, 2, 3], [[0, 1, 2], [0, 2, 3]]),
+        (5, [0, 1, 3, 2], [[0, 1, 3], [3, 1, 2]]),  # strip: every other triangle swaps
+        (6, [0, 1, 2, 3], [[0, 1, 2], [0, 2, 3]]),  # fan
+    ],
+)
+def test_gltf_triangle_lists_strips_and_fans(mode, indices, faces):
+    document, binary = square_document(indices, mode)
+    for data, fmt in ((json.dumps(document).encode(), "gltf"), (glb(document, binary), "glb")):
+        mesh = read_mesh(data, fmt, LIMITS)
+        np.testing.assert_array_equal(mesh.faces, faces)
+        np.testing.assert_array_equal(mesh.vertices, SQUARE)
+
+
+def test_gltf_node_transforms_and_order():
+    nodes = [
+        {"name": "parent", "translation": [10, 0, 0], "children": [1]},
+        {"name": "child", "mesh": 0, "scale": [2, 2, 2]},
+        {"name": "mirror", "mesh": 0, "matrix": [-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 5, 1]},
+    ]
+    document, _ = square_document([0, 1, 2, 0, 2, 3], nodes=nodes, scenes=[{"nodes": [2, 0]}])
+    mesh = read_mesh(json.dumps(document).encode(), "gltf", LIMITS)
+    mirrored = SQUARE * [-1, 1, 1] + [0, 0, 5]
+    np.testing.assert_allclose(mesh.vertices, np.concatenate([mirrored, SQUARE * 2 + [10, 0, 0]]))
+    # The mirrored instance comes first (scene order) with its winding reversed.
+    np.testing.assert_array_equal(mesh.faces, [[2, 1, 0], [3, 2, 0], [4, 5, 6], [4, 6, 7]])
+    groups = {name: ids.tolist() for name, ids in mesh.groups.items()}
+    assert groups == {"square": [0, 1, 2, 3], "mirror": [0, 1], "child": [2, 3]}
+
+
+@pytest.mark.parametrize(
+    ("change", "says"),
+    [
+        (lambda d: d["accessors"][0].update(count=6), "declares 6 elements"),
+        (lambda d: d["accessors"][1].update(componentType=5126), "componentType 5126"),
+        (lambda d: d["meshes"][0]["primitives"][0].update(mode=1), "draws lines"),
+        (lambda d: d["meshes"][0]["primitives"][0].update(indices=7), "accessors\\[7\\]"),
+        (lambda d: d["buffers"][0].update(byteLength=10**6), "declares 1,000,000 bytes"),
+        (
+            lambda d: d.update(scenes=[{"nodes": [0]}]) or d["nodes"][0].update(children=[0]),
+            "appears twice",
+        ),
+        (lambda d: d["nodes"][0].update(children=[0]), "no root node"),
+        (lambda d: d["asset"].update(version="1.0"), "only glTF 2.0"),
+    ],
+)
+def test_gltf_refusals_name_the_item(change, says):
+    document, _ = square_document([0, 1, 2, 0, 2, 3])
+    change(document)
+    with pytest.raises(MeshFormatError, match=says):
+        read_mesh(json.dumps(document).encode(), "gltf", LIMITS)
+
+
+def test_gltf_index_past_the_positions_is_refused():
+    document, _ = square_document([0, 1, 4])
+    with pytest.raises(MeshFormatError, match="refer to vertex 4 but its POSITION holds 4"):
+        read_mesh(json.dumps(document).encode(), "gltf", LIMITS)
+
+
+def test_glb_cut_short_is_refused():
+    document, binary = square_document([0, 1, 2])
+    data = glb(document, binary)
+    with pytest.raises(MeshFormatError, match="declares"):
+        read_mesh(data[:-8], "glb", LIMITS)
+
+
+def test_glb_sample_matches_trimesh():
+    sample = SAMPLES["lee-perry-smith.glb"].path.read_bytes()
+    ours = read_mesh(sample, "glb", LIMITS)
+    peer = trimesh.load(io.BytesIO(sample), file_type="glb", process=False, force="mesh")
+    np.testing.assert_allclose(ours.vertices, peer.vertices, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(ours.faces, peer.faces)
+
+
+# -- anything else is a MeshFormatError ------------------------------------------------------
+
+
+def _small_files() -> dict[str, bytes]:
+    document, binary = square_document([0, 1, 2, 0, 2, 3])
+    square = trimesh.Trimesh(SQUARE[:3], [[0, 1, 2]], process=False)
+    return {
+        "obj": b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\ng a\nf 1/1 2/1 3/1 4/1\nf -1 -2 -3\n",
+        "gltf": json.dumps(document).encode(),
+        "glb": glb(document, binary),
+        "ply": square.export(file_type="ply"),
+        "stl": square.export(file_type="stl"),
+    }
+
+
+SMALL_FILES = _small_files()
+
+
+@pytest.mark.parametrize("fmt", sorted(SMALL_FILES))
+@settings(max_examples=150, deadline=None)
+@given(data=st.data())
+def test_damaged_files_are_read_or_refused_never_crash(fmt, data):
+    original = SMALL_FILES[fmt]
+    cut = data.draw(st.integers(0, len(original)), label="cut")
+    damaged = bytearray(original[:cut])
+    for _ in range(data.draw(st.integers(0, 3), label="flips")):
+        if damaged:
+            at = data.draw(st.integers(0, len(damaged) - 1), label="at")
+            damaged[at] = data.draw(st.integers(0, 255), label="byte")
+    try:
+        mesh = read_mesh(bytes(damaged), fmt, Limits(max_vertices=1000, max_faces=1000))
+    except MeshFormatError:
+        return
+    assert np.isfinite(mesh.vertices).all()
+    assert mesh.faces.ndim == 2 and mesh.faces.shape[1] == 3
+    assert ((mesh.faces >= 0) & (mesh.faces < len(mesh.vertices))).all()

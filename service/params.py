@@ -23,7 +23,8 @@ DEFAULT_SIGMA = 0.3
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    # strict: no coercion (false is not 0, "1" is not 1), as the JSON schema says.
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 class PoleUp(_Strict):

@@ -74,8 +74,11 @@ def test_from_matrix_accepts_rotations():
     ("matrix", "says"),
     [
         (np.diag([1.0, 1.0, -1.0]), "reflection"),
-        (np.eye(3) * 1.001, "not orthonormal"),
-        (np.eye(3) + 1e-8, "not orthonormal"),
+        (np.eye(3) * 1.001, "magnitude 1.001"),
+        (np.diag([1.0, 1.0, 1e154]), "magnitude 1e+154"),  # R R^T would overflow
+        (np.diag([1.0, 1.0, 0.5]), "not orthonormal"),
+        (np.eye(3) + 1e-8, "magnitude 1.00000001"),
+        (np.full((3, 3), 0.5), "not orthonormal"),
         (np.eye(2), "3x3"),
         ([[1, 0, 0], [0, 1, 0], [0, 0, np.inf]], "NaN or Inf"),
         ("identity", "3x3"),

@@ -72,3 +72,9 @@ def test_arc_crossing_the_seam_is_at_distance_zero():
     # The same arc on the other side (x > 0) only comes near the singular points.
     a[0, 0], b[0, 0] = -a[0, 0], -b[0, 0]
     assert arcs_to_seam(a, b, cap)[0] > np.radians(50.0)
+
+
+def test_a_point_arc_measures_from_its_point_without_warnings():
+    a = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    got = arcs_to_point(a, a.copy(), np.array([0.0, 1.0, 0.0]))  # RuntimeWarnings fail tests
+    np.testing.assert_allclose(got, [np.pi / 2, np.pi / 2])

@@ -192,6 +192,11 @@ def check_rotation(rotation) -> np.ndarray:
         raise TransformInputError("rotation", f"must be a 3x3 matrix, got shape {matrix.shape}")
     if not np.isfinite(matrix).all():
         raise TransformInputError("rotation", "has a NaN or Inf entry")
+    largest = float(np.abs(matrix).max())
+    if largest > 1.0 + ROTATION_TOLERANCE:  # checked first: R R^T could overflow
+        raise TransformInputError(
+            "rotation", f"has an entry of magnitude {largest:.10g}; a rotation's lie in [-1, 1]"
+        )
     deviation = float(np.abs(matrix @ matrix.T - np.eye(3)).max())
     if deviation > ROTATION_TOLERANCE:
         raise TransformInputError(

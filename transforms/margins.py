@@ -93,8 +93,10 @@ def _arcs_to_point(a, b, point) -> np.ndarray:
     normal = _cross(a, b)
     length = _norm(normal)
     ends = np.minimum(_angle(a, point), _angle(b, point))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        unit_normal = tuple(c / length for c in normal)
+    # Where a and b are parallel (length 0) the arc is a point: only ``ends`` counts, and a
+    # stand-in length keeps the unused arithmetic finite.
+    safe_length = np.where(length > 0, length, 1.0)
+    unit_normal = tuple(c / safe_length for c in normal)
     off_plane = _dot(unit_normal, point)  # sine of the distance to the whole great circle
     in_plane = tuple(p - off_plane * n for p, n in zip(point, unit_normal, strict=True))
     # The foot of the perpendicular lies on the arc when it is between a and b.

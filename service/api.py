@@ -194,8 +194,7 @@ def answer_points(body: PointsRequest, settings: Settings) -> Response:
     with timings.measure("parse"):
         points = np.asarray(body.points, dtype=np.float64)
     with timings.measure("compute"):
-        chart = checked(lambda: chart_of(body), "")
-        frame = checked(lambda: frame_of(body, np.asarray(body.center)), "")
+        chart, frame = _chart_and_frame(body)
         theta, phi, r = checked(
             lambda: world_to_angles(points, frame, chart, threads=settings.threads), ""
         )
@@ -220,11 +219,15 @@ def answer_inverse(body: InverseRequest, settings: Settings) -> Response:
     """The /v1/points/inverse answer (CPU-bound: run it off the event loop)."""
     timings = Timings()
     with timings.measure("compute"):
-        chart = checked(lambda: chart_of(body), "")
-        frame = checked(lambda: frame_of(body, np.asarray(body.center)), "")
+        chart, frame = _chart_and_frame(body)
         r = 1.0 if body.r is None else body.r
         world = checked(lambda: angles_to_world(body.theta, body.phi, r, frame, chart), "")
     return json_response({"points": world}, timings)
+
+
+def _chart_and_frame(body: PointsRequest | InverseRequest):
+    """The chart and the frame a points request names (a bad one: a 422 naming the field)."""
+    return checked(lambda: (chart_of(body), frame_of(body, np.asarray(body.center))), "")
 
 
 def _check_count(count: int, limit: int, field: str) -> None:

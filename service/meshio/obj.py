@@ -177,15 +177,18 @@ def _numbers(data: bytes, lines: _Lines, line_ids: np.ndarray, dtype, what: str)
     return np.concatenate(parts)
 
 
+def _refuse_short(line_ids: np.ndarray, counts: np.ndarray, noun: str, needs: str) -> None:
+    """Refuse the first of ``line_ids`` with fewer than three numbers after its keyword."""
+    short = np.flatnonzero(counts < 3)
+    if short.size:
+        line, count = line_ids[short[0]] + 1, counts[short[0]]
+        raise MeshFormatError(f"{noun} on line {line} has {count} {needs}")
+
+
 def _read_vertices(data: bytes, lines: _Lines, vertex_lines: np.ndarray) -> np.ndarray:
     """(n, 3) float: x, y, z of each ``v`` line (a 4th or more numbers are ignored)."""
     per_line = lines.tokens[vertex_lines] - 1
-    short = np.flatnonzero(per_line < 3)
-    if short.size:
-        raise MeshFormatError(
-            f"vertex on line {vertex_lines[short[0]] + 1} has {per_line[short[0]]} numbers; "
-            "a vertex needs x, y and z"
-        )
+    _refuse_short(vertex_lines, per_line, "vertex", "numbers; a vertex needs x, y and z")
     values = _numbers(data, lines, vertex_lines, np.float64, "vertex coordinates")
     if np.all(per_line == 3):
         vertices = values.reshape(-1, 3)
@@ -206,12 +209,7 @@ def _read_faces(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(m, 3) int triangles in file order, and for each the index into ``face_lines``."""
     corners = lines.tokens[face_lines] - 1
-    short = np.flatnonzero(corners < 3)
-    if short.size:
-        raise MeshFormatError(
-            f"face on line {face_lines[short[0]] + 1} has {corners[short[0]]} corners; "
-            "a face needs at least 3"
-        )
+    _refuse_short(face_lines, corners, "face", "corners; a face needs at least 3")
     references = _numbers(data, lines, face_lines, np.int64, "face references")
     # Resolve 1-based and negative (relative) references to 0-based vertex ids.
     defined = np.searchsorted(vertex_lines, face_lines)  # vertices before each face line

@@ -276,7 +276,7 @@ def _groups(mesh: Mesh, names: list[str]) -> np.ndarray:
             "invalid-input",
             "params.region.groups",
         )
-    return np.unique(np.concatenate([mesh.groups[name] for name in names]))
+    return mesh.group_faces(names)
 
 
 def _center(mesh: Mesh, faces: np.ndarray, center) -> np.ndarray:

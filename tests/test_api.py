@@ -318,14 +318,15 @@ async def test_params_must_be_json(client):
         (b"", "empty.obj", "empty"),
         (b"\x00\xff" * 100, "junk.obj", "no vertex"),
         (b"v 0 0 0\nv 1 0 0\nf 1 2 9\n", "past.obj", "refers to vertex 9"),
-        (b"v 0 0 0\nv 1 0 0\nv 0 nan 1\nf 1 2 3\n", "nan.obj", "NaN"),
+        (b"v 0 0 0\nv 1 0 0\nv 0 nan 1\nf 1 2 3\n", "nan.obj", "vertex 2 (line 3)"),
         (b"glTF" + b"\x02\x00\x00\x00" + b"\xff\x00\x00\x00", "lie.glb", "declares"),
         (b"solid x\nendsolid", "empty.stl", None),
         (
             b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000\nproperty float x\n"
-            b"property float y\nproperty float z\nend_header\n\x00\x00",
+            b"property float y\nproperty float z\nelement face 1\n"
+            b"property list uchar int vertex_indices\nend_header\n\x00\x00",
             "short.ply",
-            "declares",
+            "needs at least 12,000,000 bytes but 2 follow",
         ),
     ],
 )

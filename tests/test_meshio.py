@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import io
 import json
+import re
 import struct
 
 import numpy as np
@@ -58,7 +59,8 @@ def test_obj_groups_follow_g_o_and_usemtl():
         "o head\ng scalp left\nusemtl skin/dark\nf 1 2 3 4\n"
         "g face\nf 2 3 4\n"
     )
-    groups = {name: ids.tolist() for name, ids in read_mesh(data, "obj", LIMITS).groups.items()}
+    mesh = read_mesh(data, "obj", LIMITS)
+    groups = {name: mesh.group_faces([name]).tolist() for name in mesh.groups}
     assert groups == {
         "head": [1, 2, 3],
         "scalp": [1, 2],
@@ -66,6 +68,20 @@ def test_obj_groups_follow_g_o_and_usemtl():
         "skin/dark": [1, 2, 3],
         "face": [3],
     }
+    assert mesh.group_faces(["face", "scalp"]).tolist() == [1, 2, 3]
+
+
+def test_obj_many_names_on_one_line_cost_ranges_not_faces():
+    names = " ".join(f"n{i}" for i in range(5000))
+    data = obj("v 0 0 0\nv 1 0 0\nv 0 1 0\ng " + names + "\n" + "f 1 2 3\n" * 5000)
+    mesh = read_mesh(data, "obj", LIMITS)
+    assert len(mesh.groups) == 5000 and mesh.groups["n17"].tolist() == [[0, 5000]]
+    assert mesh.group_faces(["n4999"]).tolist() == list(range(5000))
+
+
+def test_obj_leading_blanks_are_one_pass():
+    data = obj(" " * 200_000 + "v 0 0 0\n\t v 1 0 0\nv 0 1 0\n" + "   \n" * 1000 + "  f 1 2 3")
+    np.testing.assert_array_equal(read_mesh(data, "obj", LIMITS).faces, [[0, 1, 2]])
 
 
 @pytest.mark.parametrize(
@@ -80,7 +96,11 @@ def test_obj_groups_follow_g_o_and_usemtl():
         ("v 0 0 0\nv 1 x 0\nv 0 1 0\nf 1 2 3\n", "unreadable vertex coordinates"),
         ("v 0 0 0\nv 1/2 0 0\nv 0 1 0\nf 1 2 3\n", "unreadable vertex coordinates"),
         ("v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n", "line 2 has 2 numbers"),
-        ("v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n", r"vertex 2 \(line 3\) has a NaN"),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n",
+            r"vertex 2 \(line 3\) has the position \[0.0, nan",
+        ),
+        ("v 0 0 0\nv 1 0 0\nv 0 1e101 0\nf 1 2 3\n", r"within \+-1e\+100"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3.5\n", "unreadable face references"),
     ],
 )
@@ -102,6 +122,86 @@ def test_obj_sample_matches_trimesh():
     peer = trimesh.load(io.BytesIO(sample), file_type="obj", process=False, force="mesh")
     np.testing.assert_array_equal(ours.vertices, peer.vertices)
     np.testing.assert_array_equal(ours.faces, peer.faces)
+
+
+# -- PLY -------------------------------------------------------------------------------------
+
+PENTAGON = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 2, 0]], dtype=np.float64)
+POLYGONS = [[0, 1, 2], [0, 1, 2, 3], [1, 2, 3, 4, 0], [4, 3, 2]]
+FANNED = [[0, 1, 2], [0, 1, 2], [0, 2, 3], [1, 2, 3], [1, 3, 4], [1, 4, 0], [4, 3, 2]]
+
+
+def ply_header(fmt: str, extra_element: bool = False) -> bytes:
+    lines = ["ply", f"format {fmt} 1.0", "comment made by hand", "element vertex 5"]
+    lines += ["property float x", "property float y", "property double z", "property uchar red"]
+    if extra_element:
+        lines += ["element tag 2", "property list uchar short labels", "property int value"]
+    lines += ["element face 4", "property int flags", "property list uchar int vertex_indices"]
+    return ("\n".join([*lines, "end_header"]) + "\n").encode()
+
+
+def ply_binary(order: str, extra_element: bool = False) -> bytes:
+    body = b"".join(struct.pack(order + "ffdB", x, y, z, 7) for x, y, z in PENTAGON)
+    if extra_element:
+        body += struct.pack(order + "Bhhhi", 3, 1, 2, 3, 9) + struct.pack(order + "Bi", 0, 4)
+    for polygon in POLYGONS:
+        body += struct.pack(f"{order}iB{len(polygon)}i", 0, len(polygon), *polygon)
+    fmt = {"<": "binary_little_endian", ">": "binary_big_endian"}[order]
+    return ply_header(fmt, extra_element) + body
+
+
+def ply_ascii(extra_element: bool = False) -> bytes:
+    rows = [f"{x:g} {y:g} {z:g} 7" for x, y, z in PENTAGON]
+    if extra_element:
+        rows += ["3 1 2 3 9", "0 4"]
+    rows += [f"0 {len(p)} " + " ".join(map(str, p)) for p in POLYGONS]
+    return ply_header("ascii", extra_element) + "\n".join(rows).encode()  # no final newline
+
+
+@pytest.mark.parametrize("extra_element", [False, True])
+@pytest.mark.parametrize("make", [lambda e: ply_binary("<", e), lambda e: ply_binary(">", e),
+                                  ply_ascii], ids=["little", "big", "ascii"])  # fmt: skip
+def test_ply_keeps_file_order_and_fans_polygons(make, extra_element):
+    mesh = read_mesh(make(extra_element), "ply", LIMITS)
+    np.testing.assert_array_equal(mesh.vertices, PENTAGON)
+    np.testing.assert_array_equal(mesh.faces, FANNED)
+
+
+def test_ply_sample_matches_trimesh():
+    sample = SAMPLES["fsaverage-head.ply"].path.read_bytes()
+    ours = read_mesh(sample, "ply", LIMITS)
+    peer = trimesh.load(io.BytesIO(sample), file_type="ply", process=False, force="mesh")
+    np.testing.assert_array_equal(ours.vertices, peer.vertices)
+    np.testing.assert_array_equal(ours.faces, peer.faces)
+
+
+@pytest.mark.parametrize(
+    ("data", "says"),
+    [
+        (b"ply\nformat ascii 1.0\nelement vertex 0\nend_header\n", "needs a 'vertex' and a"),
+        (b"solid x", "does not start with 'ply'"),
+        (ply_header("ascii").replace(b"format ascii 1.0", b"format weird 1.0"), "line 2"),
+        (ply_header("binary_little_endian") + b"\0" * 20, "needs at least"),
+        (ply_ascii().replace(b"0 3 4 3 2", b"0 3 4 3 9"), "refers to vertex 9"),
+        (ply_ascii().replace(b"0 3 4 3 2", b"0 2 4 3"), "face 3 has 2 corners"),
+        (ply_ascii().replace(b"0 3 4 3 2", b"0 3 4 3 x"), "not a number"),
+        (ply_ascii().replace(b"0 3 4 3 2", b"0 3 4 3 2 5"), "more values"),
+        (ply_ascii().replace(b"0 3 4 3 2", b"0 3 4 3.5 2"), "3.5, which is not an index"),
+        (ply_ascii().replace(b"0 2 0 7", b"0 nan 0 7"), "vertex 4 has the position"),
+        (ply_ascii()[:-12], "the file ends before them"),
+        (ply_binary("<")[:-3], "needs at least"),
+    ],
+)
+def test_ply_errors_say_where(data, says):
+    with pytest.raises(MeshFormatError, match=re.escape(says)):
+        read_mesh(data, "ply", LIMITS)
+
+
+def test_ply_counts_are_checked_before_reading():
+    data = ply_header("binary_little_endian").replace(b"vertex 5", b"vertex 4000000000")
+    with pytest.raises(MeshFormatError, match="4,000,000,000 vertices") as caught:
+        read_mesh(data, "ply", LIMITS)
+    assert caught.value.status == 413
 
 
 # -- glTF -----------------------------------------------------------------------------------
@@ -188,7 +288,7 @@ def test_gltf_node_transforms_and_order():
     np.testing.assert_allclose(mesh.vertices, np.concatenate([mirrored, SQUARE * 2 + [10, 0, 0]]))
     # The mirrored instance comes first (scene order) with its winding reversed.
     np.testing.assert_array_equal(mesh.faces, [[2, 1, 0], [3, 2, 0], [4, 5, 6], [4, 6, 7]])
-    groups = {name: ids.tolist() for name, ids in mesh.groups.items()}
+    groups = {name: mesh.group_faces([name]).tolist() for name in mesh.groups}
     assert groups == {"square": [0, 1, 2, 3], "mirror": [0, 1], "child": [2, 3]}
 
 
@@ -247,6 +347,8 @@ def _small_files() -> dict[str, bytes]:
         "gltf": json.dumps(document).encode(),
         "glb": glb(document, binary),
         "ply": square.export(file_type="ply"),
+        "ply-ascii": ply_ascii(extra_element=True),
+        "ply-binary": ply_binary(">", extra_element=True),
         "stl": square.export(file_type="stl"),
     }
 
@@ -266,7 +368,8 @@ def test_damaged_files_are_read_or_refused_never_crash(fmt, data):
             at = data.draw(st.integers(0, len(damaged) - 1), label="at")
             damaged[at] = data.draw(st.integers(0, 255), label="byte")
     try:
-        mesh = read_mesh(bytes(damaged), fmt, Limits(max_vertices=1000, max_faces=1000))
+        reader = fmt.split("-")[0]
+        mesh = read_mesh(bytes(damaged), reader, Limits(max_vertices=1000, max_faces=1000))
     except MeshFormatError:
         return
     assert np.isfinite(mesh.vertices).all()

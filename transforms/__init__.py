@@ -13,6 +13,7 @@ from ``+X`` towards ``+Y``, in the local frame ``q = R (p - c)``.
 True
 """
 
+from .arrays import MAX_ABS_COORDINATE
 from .cap import RHO_MAX, RHO_MIN, SIGMA_MAX, SIGMA_MIN, PoleCap, check_rho, check_sigma
 from .chart import LAYOUT_ORIENTATION, Chart, Method, angles_to_world, world_to_angles
 from .errors import TransformInputError
@@ -38,6 +39,7 @@ from .warp import distorted_forward, distorted_inverse, pole_warp
 __all__ = [
     "DEGENERATE_RTOL",
     "LAYOUT_ORIENTATION",
+    "MAX_ABS_COORDINATE",
     "RHO_MAX",
     "RHO_MIN",
     "SIGMA_MAX",

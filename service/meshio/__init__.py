@@ -9,7 +9,8 @@ from __future__ import annotations
 from .gltf import read_glb, read_gltf
 from .mesh import Limits, Mesh, MeshFormatError, check_counts
 from .obj import read_obj
-from .simple import read_ply, read_stl
+from .ply import read_ply
+from .stl import read_stl
 
 READERS = {
     "obj": read_obj,

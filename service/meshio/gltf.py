@@ -10,8 +10,12 @@ Rules (the API documentation repeats them):
   triangles' winding, as glTF prescribes); vertices come in the same order, each
   primitive's POSITION elements in turn; with no scene, root nodes in order; with no nodes,
   meshes in order;
-* triangle lists, strips and fans are read; points and lines are refused;
+* triangle lists, strips and fans are read; points and lines are refused, and so are files
+  that require an extension (Draco or meshopt compression, for example);
 * groups are mesh names and node names.
+
+Every value of the JSON is type-checked where it is read, and every count is checked against
+the limits and against the bytes that hold it before anything is allocated for it.
 """
 
 from __future__ import annotations
@@ -20,10 +24,11 @@ import base64
 import binascii
 import json
 import struct
+from dataclasses import dataclass
 
 import numpy as np
 
-from .mesh import Limits, Mesh, MeshFormatError, check_counts
+from .mesh import Limits, Mesh, MeshFormatError, check_counts, checked_vertices
 
 _GLB_MAGIC = 0x46546C67  # "glTF"
 _JSON_CHUNK = 0x4E4F534A
@@ -37,7 +42,9 @@ _COMPONENT_TYPES = {
     5125: np.dtype("<u4"),
     5126: np.dtype("<f4"),
 }
-_MODES = {0: "points", 1: "lines", 2: "line loops", 3: "line strips"}
+_FLOAT, _INDEX_TYPES = (5126,), (5121, 5123, 5125)
+_TRIANGLES, _STRIP, _FAN = 4, 5, 6
+_NOT_TRIANGLES = {0: "points", 1: "lines", 2: "line loops", 3: "line strips"}
 _MAX_DEPTH = 64
 
 
@@ -81,18 +88,61 @@ def read_gltf(data: bytes, limits: Limits) -> Mesh:
 def _parse_json(text: bytes) -> dict:
     try:
         document = json.loads(text)
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except RecursionError:
+        raise MeshFormatError("the glTF JSON nests too deeply to be a glTF document") from None
+    except (UnicodeDecodeError, ValueError) as exc:  # ValueError: also over-long integers
         raise MeshFormatError(f"the glTF JSON is not valid JSON: {exc}") from None
     if not isinstance(document, dict):
         raise MeshFormatError("the glTF JSON must be an object")
-    version = str(document.get("asset", {}).get("version", ""))
-    if not version.startswith("2."):
+    asset = document.get("asset")
+    version = asset.get("version") if isinstance(asset, dict) else None
+    if not isinstance(version, str) or not version.startswith("2."):
         raise MeshFormatError(f"asset.version is {version!r}; only glTF 2.0 is read")
+    required = document.get("extensionsRequired", [])
+    if required:
+        names = ", ".join(map(str, required)) if isinstance(required, list) else repr(required)
+        raise MeshFormatError(
+            f"the file requires the extensions {names}; meshflat reads plain glTF 2.0 "
+            "(export without compression or other required extensions)"
+        )
     return document
 
 
+# -- typed access to the JSON -------------------------------------------------------------
+
+
+def _index(value, name: str) -> int:
+    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+        raise MeshFormatError(f"{name} must be a non-negative integer, got {_shown(value)}")
+    return value
+
+
+def _list(value, name: str) -> list:
+    if not isinstance(value, list):
+        raise MeshFormatError(f"{name} must be a list, got {_shown(value)}")
+    return value
+
+
+def _numbers(value, count: int, name: str) -> np.ndarray:
+    if (
+        not isinstance(value, list)
+        or len(value) != count
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    ):
+        raise MeshFormatError(f"{name} must be a list of {count} numbers, got {_shown(value)}")
+    array = np.asarray(value, dtype=np.float64)
+    if not np.isfinite(array).all():
+        raise MeshFormatError(f"{name} holds a NaN or Inf")
+    return array
+
+
+def _shown(value) -> str:
+    text = json.dumps(value) if not isinstance(value, float) else repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 class _Document:
-    """Typed access to a glTF JSON document with every reference checked."""
+    """A glTF JSON document whose every reference is checked as it is followed."""
 
     def __init__(self, document: dict, binary, limits: Limits) -> None:
         self.json = document
@@ -108,25 +158,22 @@ class _Document:
                 )
 
     def list(self, key: str) -> list:
-        value = self.json.get(key, [])
-        if not isinstance(value, list):
-            raise MeshFormatError(f"'{key}' must be a list")
-        return value
+        return _list(self.json.get(key, []), f"'{key}'")
 
     def item(self, key: str, index, where: str) -> dict:
         items = self.list(key)
         if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < len(items):
-            raise MeshFormatError(f"{where} refers to {key}[{index}], which does not exist")
+            raise MeshFormatError(f"{where} refers to {key}[{_shown(index)}], which does not exist")
         item = items[index]
         if not isinstance(item, dict):
             raise MeshFormatError(f"{key}[{index}] must be an object")
         return item
 
-    def buffer(self, index: int, where: str) -> memoryview:
+    def buffer(self, index, where: str) -> memoryview:
+        spec = self.item("buffers", index, where)
         if index in self._buffers:
             return self._buffers[index]
-        spec = self.item("buffers", index, where)
-        declared = _count(spec.get("byteLength"), f"buffers[{index}].byteLength")
+        declared = _index(spec.get("byteLength"), f"buffers[{index}].byteLength")
         uri = spec.get("uri")
         if uri is None:
             if self.binary is None or index != 0:
@@ -136,8 +183,8 @@ class _Document:
             data = memoryview(self._decode_data_uri(uri, index))
         else:
             raise MeshFormatError(
-                f"buffers[{index}] refers to the external file {uri!r}; upload a GLB, or a "
-                "glTF whose buffers are embedded data: URIs"
+                f"buffers[{index}] refers to the external file {_shown(uri)}; upload a GLB, "
+                "or a glTF whose buffers are embedded data: URIs"
             )
         if len(data) < declared:
             raise MeshFormatError(
@@ -161,64 +208,100 @@ class _Document:
         except (binascii.Error, ValueError):
             raise MeshFormatError(f"buffers[{index}] data: URI is not valid base64") from None
 
-    def accessor(self, index, where: str, components: tuple[int, ...], types) -> np.ndarray:
-        """Read an accessor as a (count, components) array, checking it fits its view."""
+    def accessor(self, index, where: str, widths: tuple[int, ...], types) -> _Accessor:
+        """An accessor's layout, checked against its buffer view, without reading it."""
         spec = self.item("accessors", index, where)
         name = f"accessors[{index}]"
         if "sparse" in spec:
             raise MeshFormatError(f"{name} is sparse; sparse accessors are not read")
         kind = spec.get("type")
-        if _COMPONENTS.get(kind) not in components:
-            raise MeshFormatError(f"{name} has type {kind!r}, {where} needs {components}")
-        dtype = _COMPONENT_TYPES.get(spec.get("componentType"))
-        if dtype is None or spec.get("componentType") not in types:
+        width = _COMPONENTS.get(kind) if isinstance(kind, str) else None
+        if width not in widths:
+            raise MeshFormatError(f"{name} has type {_shown(kind)}, not one {where} accepts")
+        component_type = spec.get("componentType")
+        if not isinstance(component_type, int) or component_type not in types:
             raise MeshFormatError(
-                f"{name} has componentType {spec.get('componentType')!r}, not one {where} "
+                f"{name} has componentType {_shown(component_type)}, not one {where} "
                 f"accepts ({', '.join(map(str, types))})"
             )
-        width = _COMPONENTS[kind]
-        count = _count(spec.get("count"), f"{name}.count")
+        dtype = _COMPONENT_TYPES[component_type]
+        count = _index(spec.get("count"), f"{name}.count")
         if "bufferView" not in spec:
-            return np.zeros((count, width), dtype=dtype)
+            raise MeshFormatError(
+                f"{name} has no bufferView (all its values would be zero); {where} needs data"
+            )
         view_index = spec["bufferView"]
         view = self.item("bufferViews", view_index, name)
         view_name = f"bufferViews[{view_index}]"
         buffer = self.buffer(view.get("buffer"), view_name)
-        view_offset = _count(view.get("byteOffset", 0), f"{view_name}.byteOffset")
-        view_length = _count(view.get("byteLength"), f"{view_name}.byteLength")
+        view_offset = _index(view.get("byteOffset", 0), f"{view_name}.byteOffset")
+        view_length = _index(view.get("byteLength"), f"{view_name}.byteLength")
         if view_offset + view_length > len(buffer):
             raise MeshFormatError(
                 f"{view_name} spans bytes {view_offset:,} to {view_offset + view_length:,} "
                 f"of a buffer of {len(buffer):,}"
             )
         element = width * dtype.itemsize
-        stride = _count(view.get("byteStride", element), f"{view_name}.byteStride") or element
+        stride = _index(view.get("byteStride", element), f"{view_name}.byteStride") or element
         if stride < element:
             raise MeshFormatError(f"{view_name}.byteStride {stride} is below the element size")
-        offset = _count(spec.get("byteOffset", 0), f"{name}.byteOffset")
+        offset = _index(spec.get("byteOffset", 0), f"{name}.byteOffset")
         needed = offset + (stride * (count - 1) + element if count else 0)
         if needed > view_length:
             raise MeshFormatError(
                 f"{name} declares {count:,} elements ({needed:,} bytes) but {view_name} "
                 f"holds {view_length:,} bytes"
             )
-        if count == 0:
-            return np.zeros((0, width), dtype=dtype)
-        raw = np.frombuffer(buffer, dtype=np.uint8, count=view_length, offset=view_offset)
-        array = np.ndarray(
-            shape=(count, width),
-            dtype=dtype,
-            buffer=raw,
-            offset=offset,
-            strides=(stride, dtype.itemsize),
+        return _Accessor(buffer, view_offset, view_length, offset, count, width, dtype, stride)
+
+
+@dataclass(frozen=True)
+class _Accessor:
+    """Where an accessor's elements lie; :meth:`read` copies them out."""
+
+    buffer: memoryview
+    view_offset: int
+    view_length: int
+    offset: int
+    count: int
+    width: int
+    dtype: np.dtype
+    stride: int
+
+    def read(self) -> np.ndarray:
+        """(count, width) array of the elements."""
+        if self.count == 0:
+            return np.zeros((0, self.width), dtype=self.dtype)
+        raw = np.frombuffer(
+            self.buffer, dtype=np.uint8, count=self.view_length, offset=self.view_offset
         )
-        return array.copy()
+        return np.ndarray(
+            shape=(self.count, self.width),
+            dtype=self.dtype,
+            buffer=raw,
+            offset=self.offset,
+            strides=(self.stride, self.dtype.itemsize),
+        ).copy()
 
 
-def _count(value, name: str) -> int:
-    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
-        raise MeshFormatError(f"{name} must be a non-negative integer, got {value!r}")
-    return value
+@dataclass(frozen=True)
+class _Primitive:
+    where: str
+    node_index: int
+    mesh_index: int
+    mode: int
+    positions: _Accessor
+    indices: _Accessor | None
+    transform: np.ndarray
+
+    @property
+    def triangle_count(self) -> int:
+        count = self.indices.count if self.indices is not None else self.positions.count
+        if self.mode == _TRIANGLES:
+            if count % 3:
+                raise MeshFormatError(f"{self.where} has {count} indices, not a multiple of 3")
+            return count // 3
+        return max(count - 2, 0)
 
 
 def _read_document(document: dict, binary, limits: Limits, fmt: str) -> Mesh:
@@ -226,90 +309,95 @@ def _read_document(document: dict, binary, limits: Limits, fmt: str) -> Mesh:
     instances = _mesh_instances(doc)
     if not instances:
         raise MeshFormatError("the glTF document has no meshes")
-    # Read every primitive once and count before assembling (limits first).
-    primitives = []
-    for node_index, mesh_index, transform in instances:
-        mesh = doc.item("meshes", mesh_index, f"nodes[{node_index}]" if node_index >= 0 else "")
-        parts = mesh.get("primitives", [])
-        if not isinstance(parts, list) or not parts:
-            raise MeshFormatError(f"meshes[{mesh_index}] has no primitives")
-        for p, primitive in enumerate(parts):
-            primitives.append((node_index, mesh_index, p, primitive, transform))
-    vertex_total, face_total, decoded = 0, 0, []
-    for node_index, mesh_index, p, primitive, transform in primitives:
-        where = f"meshes[{mesh_index}].primitives[{p}]"
-        if not isinstance(primitive, dict):
-            raise MeshFormatError(f"{where} must be an object")
-        mode = primitive.get("mode", 4)
-        if mode in _MODES:
-            raise MeshFormatError(
-                f"{where} draws {_MODES[mode]} (mode {mode}); only triangles can be flattened"
-            )
-        if mode not in (4, 5, 6):
-            raise MeshFormatError(f"{where} has an unknown mode {mode!r}")
-        attributes = primitive.get("attributes", {})
-        if not isinstance(attributes, dict) or "POSITION" not in attributes:
-            raise MeshFormatError(f"{where} has no POSITION attribute")
-        positions = doc.accessor(attributes["POSITION"], f"{where} POSITION", (3,), (5126,))
-        if "indices" in primitive:
-            indices = (
-                doc.accessor(primitive["indices"], f"{where} indices", (1,), (5121, 5123, 5125))
-                .ravel()
-                .astype(np.int64)
-            )
+    primitives = [
+        primitive
+        for node_index, mesh_index, transform in instances
+        for primitive in _primitives(doc, node_index, mesh_index, transform)
+    ]
+    # The limits, from the declared counts, before any array is allocated.
+    check_counts(
+        sum(p.positions.count for p in primitives),
+        sum(p.triangle_count for p in primitives),
+        limits,
+    )
+    vertices, faces, groups, offset, face_offset = [], [], {}, 0, 0
+    for primitive in primitives:
+        positions = primitive.positions.read()
+        if primitive.indices is not None:
+            indices = primitive.indices.read().ravel().astype(np.int64)
         else:
             indices = np.arange(len(positions), dtype=np.int64)
-        triangles = _triangles(indices, mode, where)
+        triangles = _triangles(indices, primitive.mode)
         if triangles.size and int(triangles.max()) >= len(positions):
             raise MeshFormatError(
-                f"{where} indices refer to vertex {int(triangles.max())} but its POSITION "
-                f"holds {len(positions)}"
+                f"{primitive.where} indices refer to vertex {int(triangles.max())} but its "
+                f"POSITION holds {len(positions)}"
             )
-        vertex_total += len(positions)
-        face_total += len(triangles)
-        check_counts(vertex_total, face_total, limits)
-        decoded.append((node_index, mesh_index, positions, triangles, transform))
-
-    vertices, faces, groups, offset, face_offset = [], [], {}, 0, 0
-    for node_index, mesh_index, positions, triangles, transform in decoded:
-        points = positions.astype(np.float64) @ transform[:3, :3].T + transform[:3, 3]
+        transform = primitive.transform
+        if not np.isfinite(transform).all():
+            raise MeshFormatError(f"the world transform of {primitive.where} overflows")
+        with np.errstate(over="ignore", invalid="ignore"):  # checked_vertices refuses inf
+            points = positions.astype(np.float64) @ transform[:3, :3].T + transform[:3, 3]
         if np.linalg.det(transform[:3, :3]) < 0:
             triangles = triangles[:, ::-1]
         vertices.append(points)
         faces.append(triangles + offset)
-        ids = np.arange(face_offset, face_offset + len(triangles))
-        # A set: a node often shares its mesh's name. Primitives come in ascending id order,
-        # so each group's ids stay ascending and distinct without sorting.
-        names = {
-            _name(document, "meshes", mesh_index),
-            _name(document, "nodes", node_index) if node_index >= 0 else None,
-        }
-        for name in names - {None}:
-            groups.setdefault(name, []).append(ids)
+        span = (face_offset, face_offset + len(triangles))
+        names = {_name(document, "meshes", primitive.mesh_index)}
+        if primitive.node_index >= 0:
+            names.add(_name(document, "nodes", primitive.node_index))
+        for name in names - {None}:  # a set: a node often shares its mesh's name
+            groups.setdefault(name, []).append(span)
         offset += len(points)
         face_offset += len(triangles)
-    vertices = np.ascontiguousarray(np.concatenate(vertices))
-    finite = np.isfinite(vertices).all(axis=1)
-    if not finite.all():
-        raise MeshFormatError(f"vertex {int(np.flatnonzero(~finite)[0])} has a NaN or Inf position")
     return Mesh(
-        vertices=vertices,
+        vertices=checked_vertices(np.concatenate(vertices)),
         faces=np.ascontiguousarray(np.concatenate(faces)),
-        groups={name: np.concatenate(parts) for name, parts in groups.items()},
+        groups={name: np.array(spans, dtype=np.int64) for name, spans in groups.items()},
         format=fmt,
     )
 
 
-def _triangles(indices: np.ndarray, mode: int, where: str) -> np.ndarray:
-    """(t, 3) int triangles of a triangle list (4), strip (5) or fan (6)."""
-    if mode == 4:
-        if len(indices) % 3:
-            raise MeshFormatError(f"{where} has {len(indices)} indices, not a multiple of 3")
+def _primitives(doc: _Document, node_index: int, mesh_index, transform) -> list[_Primitive]:
+    """The primitives of one mesh instance, their layouts checked."""
+    mesh = doc.item("meshes", mesh_index, f"nodes[{node_index}]" if node_index >= 0 else "")
+    parts = _list(mesh.get("primitives", []), f"meshes[{mesh_index}].primitives")
+    if not parts:
+        raise MeshFormatError(f"meshes[{mesh_index}] has no primitives")
+    primitives = []
+    for p, primitive in enumerate(parts):
+        where = f"meshes[{mesh_index}].primitives[{p}]"
+        if not isinstance(primitive, dict):
+            raise MeshFormatError(f"{where} must be an object")
+        mode = primitive.get("mode", _TRIANGLES)
+        if isinstance(mode, int) and mode in _NOT_TRIANGLES:
+            raise MeshFormatError(
+                f"{where} draws {_NOT_TRIANGLES[mode]} (mode {mode}); only triangles can be "
+                "flattened"
+            )
+        if not isinstance(mode, int) or isinstance(mode, bool) or mode not in (4, 5, 6):
+            raise MeshFormatError(f"{where} has an unknown mode {_shown(mode)}")
+        attributes = primitive.get("attributes")
+        if not isinstance(attributes, dict) or "POSITION" not in attributes:
+            raise MeshFormatError(f"{where} has no POSITION attribute")
+        positions = doc.accessor(attributes["POSITION"], f"{where} POSITION", (3,), _FLOAT)
+        indices = None
+        if "indices" in primitive:
+            indices = doc.accessor(primitive["indices"], f"{where} indices", (1,), _INDEX_TYPES)
+        primitives.append(
+            _Primitive(where, node_index, mesh_index, mode, positions, indices, transform)
+        )
+    return primitives
+
+
+def _triangles(indices: np.ndarray, mode: int) -> np.ndarray:
+    """(t, 3) int triangles of a triangle list, strip or fan (counts already checked)."""
+    if mode == _TRIANGLES:
         return indices.reshape(-1, 3)
     if len(indices) < 3:
         return np.zeros((0, 3), dtype=np.int64)
     k = np.arange(len(indices) - 2)
-    if mode == 5:  # strip: every other triangle swaps its first two corners (glTF spec)
+    if mode == _STRIP:  # every other triangle swaps two corners to keep the winding
         odd = k % 2 == 1
         a = np.where(odd, indices[k + 1], indices[k])
         b = np.where(odd, indices[k], indices[k + 1])
@@ -319,7 +407,7 @@ def _triangles(indices: np.ndarray, mode: int, where: str) -> np.ndarray:
 
 def _name(document: dict, key: str, index: int) -> str | None:
     items = document.get(key, [])
-    if 0 <= index < len(items) and isinstance(items[index], dict):
+    if isinstance(items, list) and 0 <= index < len(items) and isinstance(items[index], dict):
         name = items[index].get("name")
         return name if isinstance(name, str) and name else None
     return None
@@ -333,9 +421,13 @@ def _mesh_instances(doc: _Document) -> list[tuple[int, int, np.ndarray]]:
     scenes = doc.list("scenes")
     if scenes:
         scene_index = doc.json.get("scene", 0)
-        roots = doc.item("scenes", scene_index, "scene").get("nodes", [])
+        roots = _list(doc.item("scenes", scene_index, "scene").get("nodes", []), "scene nodes")
     else:
-        children = {c for node in nodes if isinstance(node, dict) for c in node.get("children", [])}
+        children = set()
+        for i, node in enumerate(nodes):
+            if isinstance(node, dict):
+                listed = _list(node.get("children", []), f"nodes[{i}].children")
+                children.update(c for c in listed if isinstance(c, int))
         roots = [i for i in range(len(nodes)) if i not in children]
         if not roots:
             raise MeshFormatError("the glTF has no scene and no root node (every node is a child)")
@@ -345,43 +437,36 @@ def _mesh_instances(doc: _Document) -> list[tuple[int, int, np.ndarray]]:
     while stack:
         index, parent, depth = stack.pop()
         node = doc.item("nodes", index, "the scene graph")
-        if index in seen or depth > _MAX_DEPTH:
+        if index in seen:
             raise MeshFormatError(f"nodes[{index}] appears twice in the scene graph (a cycle?)")
+        if depth > _MAX_DEPTH:
+            raise MeshFormatError(f"nodes[{index}] lies deeper than {_MAX_DEPTH} levels")
         seen.add(index)
-        world = parent @ _local_matrix(node, index)
+        with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused later
+            world = parent @ _local_matrix(node, index)
         if "mesh" in node:
             instances.append((index, node["mesh"], world))
-        children = node.get("children", [])
-        if not isinstance(children, list):
-            raise MeshFormatError(f"nodes[{index}].children must be a list")
+        children = _list(node.get("children", []), f"nodes[{index}].children")
         stack.extend((child, world, depth + 1) for child in reversed(children))
     return instances
 
 
 def _local_matrix(node: dict, index: int) -> np.ndarray:
     """A node's local 4x4 transform from ``matrix`` (column-major) or T * R * S."""
-    try:
-        if "matrix" in node:
-            matrix = np.asarray(node["matrix"], dtype=np.float64)
-            if matrix.shape != (16,):
-                raise ValueError
-            result = matrix.reshape(4, 4).T
-        else:
-            t = np.asarray(node.get("translation", [0.0, 0.0, 0.0]), dtype=np.float64)
-            x, y, z, w = np.asarray(node.get("rotation", [0.0, 0.0, 0.0, 1.0]), dtype=np.float64)
-            s = np.asarray(node.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64)
-            rotation = np.array(
-                [
-                    [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                    [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                    [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-                ]
-            )
-            result = np.eye(4)
-            result[:3, :3] = rotation * s
-            result[:3, 3] = t
-    except (TypeError, ValueError):
-        raise MeshFormatError(f"nodes[{index}] has a malformed transform") from None
-    if not np.isfinite(result).all():
-        raise MeshFormatError(f"nodes[{index}] has a NaN or Inf in its transform")
+    name = f"nodes[{index}]"
+    if "matrix" in node:
+        return _numbers(node["matrix"], 16, f"{name}.matrix").reshape(4, 4).T
+    t = _numbers(node.get("translation", [0.0, 0.0, 0.0]), 3, f"{name}.translation")
+    x, y, z, w = _numbers(node.get("rotation", [0.0, 0.0, 0.0, 1.0]), 4, f"{name}.rotation")
+    s = _numbers(node.get("scale", [1.0, 1.0, 1.0]), 3, f"{name}.scale")
+    rotation = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    result = np.eye(4)
+    result[:3, :3] = rotation * s
+    result[:3, 3] = t
     return result

@@ -1,10 +1,12 @@
-"""What every mesh reader returns, the limits they enforce, and their one error type."""
+"""What every mesh reader returns, the checks they share, and their one error type."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from transforms import MAX_ABS_COORDINATE
 
 
 class MeshFormatError(ValueError):
@@ -41,9 +43,11 @@ class Mesh:
 
     Attributes
     ----------
-    vertices : (n, 3) float, finite
+    vertices : (n, 3) float, finite, within ``MAX_ABS_COORDINATE``
     faces : (m, 3) int, vertex ids; face ``i`` is the file's ``i``-th triangle
-    groups : name -> ascending face ids (OBJ g/o/usemtl names, glTF mesh and node names)
+    groups : name -> (k, 2) int ranges ``[start, stop)`` of face ids (OBJ g/o/usemtl names,
+        glTF mesh and node names); ranges, not ids, so a name on many faces costs nothing
+        until a request asks for it
     format : str, the reader that produced it
     """
 
@@ -51,6 +55,32 @@ class Mesh:
     faces: np.ndarray
     groups: dict[str, np.ndarray] = field(default_factory=dict)
     format: str = ""
+
+    def group_faces(self, names: list[str]) -> np.ndarray:
+        """Ascending face ids in any of the groups ``names`` (each a key of ``groups``)."""
+        ranges = np.concatenate([self.groups[name] for name in names]).reshape(-1, 2)
+        # +1 at each start, -1 at each stop: faces with a positive running sum are covered.
+        marks = np.zeros(len(self.faces) + 1, dtype=np.int64)
+        np.add.at(marks, ranges[:, 0], 1)
+        np.add.at(marks, ranges[:, 1], -1)
+        return np.flatnonzero(np.cumsum(marks[:-1]) > 0)
+
+
+def checked_vertices(vertices: np.ndarray, file_lines: np.ndarray | None = None) -> np.ndarray:
+    """``vertices`` as a contiguous (n, 3) float64 array, refusing a NaN, an Inf or a
+    coordinate beyond ``MAX_ABS_COORDINATE``, named by its vertex id (and its line in the
+    file, 0-based ``file_lines``, for text formats)."""
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+    bad = ~(np.abs(vertices) <= MAX_ABS_COORDINATE).all(axis=1)  # NaN fails the test too
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        where = f" (line {file_lines[first] + 1})" if file_lines is not None else ""
+        raise MeshFormatError(
+            f"vertex {first}{where} has the position {vertices[first].tolist()}; coordinates "
+            f"must be finite and within +-{MAX_ABS_COORDINATE:g} ({int(bad.sum())} vertices "
+            "are not)"
+        )
+    return vertices
 
 
 def check_counts(n_vertices: int, n_faces: int, limits: Limits) -> None:

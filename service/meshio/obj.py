@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import Limits, Mesh, MeshFormatError, check_counts
+from .mesh import Limits, Mesh, MeshFormatError, check_counts, checked_vertices
+from .text import SPACE, TextLines, is_blank
 
-_SPACE, _TAB, _CR, _LF, _HASH, _SLASH = 32, 9, 13, 10, 35, 47
+_HASH, _SLASH = 35, 47
 
 
 def read_obj(data: bytes, limits: Limits) -> Mesh:
@@ -44,8 +45,8 @@ def read_obj(data: bytes, limits: Limits) -> Mesh:
 
     numbers = lines.numbers_only(vertex_lines, face_lines)
     vertices = _read_vertices(numbers, lines, vertex_lines)
-    faces, face_of_line = _read_faces(numbers, lines, face_lines, vertex_lines)
-    groups = _read_groups(data, lines, kind, face_lines, face_of_line)
+    faces = _read_faces(numbers, lines, face_lines, vertex_lines)
+    groups = _read_groups(data, lines, kind, face_lines)
     return Mesh(vertices=vertices, faces=faces, groups=groups, format="obj")
 
 
@@ -61,48 +62,33 @@ class _Lines:
 
     def __init__(self, data: bytes) -> None:
         buffer = np.frombuffer(data, dtype=np.uint8)
-        newlines = np.flatnonzero(buffer == _LF)
-        starts = np.concatenate(([0], newlines + 1))
-        ends = np.concatenate((newlines, [len(buffer)]))
-        keep = starts < ends  # drop the empty line after a final newline
-        self.starts, self.ends = starts[keep], ends[keep]
+        lines = TextLines.of(buffer)
         hashes = np.flatnonzero(buffer == _HASH)
         if hashes.size:
-            line = np.searchsorted(self.starts, hashes, side="right") - 1
+            line = np.searchsorted(lines.starts, hashes, side="right") - 1
             first_of_line = np.concatenate(([True], line[1:] != line[:-1]))
-            comment_starts = hashes[first_of_line]
-            comment_ends = self.ends[line[first_of_line]]
-            buffer = _blanked(buffer, comment_starts, comment_ends)
+            buffer = _blanked(buffer, hashes[first_of_line], lines.ends[line[first_of_line]])
             data = buffer.tobytes()
+            lines = TextLines.of(buffer)  # the same lines, fewer tokens
         self.data, self.buffer = data, buffer
-        # Skip leading blanks (one pass per blank column, not per line).
-        self.first = self.starts.copy()
-        while True:
-            inside = self.first < self.ends
-            blank = np.zeros(len(self.first), dtype=bool)
-            blank[inside] = _is_blank(buffer[self.first[inside]])
-            if not blank.any():
-                break
-            self.first[blank] += 1
-        blank = _is_blank(buffer)
-        token_start = ~blank
-        token_start[1:] &= blank[:-1]
+        #: (lines,) int: where each line starts, ends, and has its first non-blank byte
+        self.starts, self.ends, self.first = lines.starts, lines.ends, lines.first
         #: (lines,) int: whitespace-separated tokens per line, keyword included
-        self.tokens = np.add.reduceat(token_start.view(np.uint8), self.starts, dtype=np.int64)
+        self.tokens = lines.tokens
 
     def numbers_only(self, vertex_lines: np.ndarray, face_lines: np.ndarray) -> bytes:
         """The text with the ``v`` and ``f`` keywords and the ``/vt/vn`` tails of face
         references blanked out, so runs of those lines parse as plain numbers."""
         buffer = self.buffer.copy()
         keyword_lines = np.concatenate((vertex_lines, face_lines))
-        buffer[self.first[keyword_lines]] = _SPACE
+        buffer[self.first[keyword_lines]] = SPACE
         slashes = np.flatnonzero(buffer == _SLASH)
         on_face_line = np.zeros(len(self.starts), dtype=bool)
         on_face_line[face_lines] = True
         # Only on face lines: a slash elsewhere (a vertex, a name) is not a reference tail.
         slashes = slashes[on_face_line[np.searchsorted(self.starts, slashes, "right") - 1]]
         if slashes.size:
-            blanks = np.append(np.flatnonzero(_is_blank(buffer)), len(buffer))
+            blanks = np.append(np.flatnonzero(is_blank(buffer)), len(buffer))
             tail_ends = blanks[np.searchsorted(blanks, slashes)]
             first_of_tail = np.concatenate(([True], tail_ends[1:] != tail_ends[:-1]))
             buffer = _blanked(buffer, slashes[first_of_tail], tail_ends[first_of_tail])
@@ -121,7 +107,7 @@ class _Lines:
             return out
 
         c0, c1 = char(0), char(1)
-        separated = _is_blank(c1) | (c1 == 0)
+        separated = is_blank(c1) | (c1 == 0)
         kind[(c0 == ord("v")) & separated] = _VERTEX
         kind[(c0 == ord("f")) & separated] = _FACE
         kind[(c0 == ord("g")) & separated] = _GROUP
@@ -129,7 +115,7 @@ class _Lines:
         word = np.ones(len(first), dtype=bool)
         for offset, letter in enumerate(b"usemtl"):
             word &= char(offset) == letter
-        word &= _is_blank(char(6)) | (char(6) == 0)
+        word &= is_blank(char(6)) | (char(6) == 0)
         kind[word] = _MATERIAL
         return kind
 
@@ -140,12 +126,8 @@ def _blanked(buffer: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.nda
     edges[starts] += 1
     edges[ends] -= 1  # the ranges never overlap, so +-1 marks suffice
     blanked = buffer.copy()
-    blanked[np.cumsum(edges[:-1], dtype=np.int8) > 0] = _SPACE
+    blanked[np.cumsum(edges[:-1], dtype=np.int8) > 0] = SPACE
     return blanked
-
-
-def _is_blank(values: np.ndarray) -> np.ndarray:
-    return (values == _SPACE) | (values == _TAB) | (values == _CR) | (values == _LF)
 
 
 def _runs(line_ids: np.ndarray) -> list[tuple[int, int]]:
@@ -195,19 +177,13 @@ def _read_vertices(data: bytes, lines: _Lines, vertex_lines: np.ndarray) -> np.n
     else:
         offsets = np.concatenate(([0], np.cumsum(per_line)[:-1]))
         vertices = values[offsets[:, None] + np.arange(3)]
-    finite = np.isfinite(vertices).all(axis=1)
-    if not finite.all():
-        bad = int(np.flatnonzero(~finite)[0])
-        raise MeshFormatError(
-            f"vertex {bad} (line {vertex_lines[bad] + 1}) has a NaN or Inf coordinate"
-        )
-    return np.ascontiguousarray(vertices)
+    return checked_vertices(vertices, vertex_lines)
 
 
 def _read_faces(
     data: bytes, lines: _Lines, face_lines: np.ndarray, vertex_lines: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """(m, 3) int triangles in file order, and for each the index into ``face_lines``."""
+) -> np.ndarray:
+    """(m, 3) int triangles in file order."""
     corners = lines.tokens[face_lines] - 1
     _refuse_short(face_lines, corners, "face", "corners; a face needs at least 3")
     references = _numbers(data, lines, face_lines, np.int64, "face references")
@@ -232,48 +208,28 @@ def _read_faces(
     )
     base = first_corner[face_of_line]
     faces = np.stack([ids[base], ids[base + step + 1], ids[base + step + 2]], axis=1)
-    return faces.astype(np.int64), face_of_line
+    return faces.astype(np.int64)
 
 
 def _read_groups(
-    data: bytes,
-    lines: _Lines,
-    kind: np.ndarray,
-    face_lines: np.ndarray,
-    face_of_line: np.ndarray,
+    data: bytes, lines: _Lines, kind: np.ndarray, face_lines: np.ndarray
 ) -> dict[str, np.ndarray]:
-    """Group name -> ascending face ids, from the g (each name), o and usemtl in force."""
-    pairs_face, pairs_name, names = [], [], {}
+    """Group name -> (k, 2) ranges of face ids, from the g (each name), o and usemtl lines in
+    force. Faces come in file order, so a naming line covers one range: the triangles from it
+    to the next line of its kind."""
+    # Triangles before each line of the file: fan triangulation gives corners - 2 per face.
+    triangles_before = np.concatenate(([0], np.cumsum(lines.tokens[face_lines] - 3)))
+    ranges: dict[str, list[tuple[int, int]]] = {}
     for code, split_names in ((_GROUP, True), (_OBJECT, False), (_MATERIAL, False)):
         naming = np.flatnonzero(kind == code)
         if naming.size == 0:
             continue
-        # The names of each naming line (its text after the keyword).
-        line_names = []
-        for line in naming.tolist():
+        bounds = triangles_before[np.searchsorted(face_lines, np.append(naming, len(kind)))]
+        for j, line in enumerate(naming.tolist()):
             text = data[lines.first[line] : lines.ends[line]].decode("utf-8", "replace")
-            rest = text.split(None, 1)[1].strip() if len(text.split(None, 1)) > 1 else ""
-            line_names.append(rest.split() if split_names else ([rest] if rest else []))
-        # Which naming line is in force for each triangle (-1: none yet).
-        current = (np.searchsorted(naming, face_lines) - 1)[face_of_line]
-        named = current >= 0
-        for slot in range(max((len(n) for n in line_names), default=0)):
-            ids = np.array(
-                [names.setdefault(n[slot], len(names)) if slot < len(n) else -1 for n in line_names]
-            )
-            name_of_face = np.where(named, ids[np.maximum(current, 0)], -1)
-            has = np.flatnonzero(name_of_face >= 0)
-            pairs_face.append(has)
-            pairs_name.append(name_of_face[has])
-    if not names:
-        return {}
-    face = np.concatenate(pairs_face)
-    name = np.concatenate(pairs_name)
-    order = np.lexsort((face, name))
-    face, name = face[order], name[order]
-    bounds = np.searchsorted(name, np.arange(len(names) + 1))
-    return {
-        text: np.unique(face[bounds[i] : bounds[i + 1]])
-        for text, i in names.items()
-        if bounds[i + 1] > bounds[i]
-    }
+            words = text.split(None, 1)
+            rest = words[1].strip() if len(words) > 1 else ""
+            names = rest.split() if split_names else ([rest] if rest else [])
+            for name in names:
+                ranges.setdefault(name, []).append((int(bounds[j]), int(bounds[j + 1])))
+    return {name: np.array(spans, dtype=np.int64).reshape(-1, 2) for name, spans in ranges.items()}

@@ -1,0 +1,354 @@
+"""PLY (ASCII and binary, either byte order), read from memory in the file's own order.
+
+Rules (the API documentation repeats them):
+
+* vertex ``i`` is the ``i``-th row of the ``vertex`` element (its ``x``, ``y``, ``z``);
+* a ``face`` row's ``vertex_indices`` (or ``vertex_index``) polygon ``a b c d ...`` becomes the
+  triangles ``(a, b, c), (a, c, d), ...`` in that order, as in OBJ;
+* other elements and properties are skipped.
+
+Every count the header declares is checked against the limits and against the bytes that
+follow before anything is allocated for it. Rows of fixed size are read in one numpy pass;
+a face element whose polygons differ in size is read with one pass per polygon size.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from .mesh import Limits, Mesh, MeshFormatError, check_counts, checked_vertices
+from .text import LF, TextLines
+
+_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}  # fmt: skip
+_FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
+_INDEX_NAMES = ("vertex_indices", "vertex_index")
+_MAX_CORNERS = 255  # a polygon with more is surely a misread list
+
+
+@dataclass(frozen=True)
+class _Property:
+    name: str
+    type: str  # numpy kind code, e.g. "f4"
+    count_type: str | None = None  # set for a list property
+
+
+@dataclass(frozen=True)
+class _Element:
+    name: str
+    count: int
+    properties: tuple[_Property, ...]
+
+    @property
+    def fixed(self) -> bool:
+        return all(p.count_type is None for p in self.properties)
+
+
+def read_ply(data: bytes, limits: Limits) -> Mesh:
+    """Parse a PLY file held in memory.
+
+    Raises
+    ------
+    MeshFormatError
+        Not a PLY file, a malformed header, rows the bytes do not hold, faces referring to
+        missing vertices, or counts beyond ``limits``.
+    """
+    order, elements, body = _header(data)
+    by_name = {element.name: element for element in elements}
+    if "vertex" not in by_name or "face" not in by_name:
+        raise MeshFormatError("the PLY file needs a 'vertex' and a 'face' element")
+    vertex_names = {p.name for p in by_name["vertex"].properties}
+    if not {"x", "y", "z"} <= vertex_names:
+        raise MeshFormatError("the PLY vertex element needs x, y and z properties")
+    face = by_name["face"]
+    if not any(p.name in _INDEX_NAMES and p.count_type for p in face.properties):
+        raise MeshFormatError("the PLY face element needs a list property 'vertex_indices'")
+    check_counts(by_name["vertex"].count, face.count, limits)  # at least one triangle a face
+
+    rows = _binary_rows if order else _ascii_rows
+    vertices = faces = None
+    position = body
+    for element in elements:
+        columns, position = rows(data, position, element, order)
+        if element.name == "vertex":
+            vertices = np.stack([columns[k] for k in "xyz"], axis=1)
+        elif element.name == "face":
+            name = next(n for n in _INDEX_NAMES if n in columns)
+            faces = _fan(*columns[name], n_vertices=by_name["vertex"].count, limits=limits)
+    if not faces.size:
+        raise MeshFormatError("the PLY file holds no triangles")
+    return Mesh(vertices=checked_vertices(vertices), faces=faces, format="ply")
+
+
+def _header(data: bytes) -> tuple[str | None, list[_Element], int]:
+    """The byte order (None for ASCII), the elements, and where the body starts."""
+    if not data.startswith(b"ply"):
+        raise MeshFormatError("not a PLY file: it does not start with 'ply'")
+    end = data.find(b"end_header", 0, 1 << 16)
+    newline = data.find(b"\n", end) if end >= 0 else -1
+    if newline < 0:
+        raise MeshFormatError("not a PLY file: no 'end_header' line within its first 64 KiB")
+    order, elements = None, []
+    seen_format = False
+    for number, line in enumerate(data[:end].decode("ascii", "replace").splitlines(), 1):
+        words = line.split()
+        if not words or words[0] in ("ply", "comment", "obj_info"):
+            continue
+        if words[0] == "format" and len(words) == 3 and words[1] in _FORMATS:
+            order, seen_format = _FORMATS[words[1]], True
+        elif words[0] == "element" and len(words) == 3 and words[2].isdigit():
+            elements.append(_Element(words[1], int(words[2]), ()))
+        elif words[0] == "property" and elements:
+            elements[-1] = _Element(
+                elements[-1].name, elements[-1].count, (*elements[-1].properties, _prop(words))
+            )
+        else:
+            raise MeshFormatError(f"PLY header line {number} is not understood: {line.strip()!r}")
+    if not seen_format:
+        raise MeshFormatError("the PLY header has no 'format ascii|binary_... 1.0' line")
+    return order, elements, newline + 1
+
+
+def _prop(words: list[str]) -> _Property:
+    if len(words) == 3 and words[1] in _TYPES:
+        return _Property(words[2], _TYPES[words[1]])
+    if len(words) == 5 and words[1] == "list" and words[2] in _TYPES and words[3] in _TYPES:
+        if _TYPES[words[2]][0] == "f":
+            raise MeshFormatError(f"PLY list {words[4]!r} counts with a float type")
+        return _Property(words[4], _TYPES[words[3]], _TYPES[words[2]])
+    raise MeshFormatError(f"PLY property line not understood: {' '.join(words)!r}")
+
+
+# -- binary ---------------------------------------------------------------------------------
+
+_STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I"}
+
+
+def _binary_rows(data: bytes, position: int, element: _Element, order: str):
+    """Columns of an element's rows from ``position`` (name -> values; a list's name ->
+    (items, flat, in row order; sizes, one a row)), and where the element ends."""
+    if element.fixed:
+        dtype = _row_dtype(element, order, ())
+        end = position + dtype.itemsize * element.count
+        if end > len(data):
+            raise _short(element, len(data) - position, end - position)
+        table = np.frombuffer(data, dtype=dtype, count=element.count, offset=position)
+        return {p.name: table[p.name] for p in element.properties}, end
+    shapes, row_bytes = _row_shapes(data, position, element, order)
+    starts = position + np.concatenate(([0], np.cumsum(row_bytes)[:-1]))
+    end = position + int(row_bytes.sum())
+    raw = np.frombuffer(data, dtype=np.uint8)
+    lists = [p for p in element.properties if p.count_type is not None]
+    columns: dict = {p.name: np.empty(element.count, p.type) for p in element.properties}
+    pieces: dict = {p.name: [] for p in lists}
+    # One numpy pass per distinct row shape (one, for a mesh of triangles only).
+    for shape in np.unique(shapes, axis=0):
+        rows = np.flatnonzero((shapes == shape).all(axis=1))
+        dtype = _row_dtype(element, order, shape)
+        if len(rows) == element.count:
+            table = np.frombuffer(data, dtype=dtype, count=element.count, offset=position)
+        else:
+            table = raw[starts[rows, None] + np.arange(dtype.itemsize)].view(dtype).ravel()
+        for p in element.properties:
+            if p.count_type is None:
+                columns[p.name][rows] = table[p.name]
+            else:
+                pieces[p.name].append((rows, table[p.name].reshape(len(rows), -1)))
+    for k, p in enumerate(lists):
+        columns[p.name] = (_in_row_order(pieces[p.name], shapes[:, k]), shapes[:, k])
+    return columns, end
+
+
+def _row_shapes(data: bytes, position: int, element: _Element, order: str):
+    """(rows, lists) list sizes and (rows,) byte sizes of an element's rows."""
+    first, size = _row_shape(data, position, element, order)
+    count = element.count
+    # The usual case, checked in one pass: every row has the first row's shape.
+    if position + size * count <= len(data):
+        starts = position + size * np.arange(count)
+        raw = np.frombuffer(data, dtype=np.uint8)
+        same = np.ones(count, dtype=bool)
+        for k, (p, at) in enumerate(_count_offsets(element, first)):
+            count_dtype = np.dtype(order + p.count_type)
+            where = starts[:, None] + at + np.arange(count_dtype.itemsize)
+            same &= raw[where].view(count_dtype).ravel() == first[k]
+        if same.all():
+            return np.tile(first, (count, 1)), np.full(count, size, dtype=np.int64)
+    # Polygons of several sizes: walk the rows (reading only their counts).
+    shapes = np.empty((count, len(first)), dtype=np.int64)
+    row_bytes = np.empty(count, dtype=np.int64)
+    offset = position
+    for row in range(count):
+        shapes[row], row_bytes[row] = _row_shape(data, offset, element, order)
+        offset += int(row_bytes[row])
+    return shapes, row_bytes
+
+
+def _row_shape(data: bytes, offset: int, element: _Element, order: str):
+    """The list sizes and the byte size of the row at ``offset``."""
+    shape, at = [], offset
+    for p in element.properties:
+        if p.count_type is None:
+            at += np.dtype(p.type).itemsize
+            continue
+        width = np.dtype(p.count_type).itemsize
+        if at + width > len(data):
+            raise _short(element, len(data) - offset, at + width - offset)
+        (count,) = struct.unpack_from(order + _STRUCT[p.count_type], data, at)
+        if not 0 <= count <= _MAX_CORNERS:
+            raise MeshFormatError(
+                f"a PLY {element.name} row at byte {offset:,} lists {count} items in "
+                f"{p.name!r}; 0 to {_MAX_CORNERS} are read"
+            )
+        shape.append(count)
+        at += width + count * np.dtype(p.type).itemsize
+    if at > len(data):
+        raise _short(element, len(data) - offset, at - offset)
+    return np.array(shape, dtype=np.int64), at - offset
+
+
+def _count_offsets(element: _Element, shape) -> list[tuple[_Property, int]]:
+    """(list property, byte offset of its count in a row of list sizes ``shape``)."""
+    at, k, out = 0, 0, []
+    for p in element.properties:
+        if p.count_type is None:
+            at += np.dtype(p.type).itemsize
+            continue
+        out.append((p, at))
+        at += np.dtype(p.count_type).itemsize + int(shape[k]) * np.dtype(p.type).itemsize
+        k += 1
+    return out
+
+
+def _row_dtype(element: _Element, order: str, shape) -> np.dtype:
+    """The packed structured dtype of a row whose lists have the sizes ``shape``."""
+    fields, k = [], 0
+    for p in element.properties:
+        if p.count_type is None:
+            fields.append((p.name, order + p.type))
+        else:
+            fields.append((f"{p.name} count", order + p.count_type))
+            fields.append((p.name, order + p.type, (int(shape[k]),)))
+            k += 1
+    return np.dtype(fields)
+
+
+def _in_row_order(pieces: list, sizes: np.ndarray) -> np.ndarray:
+    """Flat list items in row order, from tables read one row shape at a time."""
+    starts = np.concatenate(([0], np.cumsum(sizes)[:-1]))
+    items = np.empty(int(sizes.sum()), dtype=np.int64)
+    for rows, table in pieces:
+        if table.shape[1]:
+            items[starts[rows, None] + np.arange(table.shape[1])] = table
+    return items
+
+
+def _short(element: _Element, have: int, need: int) -> MeshFormatError:
+    return MeshFormatError(
+        f"the PLY {element.name} element ({element.count:,} rows) needs at least {need:,} "
+        f"bytes but {have:,} follow"
+    )
+
+
+# -- ASCII ----------------------------------------------------------------------------------
+
+
+def _ascii_rows(data: bytes, position: int, element: _Element, _order=None):
+    """As :func:`_binary_rows`, for ASCII rows: one row a line."""
+    buffer = np.frombuffer(data, dtype=np.uint8, offset=position)
+    newlines = np.flatnonzero(buffer == LF)
+    if len(newlines) >= element.count:
+        end = int(newlines[element.count - 1]) + 1 if element.count else 0
+    elif len(newlines) == element.count - 1 and _last_start(newlines) < len(buffer):
+        end = len(buffer)  # the last row has no line feed
+    else:
+        raise MeshFormatError(
+            f"the PLY {element.name} element declares {element.count:,} rows; the file ends "
+            "before them"
+        )
+    block = buffer[:end]
+    lines = TextLines.of(block)
+    try:
+        values = np.fromstring(block.tobytes(), dtype=np.float64, sep=" ")
+    except ValueError:
+        values = None
+    if values is None or len(values) != int(lines.tokens.sum()):
+        raise MeshFormatError(f"the PLY {element.name} rows hold a value that is not a number")
+    columns: dict = {}
+    row_start = np.concatenate(([0], np.cumsum(lines.tokens)[:-1]))
+    row_end = row_start + lines.tokens
+    at = row_start.copy()
+    for p in element.properties:
+        _check_values(at, row_end, element)
+        if p.count_type is None:
+            columns[p.name] = values[at]
+            at = at + 1
+            continue
+        sizes = values[at]
+        if ((sizes < 0) | (sizes > _MAX_CORNERS) | (sizes % 1 != 0)).any():
+            raise MeshFormatError(
+                f"the PLY {element.name} rows give list sizes outside 0 to {_MAX_CORNERS}"
+            )
+        sizes = sizes.astype(np.int64)
+        _check_values(at + sizes, row_end, element)
+        offsets = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+        items = values[np.repeat(at + 1, sizes) + offsets]
+        bad = np.flatnonzero(~((items % 1 == 0) & (np.abs(items) < 2**31)))
+        if bad.size:
+            raise MeshFormatError(
+                f"the PLY {element.name} list {p.name!r} holds {float(items[bad[0]])!r}, "
+                "which is not an index"
+            )
+        columns[p.name] = (items.astype(np.int64), sizes)
+        at = at + 1 + sizes
+    extra = np.flatnonzero(at != row_end)
+    if extra.size:
+        raise MeshFormatError(
+            f"PLY {element.name} row {int(extra[0])} has more values than its properties"
+        )
+    return columns, position + end
+
+
+def _last_start(newlines: np.ndarray) -> int:
+    return int(newlines[-1]) + 1 if len(newlines) else 0
+
+
+def _check_values(at: np.ndarray, row_end: np.ndarray, element: _Element) -> None:
+    short = np.flatnonzero(at >= row_end)
+    if short.size:
+        raise MeshFormatError(
+            f"PLY {element.name} row {int(short[0])} has too few values for its properties"
+        )
+
+
+# -- faces ----------------------------------------------------------------------------------
+
+
+def _fan(items: np.ndarray, corners: np.ndarray, n_vertices: int, limits: Limits) -> np.ndarray:
+    """Fan triangles, in row order, of polygons given as flat ``items`` and ``corners``."""
+    short = np.flatnonzero(corners < 3)
+    if short.size:
+        raise MeshFormatError(
+            f"PLY face {int(short[0])} has {int(corners[short[0]])} corners; a face needs 3"
+        )
+    items = items.astype(np.int64)
+    bad = np.flatnonzero((items < 0) | (items >= n_vertices))
+    if bad.size:
+        raise MeshFormatError(
+            f"a PLY face refers to vertex {int(items[bad[0]])}, but the file has "
+            f"{n_vertices:,} vertices"
+        )
+    triangles = corners - 2
+    check_counts(n_vertices, int(triangles.sum()), limits)
+    first = np.concatenate(([0], np.cumsum(corners)[:-1]))
+    polygon = np.repeat(np.arange(len(corners)), triangles)
+    step = np.arange(len(polygon)) - np.repeat(np.cumsum(triangles) - triangles, triangles)
+    base = first[polygon]
+    return np.stack([items[base], items[base + step + 1], items[base + step + 2]], axis=1)

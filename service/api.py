@@ -5,9 +5,10 @@ from __future__ import annotations
 import json
 from functools import cache
 
+import anyio
 import numpy as np
 from fastapi import APIRouter, Request
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.responses import Response
 
@@ -27,7 +28,7 @@ from .params import (
     region_faces,
     resolved,
 )
-from .problems import Problem, from_mesh_error, from_transform_error, validation_problem
+from .problems import Problem, from_mesh_error, validation_problem
 from .samples import SAMPLES
 from .schemas import (
     PROBLEMS,
@@ -115,6 +116,7 @@ def readyz(request: Request) -> Health:
 def _sample_info(name: str) -> SampleInfo:
     sample = SAMPLES[name]
     data = sample.path.read_bytes()
+    # A bundled file is trusted: read with the default limits, whatever the service's are.
     mesh = read_mesh(data, format_of(name, None), Settings().limits)
     return SampleInfo(
         name=name,
@@ -170,6 +172,49 @@ def sample_file(name: str) -> Response:
     )
 
 
+# -- jobs --------------------------------------------------------------------------------
+
+
+def json_body(model: type) -> dict:
+    """The OpenAPI request body of a route that reads ``model`` as JSON itself."""
+    schema = {"$ref": f"#/components/schemas/{model.__name__}"}
+    return {"requestBody": {"required": True, "content": {"application/json": {"schema": schema}}}}
+
+
+async def run_job(request: Request, work) -> Response:
+    """Run ``work(body, content_type, settings)`` off the event loop, at most
+    ``MESHFLAT_MAX_JOBS`` at once: a request waits for a slot before its body is read, so
+    waiting requests hold no memory."""
+    settings = settings_of(request)
+    async with _job_slots(request.app, settings.max_jobs):
+        body = await request.body()
+        content_type = request.headers.get("content-type", "")
+        return await run_in_threadpool(work, body, content_type, settings)
+
+
+def _job_slots(app, total: int) -> anyio.CapacityLimiter:
+    # Made on first use: a limiter belongs to the event loop that runs the app.
+    if getattr(app.state, "job_slots", None) is None:
+        app.state.job_slots = anyio.CapacityLimiter(total)
+    return app.state.job_slots
+
+
+def parse_json(model: type[BaseModel], body: bytes, content_type: str, prefix: str = ""):
+    """``body`` validated as ``model`` (a 415 unless the content type is JSON, a 422 naming
+    the fields otherwise)."""
+    media_type = content_type.partition(";")[0].strip()
+    if media_type.lower() != "application/json":
+        raise Problem(
+            415,
+            f"send application/json, not {media_type or 'an untyped body'}",
+            "unsupported-media-type",
+        )
+    try:
+        return model.model_validate_json(body)
+    except ValidationError as error:
+        raise validation_problem(error.errors(), prefix) from None
+
+
 # -- points --------------------------------------------------------------------------------
 
 
@@ -179,22 +224,24 @@ def sample_file(name: str) -> Response:
     summary="Points to (theta, phi, r)",
     response_model=PointsResponse,
     responses=PROBLEMS,
+    openapi_extra=json_body(PointsRequest),
 )
-async def points(body: PointsRequest, request: Request) -> Response:
+async def points(request: Request) -> Response:
     """World points to distorted-pole (or standard, or separable) coordinates, radians:
-    ``theta`` the polar angle from local +Z, ``phi`` the azimuth from +X towards +Y."""
-    settings = settings_of(request)
-    _check_count(len(body.points), settings.max_points, "points")
-    return await run_in_threadpool(answer_points, body, settings)
+    ``theta`` the polar angle from local +Z, ``phi`` the azimuth from +X towards +Y.
+    Body: JSON, as the PointsRequest schema."""
+    return await run_job(request, answer_points)
 
 
-def answer_points(body: PointsRequest, settings: Settings) -> Response:
-    """The /v1/points answer (CPU-bound: run it off the event loop)."""
+def answer_points(body: bytes, content_type: str, settings: Settings) -> Response:
+    """The /v1/points answer to a JSON body (CPU-bound: run it off the event loop)."""
     timings = Timings()
     with timings.measure("parse"):
-        points = np.asarray(body.points, dtype=np.float64)
+        request = parse_json(PointsRequest, body, content_type)
+        _check_count(len(request.points), settings.max_points, "points")
+        points = np.asarray(request.points, dtype=np.float64)
     with timings.measure("compute"):
-        chart, frame = _chart_and_frame(body)
+        chart, frame = _chart_and_frame(request)
         theta, phi, r = checked(
             lambda: world_to_angles(points, frame, chart, threads=settings.threads), ""
         )
@@ -207,27 +254,30 @@ def answer_points(body: PointsRequest, settings: Settings) -> Response:
     summary="(theta, phi, r) to points",
     response_model=InverseResponse,
     responses=PROBLEMS,
+    openapi_extra=json_body(InverseRequest),
 )
-async def points_inverse(body: InverseRequest, request: Request) -> Response:
-    """Coordinates back to world points, with the same parameters as /v1/points."""
-    settings = settings_of(request)
-    _check_count(len(body.theta), settings.max_points, "theta")
-    return await run_in_threadpool(answer_inverse, body, settings)
+async def points_inverse(request: Request) -> Response:
+    """Coordinates back to world points, with the same parameters as /v1/points.
+    Body: JSON, as the InverseRequest schema."""
+    return await run_job(request, answer_inverse)
 
 
-def answer_inverse(body: InverseRequest, settings: Settings) -> Response:
-    """The /v1/points/inverse answer (CPU-bound: run it off the event loop)."""
+def answer_inverse(body: bytes, content_type: str, settings: Settings) -> Response:
+    """The /v1/points/inverse answer to a JSON body (CPU-bound: run it off the event loop)."""
     timings = Timings()
+    with timings.measure("parse"):
+        request = parse_json(InverseRequest, body, content_type)
+        _check_count(len(request.theta), settings.max_points, "theta")
     with timings.measure("compute"):
-        chart, frame = _chart_and_frame(body)
-        r = 1.0 if body.r is None else body.r
-        world = checked(lambda: angles_to_world(body.theta, body.phi, r, frame, chart), "")
+        chart, frame = _chart_and_frame(request)
+        r = 1.0 if request.r is None else request.r
+        world = checked(lambda: angles_to_world(request.theta, request.phi, r, frame, chart), "")
     return json_response({"points": world}, timings)
 
 
-def _chart_and_frame(body: PointsRequest | InverseRequest):
+def _chart_and_frame(request: PointsRequest | InverseRequest):
     """The chart and the frame a points request names (a bad one: a 422 naming the field)."""
-    return checked(lambda: (chart_of(body), frame_of(body, np.asarray(body.center))), "")
+    return checked(lambda: (chart_of(request), frame_of(request, np.asarray(request.center))), "")
 
 
 def _check_count(count: int, limit: int, field: str) -> None:
@@ -255,7 +305,7 @@ def _check_count(count: int, limit: int, field: str) -> None:
     "triangles, the validation report and the distortion metrics.\n" + MESH_RULES,
 )
 async def flatten(request: Request) -> Response:
-    return await _mesh_job(request, full=True)
+    return await run_job(request, flatten_answer)
 
 
 @router.post(
@@ -269,19 +319,20 @@ async def flatten(request: Request) -> Response:
     "validation report and the distortion metrics.\n" + MESH_RULES,
 )
 async def validate(request: Request) -> Response:
-    return await _mesh_job(request, full=False)
+    return await run_job(request, validate_answer)
 
 
-async def _mesh_job(request: Request, full: bool) -> Response:
-    settings = settings_of(request)
-    body = await request.body()
-    content_type = request.headers.get("content-type", "")
-    return await run_in_threadpool(run_mesh_job, body, content_type, settings, full)
+def flatten_answer(body: bytes, content_type: str, settings: Settings) -> Response:
+    """The /v1/flatten answer to a multipart body (CPU-bound: run it off the event loop)."""
+    return _mesh_answer(body, content_type, settings, full=True)
 
 
-def run_mesh_job(body: bytes, content_type: str, settings: Settings, full: bool) -> Response:
-    """The /v1/flatten (``full``) or /v1/validate answer to a multipart body (CPU-bound: run
-    it off the event loop)."""
+def validate_answer(body: bytes, content_type: str, settings: Settings) -> Response:
+    """The /v1/validate answer to a multipart body (CPU-bound: run it off the event loop)."""
+    return _mesh_answer(body, content_type, settings, full=False)
+
+
+def _mesh_answer(body: bytes, content_type: str, settings: Settings, full: bool) -> Response:
     timings = Timings()
     with timings.measure("parse"):
         form = parse_form(body, content_type)
@@ -302,10 +353,7 @@ def run_mesh_job(body: bytes, content_type: str, settings: Settings, full: bool)
 def _mesh_params(form) -> MeshParams:
     if "params" not in form:
         return MeshParams()
-    try:
-        return MeshParams.model_validate_json(bytes(form["params"].data))
-    except ValidationError as error:
-        raise validation_problem(error.errors(), "params") from None
+    return parse_json(MeshParams, bytes(form["params"].data), "application/json", "params")
 
 
 def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: bool) -> dict:
@@ -317,7 +365,10 @@ def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: b
             mesh.vertices, mesh.faces[faces], frame, chart, threads=settings.threads
         )
     except TransformInputError as error:
-        raise from_transform_error(error, "mesh: " if error.field == "vertices" else "") from None
+        # The parameters were checked above: what is left is about the file's vertices.
+        raise Problem(
+            422, f"mesh: {error.message}", "invalid-input", "mesh", error.indices
+        ) from None
     v = flat.validation
     face_ids = lambda positions: faces[positions]  # noqa: E731 - positions -> file ids
     d = flat.distortion

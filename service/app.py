@@ -17,7 +17,7 @@ from .allocator import keep_large_blocks
 from .api import router
 from .bodylimit import BodySizeLimit
 from .examples import add_examples
-from .params import MeshParams
+from .params import InverseRequest, MeshParams, PointsRequest
 from .problems import ProblemDetails
 from .selfcheck import run_self_check
 from .settings import Settings
@@ -74,6 +74,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     problems.install(app)
     app.include_router(router)
     app.add_middleware(BodySizeLimit, limit=settings.max_upload_bytes)
+    app.add_middleware(problems.UnexpectedErrors)
     return app
 
 
@@ -89,7 +90,12 @@ def _openapi(app: FastAPI) -> dict:
             routes=app.routes,
         )
         _, definitions = models_json_schema(
-            [(MeshParams, "validation"), (ProblemDetails, "serialization")],
+            [
+                (MeshParams, "validation"),
+                (PointsRequest, "validation"),
+                (InverseRequest, "validation"),
+                (ProblemDetails, "serialization"),
+            ],
             ref_template="#/components/schemas/{model}",
         )
         document.setdefault("components", {}).setdefault("schemas", {}).update(

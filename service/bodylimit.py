@@ -33,7 +33,11 @@ class BodySizeLimit:
             return
         for key, value in scope.get("headers", []):
             if key == b"content-length":
-                if not value.isdigit() or int(value) > self.limit:
+                if not value.isdigit():
+                    bad = Problem(400, "Content-Length must be a number of bytes", "bad-length")
+                    await problem_response(bad)(scope, receive, send)
+                    return
+                if int(value) > self.limit:
                     await problem_response(BodyTooLarge(self.limit))(scope, receive, send)
                     return
         received = 0

@@ -13,7 +13,7 @@ import orjson
 import trimesh
 from pydantic import ValidationError
 
-from .api import answer_inverse, answer_points, run_mesh_job, sample_infos
+from .api import answer_inverse, answer_points, flatten_answer, sample_infos, validate_answer
 from .meshio import MeshFormatError, read_mesh
 from .params import MESH_PARAMS_EXAMPLE, InverseRequest, PointsRequest
 from .problems import Problem, from_mesh_error, problem_response, validation_problem
@@ -22,6 +22,7 @@ from .settings import Settings
 
 BOUNDARY = "example-boundary"
 MULTIPART = f"multipart/form-data; boundary={BOUNDARY}"
+JSON = "application/json"
 
 
 def icosahedron_obj() -> bytes:
@@ -44,6 +45,10 @@ def multipart_body(params: dict, filename: str, data: bytes) -> bytes:
             f"\r\n--{BOUNDARY}--\r\n".encode(),
         ]
     )
+
+
+def _dumped(example: dict, **changes) -> bytes:
+    return json.dumps(dict(example, **changes)).encode()
 
 
 def _rounded(value):
@@ -83,27 +88,25 @@ def examples() -> dict[tuple[str, str], dict | list]:
     tiny = Settings(max_faces=10).limits
     mesh_problems = {
         "422": _problem(
-            lambda: run_mesh_job(
-                multipart_body(bad_region, "icosahedron.obj", mesh), MULTIPART, settings, True
+            lambda: flatten_answer(
+                multipart_body(bad_region, "icosahedron.obj", mesh), MULTIPART, settings
             )
         ),
         "413": _problem(lambda: read_mesh(mesh, "obj", tiny)),
     }
-    point_problem = _problem(lambda: PointsRequest.model_validate(dict(points, sigma=-1.0)))
+    point_problem = _problem(lambda: answer_points(_dumped(points, sigma=-1.0), JSON, settings))
     return {
         ("/healthz", "200"): Health().model_dump(),
         ("/readyz", "200"): Health().model_dump(),
         ("/v1/samples", "200"): [info.model_dump() for info in sample_infos()],
-        ("/v1/points", "200"): _json(answer_points(PointsRequest(**points), settings).body),
+        ("/v1/points", "200"): _json(answer_points(_dumped(points), JSON, settings).body),
         ("/v1/points", "422"): point_problem,
-        ("/v1/points/inverse", "200"): _json(
-            answer_inverse(InverseRequest(**inverse), settings).body
-        ),
+        ("/v1/points/inverse", "200"): _json(answer_inverse(_dumped(inverse), JSON, settings).body),
         ("/v1/points/inverse", "422"): _problem(
-            lambda: InverseRequest.model_validate(dict(inverse, sigma=0.3, pole_angle_deg=30))
+            lambda: answer_inverse(_dumped(inverse, pole_angle_deg=30.0), JSON, settings)
         ),
-        ("/v1/flatten", "200"): _json(run_mesh_job(body, MULTIPART, settings, True).body),
-        ("/v1/validate", "200"): _json(run_mesh_job(body, MULTIPART, settings, False).body),
+        ("/v1/flatten", "200"): _json(flatten_answer(body, MULTIPART, settings).body),
+        ("/v1/validate", "200"): _json(validate_answer(body, MULTIPART, settings).body),
         **{("/v1/flatten", status): problem for status, problem in mesh_problems.items()},
         **{("/v1/validate", status): problem for status, problem in mesh_problems.items()},
     }

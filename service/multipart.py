@@ -23,7 +23,6 @@ class Part:
 
     name: str
     filename: str | None
-    content_type: str | None
     data: memoryview
 
 
@@ -43,10 +42,10 @@ def parse_form(body: bytes, content_type: str) -> dict[str, Part]:
             f"{media_type.strip() or 'an untyped body'}",
             "unsupported-media-type",
         )
-    match = re.search(r'boundary="?([^";]+)"?', parameters)
+    match = re.search(r'boundary\s*=\s*(?:"([^"]+)"|([^";\s]+))', parameters, re.IGNORECASE)
     if not match:
         raise Problem(400, "the multipart Content-Type has no boundary", "malformed-multipart")
-    delimiter = b"--" + match.group(1).encode("latin-1")
+    delimiter = b"--" + (match.group(1) or match.group(2)).encode("latin-1")
     view = memoryview(body)
     parts: dict[str, Part] = {}
     position = body.find(delimiter)
@@ -74,7 +73,6 @@ def parse_form(body: bytes, content_type: str) -> dict[str, Part]:
             parts[name] = Part(
                 name=name,
                 filename=values.get("filename"),
-                content_type=headers.get("content-type"),
                 data=view[header_end + 4 : next_delimiter],
             )
         position = next_delimiter + 2

@@ -115,6 +115,19 @@ class InverseRequest(ChartParams):
         }
     )
 
+    @model_validator(mode="after")
+    def _one_value_per_point(self) -> InverseRequest:
+        n = len(self.theta)
+        if len(self.phi) != n:
+            raise ValueError(
+                f"theta, phi: one phi per theta; got {n} theta and {len(self.phi)} phi"
+            )
+        if isinstance(self.r, list) and len(self.r) != n:
+            raise ValueError(
+                f"theta, r: one r per theta (or a single number); got {n} theta and {len(self.r)} r"
+            )
+        return self
+
 
 class Cone(_Strict):
     axis: Vector3 = Field(description="World direction of the cone's axis (non-zero).")
@@ -199,11 +212,13 @@ def frame_of(params: ChartParams, center: np.ndarray) -> Frame:
 
 
 def resolved(chart: Chart, frame: Frame) -> dict:
-    """The ``params`` block of an answer: everything as it was used."""
+    """The ``params`` block of an answer: everything as it was used, so that it can be sent
+    back as it is (``standard`` has no cap: its sigma and pole angle are null)."""
+    standard = chart.method.value == "standard"
     return {
         "method": chart.method.value,
-        "sigma": chart.cap.sigma,
-        "pole_angle_deg": chart.cap.rho_deg,
+        "sigma": None if standard else chart.cap.sigma,
+        "pole_angle_deg": None if standard else chart.cap.rho_deg,
         "center": frame.center.tolist(),
         "rotation": frame.rotation.tolist(),
     }
@@ -240,18 +255,15 @@ def region_faces(mesh: Mesh, params: MeshParams) -> tuple[np.ndarray, np.ndarray
 
 
 def _ids(values: list[int], limit: int, field: str, noun: str) -> np.ndarray:
-    ids = np.asarray(values, dtype=np.int64)
+    try:
+        ids = np.asarray(values, dtype=np.int64)
+    except OverflowError:
+        # Only an id beyond 64 bits gets here; find it for the message.
+        huge = next(value for value in values if not -(2**63) <= value < 2**63)
+        raise _outside(field, noun, huge, limit, []) from None
     bad = np.flatnonzero((ids < 0) | (ids >= limit))
     if bad.size:
-        plural = {"vertex": "vertices", "face": "faces"}[noun]
-        raise Problem(
-            422,
-            f"{field}: {noun} id {int(ids[bad[0]])} is outside [0, {limit}) (the mesh has "
-            f"{limit} {plural})",
-            "invalid-input",
-            field,
-            ids[bad[:5]].tolist(),
-        )
+        raise _outside(field, noun, int(ids[bad[0]]), limit, ids[bad[:5]].tolist())
     unique, counts = np.unique(ids, return_counts=True)
     if (counts > 1).any():
         repeated = unique[counts > 1]
@@ -264,6 +276,18 @@ def _ids(values: list[int], limit: int, field: str, noun: str) -> np.ndarray:
             repeated[:5].tolist(),
         )
     return ids
+
+
+def _outside(field: str, noun: str, value: int, limit: int, indices: list[int]) -> Problem:
+    plural = {"vertex": "vertices", "face": "faces"}[noun]
+    return Problem(
+        422,
+        f"{field}: {noun} id {value} is outside [0, {limit:,}) (the mesh has {limit:,} "
+        f"{noun if limit == 1 else plural})",
+        "invalid-input",
+        field,
+        indices,
+    )
 
 
 def _groups(mesh: Mesh, names: list[str]) -> np.ndarray:

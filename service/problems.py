@@ -16,6 +16,7 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.responses import Response
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from transforms import TransformInputError
 
@@ -110,14 +111,6 @@ def install(app: FastAPI) -> None:
     async def on_problem(_: Request, exc: Problem) -> Response:
         return problem_response(exc)
 
-    @app.exception_handler(TransformInputError)
-    async def on_transform_error(_: Request, exc: TransformInputError) -> Response:
-        return problem_response(from_transform_error(exc))
-
-    @app.exception_handler(MeshFormatError)
-    async def on_mesh_error(_: Request, exc: MeshFormatError) -> Response:
-        return problem_response(from_mesh_error(exc))
-
     @app.exception_handler(RequestValidationError)
     async def on_validation_error(_: Request, exc: RequestValidationError) -> Response:
         return problem_response(validation_problem(exc.errors()))
@@ -129,10 +122,34 @@ def install(app: FastAPI) -> None:
             Problem(exc.status_code, detail, "http-error", headers=getattr(exc, "headers", None))
         )
 
-    @app.exception_handler(Exception)
-    async def on_unexpected(request: Request, exc: Exception) -> Response:
-        # Only the route and the exception type: never request content.
-        logger.error("unexpected %s on %s %s", type(exc).__name__, request.method, request.url.path)
-        return problem_response(
-            Problem(500, "the service failed unexpectedly; the error is logged", "internal-error")
-        )
+
+class UnexpectedErrors:
+    """ASGI middleware: any exception no handler took becomes a 500 problem, and the log
+    gets its type and the route only (never its message or traceback, which could quote an
+    uploaded mesh); the exception is not raised further, so the server logs nothing more."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = False
+
+        async def watched(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, receive, watched)
+        except Exception as exc:
+            logger.error(
+                "unexpected %s on %s %s", type(exc).__name__, scope["method"], scope["path"]
+            )
+            if not started:
+                problem = Problem(
+                    500, "the service failed unexpectedly; the error is logged", "internal-error"
+                )
+                await problem_response(problem)(scope, receive, send)

@@ -10,8 +10,10 @@ from pydantic import BaseModel, Field
 
 class ResolvedParams(BaseModel):
     method: Literal["distorted", "standard", "separable"]
-    sigma: float = Field(description="The warp parameter used (1 for standard).")
-    pole_angle_deg: float = Field(description="The cap's angle rho = 2 atan(sigma), degrees.")
+    sigma: float | None = Field(description="The warp parameter used; null for standard.")
+    pole_angle_deg: float | None = Field(
+        description="The cap's angle rho = 2 atan(sigma), degrees; null for standard."
+    )
     center: list[float] = Field(description="The centre used, world coordinates.")
     rotation: list[list[float]] = Field(description="The world-to-local rotation used (rows).")
 

@@ -3,21 +3,25 @@ bundled scan and summarise the result."""
 
 from __future__ import annotations
 
-import io
 import time
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
 
-from transforms import Chart, Frame, PoleCap, flatten_region
+from transforms import flatten_region
 
+from .meshio import format_of, read_mesh
+from .params import MeshParams, chart_of, frame_of, region_faces
 from .samples import SAMPLES
+from .settings import Settings
 
 SAMPLE = "fsaverage-head.ply"
-#: The scalp: faces whose centroid is within this angle of up (+Z in the sample's RAS axes)
-#: seen from the bounding-box centre.
-SCALP_HALF_ANGLE_DEG = 70.0
+#: The scalp: faces whose centroid is within 70 degrees of up (+Z in the sample's RAS axes)
+#: seen from the bounding-box centre; the cap around -Z (the neck).
+SCALP_PARAMS = {
+    "rotation": {"pole": [0.0, 0.0, -1.0], "up": [0.0, 1.0, 0.0]},
+    "region": {"cone": {"axis": [0.0, 0.0, 1.0], "half_angle_deg": 70.0}},
+}
 
 
 @dataclass(frozen=True)
@@ -45,22 +49,19 @@ class SelfCheck:
 
 
 def run_self_check() -> SelfCheck:
-    """Flatten the scalp of ``SAMPLE`` with the default method (distorted, sigma 0.3)."""
+    """Flatten the scalp of ``SAMPLE`` with the default method (distorted, sigma 0.3), read
+    and resolved the way a request would be."""
     data = SAMPLES[SAMPLE].path.read_bytes()
-    mesh = trimesh.load(io.BytesIO(data), file_type="ply", process=False, force="mesh")
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.faces, dtype=np.int64)
+    mesh = read_mesh(data, format_of(SAMPLE, None), Settings().limits)
+    params = MeshParams.model_validate(SCALP_PARAMS)
     start = time.perf_counter()
-    centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
-    directions = vertices[faces].mean(axis=1) - centre
-    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    scalp = faces[directions[:, 2] >= np.cos(np.radians(SCALP_HALF_ANGLE_DEG))]
-    frame = Frame.from_pole_up(pole=[0.0, 0.0, -1.0], up=[0.0, 1.0, 0.0], center=centre)
-    flat = flatten_region(vertices, scalp, frame, Chart.distorted(PoleCap.from_sigma(0.3)))
+    faces, center = region_faces(mesh, params)
+    frame, chart = frame_of(params, center), chart_of(params)
+    flat = flatten_region(mesh.vertices, mesh.faces[faces], frame, chart)
     v = flat.validation
     return SelfCheck(
         sample=SAMPLE,
-        faces=len(scalp),
+        faces=len(faces),
         seam_free=v.seam_free,
         margin_deg=min(v.margin_deg_seam, v.margin_deg_north, v.margin_deg_south),
         isometric_mean=flat.distortion.isometric.mean,

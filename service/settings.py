@@ -20,6 +20,7 @@ class Settings:
     max_vertices, max_faces : MESHFLAT_MAX_VERTICES, MESHFLAT_MAX_FACES, per mesh
     max_points : MESHFLAT_MAX_POINTS, per /v1/points request
     threads : MESHFLAT_THREADS, threads one request's computation may use
+    max_jobs : MESHFLAT_MAX_JOBS, requests computed at once; more wait, unread, for a slot
     """
 
     max_upload_bytes: int = 256 * 2**20
@@ -27,6 +28,7 @@ class Settings:
     max_faces: int = 5_000_000
     max_points: int = 5_000_000
     threads: int = 1
+    max_jobs: int = 2
 
     @classmethod
     def from_env(cls, environ: Mapping[str, str] | None = None) -> Settings:

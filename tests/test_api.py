@@ -7,6 +7,7 @@ import base64
 import json
 import math
 
+import anyio
 import httpx
 import numpy as np
 import pytest
@@ -163,6 +164,37 @@ async def test_inverse_checks_ranges(client):
     problem(response, 422, "theta")
 
 
+@pytest.mark.parametrize(
+    ("body", "says"),
+    [
+        ({"theta": [1.0, 2.0], "phi": [0.0]}, "got 2 theta and 1 phi"),
+        ({"theta": [1.0], "phi": [0.0], "r": [1.0, 2.0]}, "got 1 theta and 2 r"),
+    ],
+)
+async def test_inverse_needs_one_value_per_point(client, body, says):
+    assert says in problem(await client.post("/v1/points/inverse", json=body), 422)["detail"]
+
+
+async def test_points_need_a_json_body(client):
+    response = await client.post(
+        "/v1/points", content=b"points=1", headers={"content-type": "text/plain"}
+    )
+    assert "application/json" in problem(response, 415)["detail"]
+    problem(await client.post("/v1/points", content=b"{"), 415)
+    broken = await client.post(
+        "/v1/points", content=b"{", headers={"content-type": "application/json"}
+    )
+    assert "JSON" in problem(broken, 422)["detail"]
+
+
+async def test_standard_answers_no_cap_and_its_params_can_be_sent_back(client):
+    first = await flatten(client, "fsaverage-head.ply", {"method": "standard"})
+    params = first.json()["params"]
+    assert params["sigma"] is None and params["pole_angle_deg"] is None
+    again = await flatten(client, "fsaverage-head.ply", params)
+    assert again.status_code == 200 and again.json()["params"] == params
+
+
 # -- flatten and validate ------------------------------------------------------------------
 
 
@@ -260,7 +292,7 @@ async def test_regions_by_faces_vertices_and_groups(client):
     [
         ({"faces": [1, 2, 2]}, "params.region.faces", "more than once"),
         ({"faces": [-1]}, "params.region.faces", "outside"),
-        ({"faces": [99999]}, "params.region.faces", "outside [0, 4062)"),
+        ({"faces": [99999]}, "params.region.faces", "outside [0, 4,062)"),
         ({"vertices": [0]}, "params.region", "selects no faces"),
         (
             {"cone": {"axis": [0, 0, 0], "half_angle_deg": 10}},
@@ -269,6 +301,8 @@ async def test_regions_by_faces_vertices_and_groups(client):
         ),
         ({"cone": {"axis": [0, 0, 1], "half_angle_deg": 0.0001}}, "params.region", "no faces"),
         ({"faces": []}, "params.region", None),
+        ({"faces": [2**70]}, "params.region.faces", f"face id {2**70} is outside"),
+        ({"vertices": [-(2**64)]}, "params.region.vertices", "is outside"),
     ],
 )
 async def test_bad_regions(client, region, field, says):
@@ -282,7 +316,7 @@ async def test_bad_regions(client, region, field, says):
 async def test_a_centre_on_a_vertex_names_it(client):
     vertices, _ = load_sample("fsaverage-head.ply")
     response = await flatten(client, "fsaverage-head.ply", {"center": vertices[123].tolist()})
-    body = problem(response, 422)
+    body = problem(response, 422, "mesh")
     assert body["indices"] == [123] and "vertex 123" in body["detail"]
 
 
@@ -392,27 +426,91 @@ async def test_limits():
             assert "MESHFLAT_MAX_FACES" in body["detail"]
 
 
+async def test_json_bodies_are_limited_as_they_stream_in():
+    app = create_app(Settings(max_upload_bytes=10_000))
+    transport = httpx.ASGITransport(app=app)
+    async with httpx.AsyncClient(transport=transport, base_url="http://m") as c:
+
+        async def chunks():
+            yield b'{"points": ['
+            for _ in range(2000):
+                yield b"[1, 2, 3],"
+
+        headers = {"content-type": "application/json"}
+        response = await c.post("/v1/points", content=chunks(), headers=headers)
+        assert "MESHFLAT_MAX_UPLOAD_BYTES" in problem(response, 413)["detail"]
+        response = await c.post(
+            "/v1/points", content=b"{}", headers=headers | {"content-length": "x"}
+        )
+        problem(response, 400)
+
+
+async def test_jobs_wait_for_a_slot(monkeypatch):
+    """With MESHFLAT_MAX_JOBS=1, requests are computed one at a time."""
+    import threading
+    import time
+
+    from service import api
+
+    running, most, lock = 0, 0, threading.Lock()
+    real = api.answer_points
+
+    def counted(*args):
+        nonlocal running, most
+        with lock:
+            running += 1
+            most = max(most, running)
+        time.sleep(0.05)
+        with lock:
+            running -= 1
+        return real(*args)
+
+    monkeypatch.setattr(api, "answer_points", counted)
+    for jobs, expected in ((1, 1), (3, 3)):
+        running = most = 0
+        app = create_app(Settings(max_jobs=jobs))
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://m") as c:
+            statuses = []
+
+            async def post(client=c, statuses=statuses):
+                response = await client.post("/v1/points", json={"points": [[1, 0, 0]]})
+                statuses.append(response.status_code)
+
+            async with anyio.create_task_group() as group:
+                for _ in range(3):
+                    group.start_soon(post)
+        assert statuses == [200] * 3
+        assert most == expected
+
+
+async def test_multipart_details(client):
+    data = SAMPLES["fsaverage-head.ply"].path.read_bytes()
+    body = (
+        b'--AbC\r\nContent-Disposition: form-data; name="mesh"; filename="a.ply"\r\n\r\n'
+        + data
+        + b"\r\n--AbC--\r\n"
+    )
+    for content_type in (
+        "multipart/form-data; BOUNDARY=AbC",
+        'multipart/form-data; boundary = "AbC"',
+    ):
+        response = await client.post(
+            "/v1/validate", content=body, headers={"content-type": content_type}
+        )
+        assert response.status_code == 200, (content_type, response.text)
+    nameless = body.replace(b'; filename="a.ply"', b"")
+    response = await client.post(
+        "/v1/validate",
+        content=nameless,
+        headers={"content-type": "multipart/form-data; boundary=AbC"},
+    )
+    assert "no file name" in problem(response, 422, "mesh")["detail"]
+
+
 async def test_wrong_content_type(client):
     response = await client.post("/v1/flatten", json={"mesh": "no"})
     problem(response, 415)
-
-
-async def test_answers_never_reach_the_disk(client, tmp_path, monkeypatch):
-    """The body is parsed in memory: no temporary file is created while flattening."""
-    import tempfile
-
-    created = []
-    real = tempfile.SpooledTemporaryFile
-
-    def spy(*args, **kwargs):
-        created.append(args)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(tempfile, "SpooledTemporaryFile", spy)
-    monkeypatch.setattr(tempfile, "NamedTemporaryFile", spy)
-    monkeypatch.setattr(tempfile, "TemporaryFile", spy)
-    response = await flatten(client, "nefertiti-lowres.obj", {})
-    assert response.status_code == 200 and not created
 
 
 # -- the OpenAPI examples are answers ------------------------------------------------------

@@ -37,7 +37,12 @@ def format_of(filename: str | None, declared: str | None) -> str:
         if fmt not in READERS:
             raise MeshFormatError(f"format {declared!r} is not one of {supported}")
         return fmt
-    extension = (filename or "").rsplit(".", 1)[-1].lower() if "." in (filename or "") else ""
+    if not filename:
+        raise MeshFormatError(
+            f"the file part has no file name to tell its format by: send one ending in one "
+            f"of {supported}, or set params.format"
+        )
+    extension = filename.rsplit(".", 1)[-1].lower() if "." in filename else ""
     if extension not in READERS:
         raise MeshFormatError(
             f"cannot tell the format of {filename!r}: name the file with one of the "

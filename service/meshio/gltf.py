@@ -97,7 +97,8 @@ def _parse_json(text: bytes) -> dict:
     asset = document.get("asset")
     version = asset.get("version") if isinstance(asset, dict) else None
     if not isinstance(version, str) or not version.startswith("2."):
-        raise MeshFormatError(f"asset.version is {version!r}; only glTF 2.0 is read")
+        shown = "missing" if version is None else f"{version!r}"
+        raise MeshFormatError(f"asset.version is {shown}; only glTF 2.0 is read")
     required = document.get("extensionsRequired", [])
     if required:
         names = ", ".join(map(str, required)) if isinstance(required, list) else repr(required)

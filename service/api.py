@@ -81,8 +81,9 @@ and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order
 (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and
 ``usemtl`` names. glTF triangles come primitive by primitive in document order (the default
 scene's nodes depth first, children in order, each node's mesh's primitives in order) with
-node transforms applied; groups are mesh and node names. STL triangles keep their own
-corners (nothing is merged).
+node transforms applied; groups are mesh and node names. PLY polygons are fan-triangulated
+like OBJ's; other elements and properties are skipped. STL triangles keep their own corners
+(nothing is merged).
 """
 
 

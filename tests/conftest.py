@@ -21,6 +21,8 @@ from service.samples import SAMPLES
 # benchmarks' business.
 settings.register_profile("dev", deadline=None)
 settings.register_profile("ci", deadline=None, derandomize=True, max_examples=300)
+#: A longer search, run by hand: HYPOTHESIS_PROFILE=long pytest tests/test_gltf_fuzz.py
+settings.register_profile("long", deadline=None, max_examples=5000)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
 
 

@@ -131,7 +131,10 @@ def _numbers(value, count: int, name: str) -> np.ndarray:
         or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
     ):
         raise MeshFormatError(f"{name} must be a list of {count} numbers, got {_shown(value)}")
-    array = np.asarray(value, dtype=np.float64)
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except OverflowError:  # JSON integers have no bound
+        raise MeshFormatError(f"{name} holds a number beyond a 64-bit float") from None
     if not np.isfinite(array).all():
         raise MeshFormatError(f"{name} holds a NaN or Inf")
     return array
@@ -337,9 +340,11 @@ def _read_document(document: dict, binary, limits: Limits, fmt: str) -> Mesh:
         transform = primitive.transform
         if not np.isfinite(transform).all():
             raise MeshFormatError(f"the world transform of {primitive.where} overflows")
-        with np.errstate(over="ignore", invalid="ignore"):  # checked_vertices refuses inf
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            # checked_vertices refuses an overflow; slogdet: the sign, never overflowing
             points = positions.astype(np.float64) @ transform[:3, :3].T + transform[:3, 3]
-        if np.linalg.det(transform[:3, :3]) < 0:
+            mirrored = np.linalg.slogdet(transform[:3, :3])[0] < 0
+        if mirrored:
             triangles = triangles[:, ::-1]
         vertices.append(points)
         faces.append(triangles + offset)

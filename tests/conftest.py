@@ -7,6 +7,7 @@ import os
 from fractions import Fraction
 from functools import cache
 
+import httpx
 import numpy as np
 import pytest
 import trimesh
@@ -14,7 +15,9 @@ from hypothesis import settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from service.app import create_app
 from service.samples import SAMPLES
+from service.settings import Settings
 
 # Local runs explore new examples each time; CI (HYPOTHESIS_PROFILE=ci) replays a fixed,
 # larger set so a red build always means the same thing. No timing deadlines: speed is the
@@ -38,6 +41,16 @@ def load_sample(name: str) -> tuple[np.ndarray, np.ndarray]:
     vertices.flags.writeable = False
     faces.flags.writeable = False
     return vertices, faces
+
+
+@pytest.fixture
+async def client():
+    """An httpx client of a started app with the default settings."""
+    app = create_app(Settings())
+    async with app.router.lifespan_context(app):
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as c:
+            yield c
 
 
 @pytest.fixture

@@ -36,15 +36,6 @@ SCALP = {
 }
 
 
-@pytest.fixture
-async def client():
-    app = create_app(Settings())
-    async with app.router.lifespan_context(app):
-        transport = httpx.ASGITransport(app=app)
-        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as c:
-            yield c
-
-
 async def flatten(client, name, params=None, data=None, filename=None, endpoint="/v1/flatten"):
     data = SAMPLES[name].path.read_bytes() if data is None else data
     fields = {"params": json.dumps(params)} if params is not None else {}

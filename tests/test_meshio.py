@@ -116,10 +116,12 @@ def test_obj_counts_are_checked_before_reading():
     assert caught.value.status == 413
 
 
-def test_obj_sample_matches_trimesh():
-    sample = SAMPLES["nefertiti-lowres.obj"].path.read_bytes()
-    ours = read_mesh(sample, "obj", LIMITS)
-    peer = trimesh.load(io.BytesIO(sample), file_type="obj", process=False, force="mesh")
+@pytest.mark.parametrize("name", ["nefertiti-lowres.obj", "fsaverage-head.ply"])
+def test_sample_matches_trimesh(name):
+    sample = SAMPLES[name].path.read_bytes()
+    fmt = name.rsplit(".", 1)[1]
+    ours = read_mesh(sample, fmt, LIMITS)
+    peer = trimesh.load(io.BytesIO(sample), file_type=fmt, process=False, force="mesh")
     np.testing.assert_array_equal(ours.vertices, peer.vertices)
     np.testing.assert_array_equal(ours.faces, peer.faces)
 
@@ -165,14 +167,6 @@ def test_ply_keeps_file_order_and_fans_polygons(make, extra_element):
     mesh = read_mesh(make(extra_element), "ply", LIMITS)
     np.testing.assert_array_equal(mesh.vertices, PENTAGON)
     np.testing.assert_array_equal(mesh.faces, FANNED)
-
-
-def test_ply_sample_matches_trimesh():
-    sample = SAMPLES["fsaverage-head.ply"].path.read_bytes()
-    ours = read_mesh(sample, "ply", LIMITS)
-    peer = trimesh.load(io.BytesIO(sample), file_type="ply", process=False, force="mesh")
-    np.testing.assert_array_equal(ours.vertices, peer.vertices)
-    np.testing.assert_array_equal(ours.faces, peer.faces)
 
 
 @pytest.mark.parametrize(

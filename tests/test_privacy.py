@@ -7,12 +7,9 @@ import os
 import sys
 import tempfile
 
-import httpx
 import pytest
 
 from service import api
-from service.app import create_app
-from service.settings import Settings
 
 from .test_api import flatten, problem
 
@@ -42,15 +39,6 @@ def _on_audit(event: str, args: tuple) -> None:
 
 
 sys.addaudithook(_on_audit)
-
-
-@pytest.fixture
-async def client():
-    app = create_app(Settings())
-    async with app.router.lifespan_context(app):
-        transport = httpx.ASGITransport(app=app)
-        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as c:
-            yield c
 
 
 async def watched_writes(call) -> list[tuple]:

@@ -10,6 +10,7 @@ import numpy as np
 from fastapi import APIRouter, Request
 from pydantic import BaseModel, ValidationError
 from starlette.concurrency import run_in_threadpool
+from starlette.requests import ClientDisconnect
 from starlette.responses import Response
 
 from transforms import TransformInputError, angles_to_world, flatten_region, world_to_angles
@@ -183,13 +184,17 @@ def json_body(model: type) -> dict:
 
 
 async def run_job(request: Request, work) -> Response:
-    """Run ``work(body, content_type, settings)`` off the event loop, at most
-    ``MESHFLAT_MAX_JOBS`` at once: a request waits for a slot before its body is read, so
-    waiting requests hold no memory."""
+    """Read the body (its size is bounded by the upload limit), then run
+    ``work(body, content_type, settings)`` off the event loop, at most ``MESHFLAT_MAX_JOBS``
+    at once: a slow upload does not hold a slot that a ready request could use."""
     settings = settings_of(request)
-    async with _job_slots(request.app, settings.max_jobs):
+    try:
         body = await request.body()
-        content_type = request.headers.get("content-type", "")
+    except ClientDisconnect:
+        # Nobody is left to answer; nothing to log.
+        return Response(status_code=400)
+    content_type = request.headers.get("content-type", "")
+    async with _job_slots(request.app, settings.max_jobs):
         return await run_in_threadpool(work, body, content_type, settings)
 
 

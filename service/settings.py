@@ -20,7 +20,7 @@ class Settings:
     max_vertices, max_faces : MESHFLAT_MAX_VERTICES, MESHFLAT_MAX_FACES, per mesh
     max_points : MESHFLAT_MAX_POINTS, per /v1/points request
     threads : MESHFLAT_THREADS, threads one request's computation may use
-    max_jobs : MESHFLAT_MAX_JOBS, requests computed at once; more wait, unread, for a slot
+    max_jobs : MESHFLAT_MAX_JOBS, requests computed at once; more wait for a slot
     """
 
     max_upload_bytes: int = 256 * 2**20

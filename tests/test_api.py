@@ -351,7 +351,7 @@ async def test_params_must_be_json(client):
             b"property float y\nproperty float z\nelement face 1\n"
             b"property list uchar int vertex_indices\nend_header\n\x00\x00",
             "short.ply",
-            "needs at least 12,000,000 bytes but 2 follow",
+            "need at least 12,000,000 bytes but 2 follow",
         ),
     ],
 )

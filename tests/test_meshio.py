@@ -175,15 +175,18 @@ def test_ply_keeps_file_order_and_fans_polygons(make, extra_element):
         (b"ply\nformat ascii 1.0\nelement vertex 0\nend_header\n", "needs a 'vertex' and a"),
         (b"solid x", "does not start with 'ply'"),
         (ply_header("ascii").replace(b"format ascii 1.0", b"format weird 1.0"), "line 2"),
-        (ply_header("binary_little_endian") + b"\0" * 20, "needs at least"),
+        (ply_header("binary_little_endian") + b"\0" * 20, "is cut short"),
         (ply_ascii().replace(b"0 3 4 3 2", b"0 3 4 3 9"), "refers to vertex 9"),
         (ply_ascii().replace(b"0 3 4 3 2", b"0 2 4 3"), "face 3 has 2 corners"),
         (ply_ascii().replace(b"0 3 4 3 2", b"0 3 4 3 x"), "not a number"),
         (ply_ascii().replace(b"0 3 4 3 2", b"0 3 4 3 2 5"), "more values"),
-        (ply_ascii().replace(b"0 3 4 3 2", b"0 3 4 3.5 2"), "3.5, which is not an index"),
+        (
+            ply_ascii().replace(b"0 3 4 3 2", b"0 3 4 3.5 2"),
+            "PLY face 3 lists 3.5, not a vertex index",
+        ),
         (ply_ascii().replace(b"0 2 0 7", b"0 nan 0 7"), "vertex 4 has the position"),
         (ply_ascii()[:-12], "the file ends before them"),
-        (ply_binary("<")[:-3], "needs at least"),
+        (ply_binary("<")[:-3], "is cut short"),
     ],
 )
 def test_ply_errors_say_where(data, says):
@@ -369,3 +372,99 @@ def test_damaged_files_are_read_or_refused_never_crash(fmt, data):
     assert np.isfinite(mesh.vertices).all()
     assert mesh.faces.ndim == 2 and mesh.faces.shape[1] == 3
     assert ((mesh.faces >= 0) & (mesh.faces < len(mesh.vertices))).all()
+
+
+def ply_text(header: str, body: str) -> bytes:
+    return f"ply\nformat ascii 1.0\n{header}end_header\n{body}".encode()
+
+
+VERTS = "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+TRIANGLE_ROWS = "0 0 0\n1 0 0\n0 1 0\n"
+
+
+@pytest.mark.parametrize(
+    ("data", "faces"),
+    [
+        # An element with no rows (MeshLab writes `element edge 0`).
+        (
+            ply_text(
+                VERTS + "element face 1\nproperty list uchar int vertex_indices\n"
+                "element edge 0\nproperty int vertex1\n",
+                TRIANGLE_ROWS + "3 0 1 2\n",
+            ),
+            [[0, 1, 2]],
+        ),
+        # A float list that is not the face indices (texture coordinates) is skipped.
+        (
+            ply_text(
+                VERTS + "element face 1\nproperty list uchar int vertex_indices\n"
+                "property list uchar float texcoord\n",
+                TRIANGLE_ROWS + "3 0 1 2 6 0.5 0.5 0.25 0 1 1\n",
+            ),
+            [[0, 1, 2]],
+        ),
+        # 'end_header' inside a comment does not end the header.
+        (
+            ply_text(
+                "comment made by end_header_writer\n"
+                + VERTS
+                + "element face 1\nproperty list uchar int vertex_indices\n",
+                TRIANGLE_ROWS + "3 0 1 2\n",
+            ),
+            [[0, 1, 2]],
+        ),
+    ],
+)
+def test_ply_reads_what_real_writers_write(data, faces):
+    assert read_mesh(data, "ply", LIMITS).faces.tolist() == faces
+
+
+@pytest.mark.parametrize(
+    ("data", "says", "status"),
+    [
+        (
+            b"ply\nformat binary_little_endian 1.0\n" + VERTS.encode() + b"element face 1\n"
+            b"property list uchar int vertex_indices\nelement junk 10000000000000\n"
+            b"property list uchar uchar a\nend_header\n" + b"\0" * 40,
+            "junk element declares 10,000,000,000,000 rows",
+            413,
+        ),
+        (
+            ply_text(VERTS + "property float x\nelement face 0\n", ""),
+            "a second 'x' property",
+            422,
+        ),
+        (
+            ply_text(
+                "element vertex 1\nproperty list uchar float x\nproperty float y\n"
+                "property float z\nelement face 0\nproperty list uchar int vertex_indices\n",
+                "",
+            ),
+            "needs scalar x, y and z",
+            422,
+        ),
+        (
+            ply_text(VERTS + "element face 1\nproperty int vertex_indices\n", TRIANGLE_ROWS),
+            "needs a list property",
+            422,
+        ),
+    ],
+)
+def test_ply_header_mistakes_are_named(data, says, status):
+    with pytest.raises(MeshFormatError, match=re.escape(says)) as caught:
+        read_mesh(data, "ply", LIMITS)
+    assert caught.value.status == status
+
+
+def test_a_gltf_without_triangles_is_refused():
+    twelve = base64.b64encode(bytes(12)).decode()
+    document = {
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": 12, "uri": f"data:application/octet-stream;base64,{twelve}"}],
+        "bufferViews": [{"buffer": 0, "byteLength": 12}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 0, "type": "VEC3"}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "nodes": [{"mesh": 0}],
+    }
+    with pytest.raises(MeshFormatError, match="no triangles"):
+        read_mesh(json.dumps(document).encode(), "gltf", LIMITS)

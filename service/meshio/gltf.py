@@ -356,6 +356,8 @@ def _read_document(document: dict, binary, limits: Limits, fmt: str) -> Mesh:
             groups.setdefault(name, []).append(span)
         offset += len(points)
         face_offset += len(triangles)
+    if face_offset == 0:
+        raise MeshFormatError("the glTF file holds no triangles")
     return Mesh(
         vertices=checked_vertices(np.concatenate(vertices)),
         faces=np.ascontiguousarray(np.concatenate(faces)),

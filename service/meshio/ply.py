@@ -9,7 +9,8 @@ Rules (the API documentation repeats them):
 
 Every count the header declares is checked against the limits and against the bytes that
 follow before anything is allocated for it. Rows of fixed size are read in one numpy pass;
-a face element whose polygons differ in size is read with one pass per polygon size.
+a face element whose polygons differ in size is walked once for its list sizes, then read
+with one pass per polygon size.
 """
 
 from __future__ import annotations
@@ -64,56 +65,98 @@ def read_ply(data: bytes, limits: Limits) -> Mesh:
     by_name = {element.name: element for element in elements}
     if "vertex" not in by_name or "face" not in by_name:
         raise MeshFormatError("the PLY file needs a 'vertex' and a 'face' element")
-    vertex_names = {p.name for p in by_name["vertex"].properties}
-    if not {"x", "y", "z"} <= vertex_names:
-        raise MeshFormatError("the PLY vertex element needs x, y and z properties")
-    face = by_name["face"]
-    if not any(p.name in _INDEX_NAMES and p.count_type for p in face.properties):
+    vertex, face = by_name["vertex"], by_name["face"]
+    scalars = {p.name for p in vertex.properties if p.count_type is None}
+    if not {"x", "y", "z"} <= scalars:
+        raise MeshFormatError("the PLY vertex element needs scalar x, y and z properties")
+    index = next((p for p in face.properties if p.name in _INDEX_NAMES), None)
+    if index is None or index.count_type is None:
         raise MeshFormatError("the PLY face element needs a list property 'vertex_indices'")
-    check_counts(by_name["vertex"].count, face.count, limits)  # at least one triangle a face
+    check_counts(vertex.count, face.count, limits)  # at least one triangle a face
+    largest = max(limits.max_vertices, limits.max_faces)
+    for element in elements:
+        if element.count > largest:
+            raise MeshFormatError(
+                f"the PLY {element.name} element declares {element.count:,} rows; the limit "
+                f"is {largest:,}",
+                status=413,
+            )
 
     rows = _binary_rows if order else _ascii_rows
     vertices = faces = None
     position = body
     for element in elements:
         columns, position = rows(data, position, element, order)
-        if element.name == "vertex":
-            vertices = np.stack([columns[k] for k in "xyz"], axis=1)
-        elif element.name == "face":
-            name = next(n for n in _INDEX_NAMES if n in columns)
-            faces = _fan(*columns[name], n_vertices=by_name["vertex"].count, limits=limits)
+        if element is vertex:
+            vertices = np.stack([columns[k] for k in "xyz"], axis=1).astype(np.float64)
+        elif element is face:
+            items, corners = columns[index.name]
+            faces = _fan(_indices(items, corners), corners, vertex.count, limits)
     if not faces.size:
         raise MeshFormatError("the PLY file holds no triangles")
     return Mesh(vertices=checked_vertices(vertices), faces=faces, format="ply")
+
+
+def _face_of(item: int, corners: np.ndarray) -> int:
+    """The face (row) that flat list item ``item`` belongs to."""
+    return int(np.searchsorted(np.cumsum(corners), item, side="right"))
+
+
+def _indices(items: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Vertex references as int64; a float list must hold whole numbers."""
+    if items.dtype.kind == "f":
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(~(np.isfinite(items) & (items % 1 == 0) & (np.abs(items) < 2**62)))
+        if bad.size:
+            raise MeshFormatError(
+                f"PLY face {_face_of(int(bad[0]), corners)} lists {float(items[bad[0]])!r}, "
+                "not a vertex index"
+            )
+    return items.astype(np.int64)
 
 
 def _header(data: bytes) -> tuple[str | None, list[_Element], int]:
     """The byte order (None for ASCII), the elements, and where the body starts."""
     if not data.startswith(b"ply"):
         raise MeshFormatError("not a PLY file: it does not start with 'ply'")
-    end = data.find(b"end_header", 0, 1 << 16)
-    newline = data.find(b"\n", end) if end >= 0 else -1
-    if newline < 0:
+    head = data[: 1 << 16]
+    lines, offset, body = [], 0, None
+    while offset < len(head):
+        newline = head.find(b"\n", offset)
+        if newline < 0:
+            break
+        line = head[offset:newline].decode("ascii", "replace").strip()
+        offset = newline + 1
+        if line == "end_header":
+            body = offset
+            break
+        lines.append(line)
+    if body is None:
         raise MeshFormatError("not a PLY file: no 'end_header' line within its first 64 KiB")
     order, elements = None, []
     seen_format = False
-    for number, line in enumerate(data[:end].decode("ascii", "replace").splitlines(), 1):
+    for number, line in enumerate(lines, 1):
         words = line.split()
         if not words or words[0] in ("ply", "comment", "obj_info"):
             continue
         if words[0] == "format" and len(words) == 3 and words[1] in _FORMATS:
             order, seen_format = _FORMATS[words[1]], True
         elif words[0] == "element" and len(words) == 3 and words[2].isdigit():
+            if any(element.name == words[1] for element in elements):
+                raise MeshFormatError(f"PLY header line {number}: a second {words[1]!r} element")
             elements.append(_Element(words[1], int(words[2]), ()))
         elif words[0] == "property" and elements:
-            elements[-1] = _Element(
-                elements[-1].name, elements[-1].count, (*elements[-1].properties, _prop(words))
-            )
+            last, new = elements[-1], _prop(words)
+            if any(p.name == new.name for p in last.properties):
+                raise MeshFormatError(
+                    f"PLY header line {number}: {last.name!r} has a second {new.name!r} property"
+                )
+            elements[-1] = _Element(last.name, last.count, (*last.properties, new))
         else:
-            raise MeshFormatError(f"PLY header line {number} is not understood: {line.strip()!r}")
+            raise MeshFormatError(f"PLY header line {number} is not understood: {line!r}")
     if not seen_format:
         raise MeshFormatError("the PLY header has no 'format ascii|binary_... 1.0' line")
-    return order, elements, newline + 1
+    return order, elements, body
 
 
 def _prop(words: list[str]) -> _Property:
@@ -134,6 +177,8 @@ _STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I"}
 def _binary_rows(data: bytes, position: int, element: _Element, order: str):
     """Columns of an element's rows from ``position`` (name -> values; a list's name ->
     (items, flat, in row order; sizes, one a row)), and where the element ends."""
+    if element.count == 0:
+        return _no_rows(element), position
     if element.fixed:
         dtype = _row_dtype(element, order, ())
         end = position + dtype.itemsize * element.count
@@ -141,6 +186,9 @@ def _binary_rows(data: bytes, position: int, element: _Element, order: str):
             raise _short(element, len(data) - position, end - position)
         table = np.frombuffer(data, dtype=dtype, count=element.count, offset=position)
         return {p.name: table[p.name] for p in element.properties}, end
+    smallest = sum(np.dtype(p.count_type or p.type).itemsize for p in element.properties)
+    if position + smallest * element.count > len(data):
+        raise _short(element, len(data) - position, smallest * element.count)
     shapes, row_bytes = _row_shapes(data, position, element, order)
     starts = position + np.concatenate(([0], np.cumsum(row_bytes)[:-1]))
     end = position + int(row_bytes.sum())
@@ -162,7 +210,7 @@ def _binary_rows(data: bytes, position: int, element: _Element, order: str):
             else:
                 pieces[p.name].append((rows, table[p.name].reshape(len(rows), -1)))
     for k, p in enumerate(lists):
-        columns[p.name] = (_in_row_order(pieces[p.name], shapes[:, k]), shapes[:, k])
+        columns[p.name] = (_in_row_order(pieces[p.name], shapes[:, k], p.type), shapes[:, k])
     return columns, end
 
 
@@ -181,14 +229,36 @@ def _row_shapes(data: bytes, position: int, element: _Element, order: str):
             same &= raw[where].view(count_dtype).ravel() == first[k]
         if same.all():
             return np.tile(first, (count, 1)), np.full(count, size, dtype=np.int64)
-    # Polygons of several sizes: walk the rows (reading only their counts).
-    shapes = np.empty((count, len(first)), dtype=np.int64)
-    row_bytes = np.empty(count, dtype=np.int64)
-    offset = position
+    # Polygons of several sizes: walk the rows, reading only their counts, with plain ints.
+    plan = [
+        (np.dtype(p.type).itemsize, None)
+        if p.count_type is None
+        else (np.dtype(p.type).itemsize, struct.Struct(order + _STRUCT[p.count_type]))
+        for p in element.properties
+    ]
+    sizes: list[int] = []
+    row_bytes_list: list[int] = []
+    offset, end = position, len(data)
     for row in range(count):
-        shapes[row], row_bytes[row] = _row_shape(data, offset, element, order)
-        offset += int(row_bytes[row])
-    return shapes, row_bytes
+        start = offset
+        for item_size, counter in plan:
+            if counter is None:
+                offset += item_size
+                continue
+            if offset + counter.size > end:
+                raise _short(element, end - position, offset + counter.size - position)
+            (n,) = counter.unpack_from(data, offset)
+            if not 0 <= n <= _MAX_CORNERS:
+                raise MeshFormatError(
+                    f"PLY {element.name} row {row} lists {n} items; 0 to {_MAX_CORNERS} are read"
+                )
+            sizes.append(n)
+            offset += counter.size + n * item_size
+        row_bytes_list.append(offset - start)
+    if offset > end:
+        raise _short(element, end - position, offset - position)
+    shapes = np.array(sizes, dtype=np.int64).reshape(count, len(first))
+    return shapes, np.array(row_bytes_list, dtype=np.int64)
 
 
 def _row_shape(data: bytes, offset: int, element: _Element, order: str):
@@ -204,8 +274,8 @@ def _row_shape(data: bytes, offset: int, element: _Element, order: str):
         (count,) = struct.unpack_from(order + _STRUCT[p.count_type], data, at)
         if not 0 <= count <= _MAX_CORNERS:
             raise MeshFormatError(
-                f"a PLY {element.name} row at byte {offset:,} lists {count} items in "
-                f"{p.name!r}; 0 to {_MAX_CORNERS} are read"
+                f"PLY {element.name} row 0 lists {count} items in {p.name!r}; 0 to "
+                f"{_MAX_CORNERS} are read"
             )
         shape.append(count)
         at += width + count * np.dtype(p.type).itemsize
@@ -240,10 +310,11 @@ def _row_dtype(element: _Element, order: str, shape) -> np.dtype:
     return np.dtype(fields)
 
 
-def _in_row_order(pieces: list, sizes: np.ndarray) -> np.ndarray:
-    """Flat list items in row order, from tables read one row shape at a time."""
+def _in_row_order(pieces: list, sizes: np.ndarray, kind: str) -> np.ndarray:
+    """Flat list items in row order, from tables read one row shape at a time; ``kind`` is
+    the items' type (native byte order: values, not bytes, are copied)."""
     starts = np.concatenate(([0], np.cumsum(sizes)[:-1]))
-    items = np.empty(int(sizes.sum()), dtype=np.int64)
+    items = np.empty(int(sizes.sum()), dtype=kind)
     for rows, table in pieces:
         if table.shape[1]:
             items[starts[rows, None] + np.arange(table.shape[1])] = table
@@ -252,9 +323,18 @@ def _in_row_order(pieces: list, sizes: np.ndarray) -> np.ndarray:
 
 def _short(element: _Element, have: int, need: int) -> MeshFormatError:
     return MeshFormatError(
-        f"the PLY {element.name} element ({element.count:,} rows) needs at least {need:,} "
-        f"bytes but {have:,} follow"
+        f"the PLY {element.name} element ({element.count:,} rows) is cut short: its rows "
+        f"need at least {need:,} bytes but {have:,} follow"
     )
+
+
+def _no_rows(element: _Element) -> dict:
+    return {
+        p.name: np.empty(0, p.type)
+        if p.count_type is None
+        else (np.empty(0, p.type), np.empty(0, np.int64))
+        for p in element.properties
+    }
 
 
 # -- ASCII ----------------------------------------------------------------------------------
@@ -262,6 +342,8 @@ def _short(element: _Element, have: int, need: int) -> MeshFormatError:
 
 def _ascii_rows(data: bytes, position: int, element: _Element, _order=None):
     """As :func:`_binary_rows`, for ASCII rows: one row a line."""
+    if element.count == 0:
+        return _no_rows(element), position
     buffer = np.frombuffer(data, dtype=np.uint8, offset=position)
     newlines = np.flatnonzero(buffer == LF)
     if len(newlines) >= element.count:
@@ -292,21 +374,17 @@ def _ascii_rows(data: bytes, position: int, element: _Element, _order=None):
             at = at + 1
             continue
         sizes = values[at]
-        if ((sizes < 0) | (sizes > _MAX_CORNERS) | (sizes % 1 != 0)).any():
+        bad = np.flatnonzero((sizes < 0) | (sizes > _MAX_CORNERS) | (sizes % 1 != 0))
+        if bad.size:
             raise MeshFormatError(
-                f"the PLY {element.name} rows give list sizes outside 0 to {_MAX_CORNERS}"
+                f"PLY {element.name} row {int(bad[0])} gives {p.name!r} {float(sizes[bad[0]])!r} "
+                f"items; 0 to {_MAX_CORNERS} are read"
             )
         sizes = sizes.astype(np.int64)
         _check_values(at + sizes, row_end, element)
         offsets = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
         items = values[np.repeat(at + 1, sizes) + offsets]
-        bad = np.flatnonzero(~((items % 1 == 0) & (np.abs(items) < 2**31)))
-        if bad.size:
-            raise MeshFormatError(
-                f"the PLY {element.name} list {p.name!r} holds {float(items[bad[0]])!r}, "
-                "which is not an index"
-            )
-        columns[p.name] = (items.astype(np.int64), sizes)
+        columns[p.name] = (items, sizes)  # as read: only the face indices are checked
         at = at + 1 + sizes
     extra = np.flatnonzero(at != row_end)
     if extra.size:
@@ -338,12 +416,11 @@ def _fan(items: np.ndarray, corners: np.ndarray, n_vertices: int, limits: Limits
         raise MeshFormatError(
             f"PLY face {int(short[0])} has {int(corners[short[0]])} corners; a face needs 3"
         )
-    items = items.astype(np.int64)
     bad = np.flatnonzero((items < 0) | (items >= n_vertices))
     if bad.size:
         raise MeshFormatError(
-            f"a PLY face refers to vertex {int(items[bad[0]])}, but the file has "
-            f"{n_vertices:,} vertices"
+            f"PLY face {_face_of(int(bad[0]), corners)} refers to vertex "
+            f"{int(items[bad[0]])}, but the file has {n_vertices:,} vertices (ids count from 0)"
         )
     triangles = corners - 2
     check_counts(n_vertices, int(triangles.sum()), limits)

@@ -7,7 +7,7 @@ order is kept: vertex ``i`` and face ``i`` are the file's ``i``-th vertex and tr
 from __future__ import annotations
 
 from .gltf import read_glb, read_gltf
-from .mesh import Limits, Mesh, MeshFormatError, check_counts
+from .mesh import Limits, Mesh, MeshFormatError
 from .obj import read_obj
 from .ply import read_ply
 from .stl import read_stl
@@ -20,7 +20,7 @@ READERS = {
     "stl": read_stl,
 }
 
-__all__ = ["READERS", "Limits", "Mesh", "MeshFormatError", "check_counts", "format_of", "read_mesh"]
+__all__ = ["READERS", "Limits", "Mesh", "MeshFormatError", "format_of", "read_mesh"]
 
 
 def format_of(filename: str | None, declared: str | None) -> str:

@@ -83,6 +83,23 @@ def checked_vertices(vertices: np.ndarray, file_lines: np.ndarray | None = None)
     return vertices
 
 
+def fan_triangles(items: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(sum(corners) - 2 * len(corners), 3) int: polygon ``(a, b, c, d, ...)`` becomes
+    ``(a, b, c), (a, c, d), ...``, polygon after polygon.
+
+    Parameters
+    ----------
+    items : (sum(corners),) int, the polygons' vertex ids, flat, in order
+    corners : (polygons,) int, each polygon's corner count, at least 3
+    """
+    triangles = corners - 2
+    first_corner = np.concatenate(([0], np.cumsum(corners)[:-1]))
+    polygon = np.repeat(np.arange(len(corners)), triangles)
+    step = np.arange(len(polygon)) - np.repeat(np.cumsum(triangles) - triangles, triangles)
+    base = first_corner[polygon]
+    return np.stack([items[base], items[base + step + 1], items[base + step + 2]], axis=1)
+
+
 def check_counts(n_vertices: int, n_faces: int, limits: Limits) -> None:
     """Refuse a mesh beyond the vertex or face limit (413), before reading it all."""
     if n_vertices > limits.max_vertices:

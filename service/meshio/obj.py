@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh import Limits, Mesh, MeshFormatError, check_counts, checked_vertices
-from .text import SPACE, TextLines, is_blank
+from .mesh import Limits, Mesh, MeshFormatError, check_counts, checked_vertices, fan_triangles
+from .text import SPACE, TextLines, is_blank, parse_numbers
 
 _HASH, _SLASH = 35, 47
 
@@ -146,11 +146,8 @@ def _numbers(data: bytes, lines: _Lines, line_ids: np.ndarray, dtype, what: str)
         first, last = line_ids[i], line_ids[j - 1]
         text = data[lines.starts[first] : lines.ends[last]]
         expected = int(lines.tokens[line_ids[i:j]].sum()) - (j - i)  # less the keywords
-        try:
-            values = np.fromstring(text, dtype=dtype, sep=" ")
-        except ValueError:
-            values = None
-        if values is None or len(values) != expected:
+        values = parse_numbers(text, dtype, expected)
+        if values is None:
             raise MeshFormatError(
                 f"unreadable {what} between lines {first + 1} and {last + 1}: every token "
                 "after the keyword must be a number"
@@ -199,16 +196,7 @@ def _read_faces(
             f"face on line {line} refers to vertex {int(references[k])}, but the file has "
             f"{len(vertex_lines)} vertices (references count from 1, or back from -1)"
         )
-    # Fan triangulation: polygon (a, b, c, d, ...) -> (a, b, c), (a, c, d), ...
-    triangles = corners - 2
-    first_corner = np.concatenate(([0], np.cumsum(corners)[:-1]))
-    face_of_line = np.repeat(np.arange(len(face_lines)), triangles)
-    step = np.arange(len(face_of_line)) - np.repeat(
-        np.concatenate(([0], np.cumsum(triangles)[:-1])), triangles
-    )
-    base = first_corner[face_of_line]
-    faces = np.stack([ids[base], ids[base + step + 1], ids[base + step + 2]], axis=1)
-    return faces.astype(np.int64)
+    return fan_triangles(ids, corners).astype(np.int64)
 
 
 def _read_groups(

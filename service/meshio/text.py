@@ -15,6 +15,16 @@ def is_blank(values: np.ndarray) -> np.ndarray:
     return (values == SPACE) | (values == TAB) | (values == CR) | (values == LF)
 
 
+def parse_numbers(text: bytes, dtype, expected: int) -> np.ndarray | None:
+    """The whitespace-separated numbers of ``text``, or None unless every one of its
+    ``expected`` tokens is a number of ``dtype``."""
+    try:
+        values = np.fromstring(text, dtype=dtype, sep=" ")
+    except ValueError:
+        return None
+    return values if len(values) == expected else None
+
+
 @dataclass(frozen=True)
 class TextLines:
     """Line ``i`` spans bytes ``[starts[i], ends[i])`` (its line feed excluded); its first

@@ -16,12 +16,6 @@ import numpy as np
 from .cap import PoleCap
 
 
-def angles_between(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(k,) float: angle between rows of ``u`` and ``v`` (``(k, 3)`` or ``(3,)``), accurate
-    at 0 and pi (``atan2(|u x v|, u . v)``)."""
-    return _angle(_rows(u), _rows(v))
-
-
 def arcs_to_point(a: np.ndarray, b: np.ndarray, point: np.ndarray) -> np.ndarray:
     """Distance from a unit ``point`` (3,) to each minor arc ``a -> b``.
 

@@ -194,7 +194,10 @@ def main(argv: list[str] | None = None) -> int:
     ):
         child = [sys.executable, "-m", "benchmarks.transforms_bench", "--child", allocator]
         child += ["--subdivisions", str(args.subdivisions), "--runs", str(args.runs)]
-        table = subprocess.run(child, check=True, capture_output=True, text=True).stdout
+        # BLAS on one thread, as in the service (service/__init__.py): "threads" is then every
+        # thread a step uses.
+        env = os.environ | {"OPENBLAS_NUM_THREADS": "1"}
+        table = subprocess.run(child, check=True, capture_output=True, text=True, env=env).stdout
         sections.append(f"### With {title}\n\n{table.strip()}")
     report = "\n\n".join(sections)
     print(report)
@@ -247,7 +250,7 @@ def time_case(case: Case, runs: int) -> tuple[str, str, list]:
     distorted, separable = Chart.distorted(cap), Chart.separable(cap)
     used = np.unique(case.faces)
     points = case.vertices[used]  # the region's vertices: what the steps transform
-    position = np.full(len(case.vertices), -1, dtype=np.int64)
+    position = np.full(len(case.vertices), -1, dtype=np.int32)  # as flatten_region makes it
     position[used] = np.arange(len(used))
     region = position[case.faces]
     frame = case.frame

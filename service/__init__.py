@@ -1,2 +1,10 @@
 """meshflat's HTTP service: thin FastAPI routes over :mod:`transforms` (ASGI app
 ``service.app:app``)."""
+
+import os
+
+# OpenBLAS (numpy's dot and matrix products) starts threads of its own on every large call;
+# they compete for the cores with the request's threads (MESHFLAT_THREADS) and the other jobs
+# and made validation a fifth slower on two threads. Read when numpy loads, so set here, before
+# any module of the service imports numpy.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")

@@ -42,3 +42,26 @@ def test_allocator_keeps_large_blocks_on_glibc():
     from service.allocator import keep_large_blocks
 
     assert keep_large_blocks()  # the machines meshflat runs on use glibc
+
+
+@pytest.mark.parametrize(("given", "expected"), [(None, 1), ("2", 2)])
+def test_service_runs_blas_on_one_thread_unless_told(given, expected):
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    # A fresh interpreter, asking the OpenBLAS numpy loaded how many threads it runs (the
+    # setting only counts when made before numpy loads).
+    code = (
+        "import ctypes, glob, os, service.app, numpy;"
+        "libs = os.path.join(os.path.dirname(numpy.__file__), os.pardir, 'numpy.libs');"
+        "blas = ctypes.CDLL(glob.glob(os.path.join(libs, 'libscipy_openblas*'))[0]);"
+        "print(blas.scipy_openblas_get_num_threads64_())"
+    )
+    found = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    assert int(found.stdout) == expected

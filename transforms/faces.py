@@ -128,10 +128,10 @@ def measure_faces(
         "stretch_min": np.empty(m),
     }
     singular = (cap.north, cap.south)
-    sides = _sides_of_singular_lines(rows, cap)
+    sides = _sides_of_singular_lines(rows, cap, threads)
 
     def measure(block: slice) -> None:
-        ids = np.ascontiguousarray(faces[block].T)
+        ids = faces[block].T.astype(np.intp, order="C")  # take() converts int32 every call
         corners = np.empty((3, 3, ids.shape[1]))  # (axis, corner, face)
         layout = np.empty((2, 3, ids.shape[1]))  # (phi|theta, corner, face)
         for axis in range(3):
@@ -252,7 +252,7 @@ _SOUTH_BITS = 0b110000
 _SIDE_SLACK = 1e-13
 
 
-def _sides_of_singular_lines(rows: np.ndarray, cap: PoleCap) -> np.ndarray:
+def _sides_of_singular_lines(rows: np.ndarray, cap: PoleCap, threads: int = 1) -> np.ndarray:
     """(n,) uint8: each vertex's side code (see ``_X_BITS``) for the two planes through each
     singular line (the line through the centre and a singular point).
 
@@ -261,17 +261,26 @@ def _sides_of_singular_lines(rows: np.ndarray, cap: PoleCap) -> np.ndarray:
     side of a plane through a line cannot meet that line, so only faces whose corners' codes
     cover both sides of both planes need the exact test.
     """
-    x, y, z = rows
     _, cos_rho, sin_rho = cap.north
-    codes = np.zeros(x.shape, dtype=np.uint8)
-    for distance, bits in (
-        (x, _X_BITS),
-        (cos_rho * z - sin_rho * y, _NORTH_BITS),
-        (cos_rho * z + sin_rho * y, _SOUTH_BITS),
-    ):
-        low_bit = bits & -bits
-        codes |= np.where(distance >= -_SIDE_SLACK, low_bit, 0).astype(np.uint8)
-        codes |= np.where(distance <= _SIDE_SLACK, low_bit << 1, 0).astype(np.uint8)
+    codes = np.empty(rows.shape[1], dtype=np.uint8)
+
+    def code(block: slice) -> None:
+        x, y, z = rows[:, block]
+        out = codes[block]
+        out[:] = 0
+        bit = np.empty(x.shape, dtype=bool)
+        for distance, bits in (
+            (x, _X_BITS),
+            (cos_rho * z - sin_rho * y, _NORTH_BITS),
+            (cos_rho * z + sin_rho * y, _SOUTH_BITS),
+        ):
+            low_bit = np.uint8(bits & -bits)
+            np.greater_equal(distance, -_SIDE_SLACK, out=bit)
+            out |= bit.view(np.uint8) * low_bit
+            np.less_equal(distance, _SIDE_SLACK, out=bit)
+            out |= bit.view(np.uint8) * (low_bit << np.uint8(1))
+
+    map_blocks(code, len(codes), threads)
     return codes
 
 

@@ -13,7 +13,6 @@ from .chart import Chart
 from .faces import measure_faces
 from .frames import Frame
 from .metrics import Distortion, distortion
-from .parallel import run_all
 from .validation import RegionValidation, validate
 
 
@@ -73,7 +72,7 @@ def flatten_region(
     used = np.zeros(len(vertices), dtype=bool)
     used[faces.ravel()] = True
     vertex_ids = np.flatnonzero(used)
-    position = np.empty(len(vertices), dtype=np.int64)
+    position = np.empty(len(vertices), dtype=faces.dtype)  # int32 where the ids fit
     position[vertex_ids] = np.arange(len(vertex_ids))
     compact = position[faces]
     local = frame.to_local(vertices[vertex_ids])
@@ -108,14 +107,12 @@ def assess_region(
     theta, phi : (n,) float, the vertices' coordinates from the chart
     cap : PoleCap, the chart's cap
     winding : +1 or -1 to fix which way normals point (see :func:`.validation.validate`)
-    threads : int, threads to share the work (validation and metrics also run side by side)
+    threads : int, threads to share the work
 
     Returns
     -------
     (RegionValidation, Distortion)
     """
     measures = measure_faces(vertices_local, faces, theta, phi, cap, threads)
-    validation, metrics = run_all(
-        [lambda: validate(measures, winding, threads), lambda: distortion(measures)], threads
-    )
-    return validation, metrics
+    # One after the other: side by side on two threads they only compete for memory.
+    return validate(measures, winding, threads), distortion(measures)

@@ -49,7 +49,12 @@ class RegionEdges:
 _COUNT_BITS = 32
 _COUNT_MASK = (1 << _COUNT_BITS) - 1
 _SMOOTH = 2 + (4 << _COUNT_BITS)
-_VALUE_OF_SIDE_PLUS_ONE = np.array([1 + (k * k << _COUNT_BITS) for k in range(3)], dtype=np.int64)
+_VALUE_OF_SIDE_PLUS_ONE = [1 + (k * k << _COUNT_BITS) for k in range(3)]
+#: The value by ``3 * backwards + orientation + 1``, where ``backwards`` is 1 when the
+#: half-edge runs from the higher to the lower index (its side is then minus the orientation).
+_VALUE_OF_BACKWARDS_AND_ORIENTATION = np.array(
+    _VALUE_OF_SIDE_PLUS_ONE + _VALUE_OF_SIDE_PLUS_ONE[::-1], dtype=np.int64
+)
 
 
 def region_edges(
@@ -80,27 +85,29 @@ def region_edges(
     """
     m = len(faces)
     index = np.int32 if n_vertices < 2**31 else np.int64  # what scipy would convert to
-    heads = faces.ravel()
-    tails = np.empty_like(heads)  # the other end of each half-edge: the next corner
-    tails[:-1] = heads[1:]
-    tails[2::3] = heads[::3]
-    turn = np.repeat(orientation, 3)
     low = np.empty(3 * m, dtype=index)
     high = np.empty(3 * m, dtype=index)
     value = np.empty(3 * m, dtype=np.int64)
 
-    def half_edges(block: slice) -> None:
-        h, t = heads[block], tails[block]
-        np.minimum(h, t, out=low[block], casting="unsafe")
-        np.maximum(h, t, out=high[block], casting="unsafe")
-        side_plus_one = turn[block] * (1 - 2 * (h > t).view(np.int8))  # int8: -1, 0, 1
-        side_plus_one += 1
-        np.take(_VALUE_OF_SIDE_PLUS_ONE, side_plus_one, out=value[block])
+    def half_edges(block: slice) -> bool:
+        heads = faces[block].ravel()
+        tails = np.empty_like(heads)  # the other end of each half-edge: the next corner
+        tails[:-1] = heads[1:]
+        tails[2::3] = heads[::3]
+        rows = slice(3 * block.start, 3 * block.stop)
+        np.minimum(heads, tails, out=low[rows], casting="unsafe")
+        np.maximum(heads, tails, out=high[rows], casting="unsafe")
+        # side + 1 = orientation + 1, or 1 - orientation when the edge runs downwards.
+        backwards = (heads > tails).view(np.int8)
+        backwards *= 3
+        backwards += np.repeat(orientation[block] + 1, 3)
+        np.take(_VALUE_OF_BACKWARDS_AND_ORIENTATION, backwards, out=value[rows])
+        return bool((heads == tails).any())  # a face repeating a vertex
 
-    map_blocks(half_edges, 3 * m, threads)
-    loops = low == high  # an edge from a vertex to itself (a face repeating a vertex)
-    if loops.any():
-        low, high, value = low[~loops], high[~loops], value[~loops]
+    loops = any(map_blocks(half_edges, m, threads))
+    if loops:  # an edge from a vertex to itself is no edge
+        keep = low != high
+        low, high, value = low[keep], high[keep], value[keep]
     sums = csr_matrix((value, (low, high)), shape=(n_vertices, n_vertices))
     outline = np.flatnonzero(sums.data != _SMOOTH)
     boundary = outline[(sums.data[outline] & _COUNT_MASK) == 1]

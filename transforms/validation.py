@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .arrays import unit_rows
+from .arrays import blocks, unit_rows
 from .chart import LAYOUT_ORIENTATION
 from .errors import TransformInputError
 from .faces import FaceMeasures
@@ -193,15 +193,25 @@ def _faces_meeting_seam(measures: FaceMeasures) -> np.ndarray:
         # With h = sqrt(x^2 + z^2) and a the angle from +Y: r sin|a - rho| = |h cos rho -
         # y sin rho| and r cos(a - rho) = y cos rho + h sin rho. "|a - rho| <= asin(L / r)"
         # is then "|h cos rho - y sin rho| <= L, cos(a - rho) >= 0" (no trigonometry).
+        # The touch tolerance is an angle: at most _SEAM_TOUCH * r, and r < 2 in scaled units.
         x, y, z = rows[:, vertex_ids]
-        h = np.sqrt(x * x + z * z)
-        reach = longest * (1.0 + 1e-9) + _SEAM_TOUCH * np.sqrt(h * h + y * y)
-        close = np.abs(h * cos_rho - y * sin_rho) <= reach
-        close &= y * cos_rho + h * sin_rho >= -reach
+        reach = longest * (1.0 + 1e-9) + 2.0 * _SEAM_TOUCH
+        h = x * x
+        h += z * z
+        np.sqrt(h, out=h)
+        off_circle = h * cos_rho
+        off_circle -= y * sin_rho
+        close = np.abs(off_circle, out=off_circle) <= reach
+        ahead = y * cos_rho
+        ahead += h * sin_rho
+        close &= ahead >= -reach
         close &= x <= reach
         return close
 
-    vertex_near = np.take(near(slice(None), measures.edge_bound), faces.ravel())
+    vertex_near = np.empty(rows.shape[1], dtype=bool)
+    for block in blocks(len(vertex_near)):  # temporaries that stay in cache
+        vertex_near[block] = near(block, measures.edge_bound)
+    vertex_near = np.take(vertex_near, faces.ravel())
     corner_near = vertex_near.reshape(-1, 3)
     candidates = corner_near[:, 0] | corner_near[:, 1] | corner_near[:, 2]
     candidates &= ~measures.crosses_seam

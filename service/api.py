@@ -13,13 +13,23 @@ from starlette.concurrency import run_in_threadpool
 from starlette.requests import ClientDisconnect
 from starlette.responses import Response
 
-from transforms import TransformInputError, angles_to_world, flatten_region, world_to_angles
+from transforms import (
+    PoleCap,
+    TransformInputError,
+    angles_to_world,
+    fit_region,
+    flatten_region,
+    world_to_angles,
+)
 
 from .encoding import Timings, json_response
 from .meshio import Mesh, MeshFormatError, format_of, read_mesh
 from .multipart import parse_form
 from .params import (
+    DEFAULT_SIGMA,
     MESH_PARAMS_EXAMPLE,
+    AutoPole,
+    FitParams,
     InverseRequest,
     MeshParams,
     PointsRequest,
@@ -29,10 +39,11 @@ from .params import (
     region_faces,
     resolved,
 )
-from .problems import Problem, from_mesh_error, validation_problem
+from .problems import Problem, from_mesh_error, from_transform_error, validation_problem
 from .samples import SAMPLES
 from .schemas import (
     PROBLEMS,
+    FitResponse,
     FlattenResponse,
     Health,
     InverseResponse,
@@ -328,6 +339,28 @@ async def validate(request: Request) -> Response:
     return await run_job(request, validate_answer)
 
 
+@router.post(
+    "/v1/fit",
+    tags=["meshes"],
+    summary="Choose the centre, rotation and sigma for a region",
+    response_model=FitResponse,
+    responses=PROBLEMS,
+    openapi_extra=MULTIPART_BODY,
+    description="The same input as /v1/flatten, but centre, rotation and sigma not given are "
+    'chosen ("auto"); any of them may be fixed. They are chosen together to minimise the '
+    "region's area-weighted isometric energy, keeping the centre inside the region's kernel "
+    "at a depth of at least min_kernel_depth of its inscribed radius and the margin to the "
+    "seam and the singular points at least min_margin_deg. The search starts from the "
+    "kernel's deepest point (a linear program), the middle of the largest cap free of region "
+    "directions as the pole, the roll along the region's widest spread about the pole (or "
+    "the up hint), and the best sigma with that cap; then refines the free ones together on "
+    "an area-weighted sample of the triangles. Answers the resolved parameters, the "
+    "validation and metrics they give on every triangle, and `explain`.\n" + MESH_RULES,
+)
+async def fit(request: Request) -> Response:
+    return await run_job(request, fit_answer)
+
+
 def flatten_answer(body: bytes, content_type: str, settings: Settings) -> Response:
     """The /v1/flatten answer to a multipart body (CPU-bound: run it off the event loop)."""
     return _mesh_answer(body, content_type, settings, full=True)
@@ -338,11 +371,22 @@ def validate_answer(body: bytes, content_type: str, settings: Settings) -> Respo
     return _mesh_answer(body, content_type, settings, full=False)
 
 
-def _mesh_answer(body: bytes, content_type: str, settings: Settings, full: bool) -> Response:
+def fit_answer(body: bytes, content_type: str, settings: Settings) -> Response:
+    """The /v1/fit answer to a multipart body (CPU-bound: run it off the event loop)."""
+    return _mesh_answer(body, content_type, settings, full=False, model=FitParams)
+
+
+def _mesh_answer(
+    body: bytes,
+    content_type: str,
+    settings: Settings,
+    full: bool,
+    model: type[MeshParams] = MeshParams,
+) -> Response:
     timings = Timings()
     with timings.measure("parse"):
         form = parse_form(body, content_type)
-        params = _mesh_params(form)
+        params = _mesh_params(form, model)
         if "mesh" not in form:
             raise Problem(422, "mesh: the form has no 'mesh' file field", "invalid-request", "mesh")
         part = form["mesh"]
@@ -356,25 +400,48 @@ def _mesh_answer(body: bytes, content_type: str, settings: Settings, full: bool)
     return json_response(payload, timings)
 
 
-def _mesh_params(form) -> MeshParams:
+def _mesh_params(form, model: type[MeshParams]) -> MeshParams:
     if "params" not in form:
-        return MeshParams()
-    return parse_json(MeshParams, bytes(form["params"].data), "application/json", "params")
+        return model()
+    return parse_json(model, bytes(form["params"].data), "application/json", "params")
+
+
+#: Core errors about these inputs are the parameters' fault; any other is the file's.
+_PARAMETER_FIELDS = {"center", "up", "pole", "rotation", "sigma", "min_kernel_depth"}
+
+
+def _mesh_error(error: TransformInputError) -> Problem:
+    if error.field in _PARAMETER_FIELDS | {"min_margin_deg"}:
+        return from_transform_error(error, "params.")
+    return Problem(422, f"mesh: {error.message}", "invalid-input", "mesh", error.indices)
 
 
 def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: bool) -> dict:
-    chart = checked(lambda: chart_of(params))
+    fitting = isinstance(params, FitParams) or params.auto
     faces, center = region_faces(mesh, params)
-    frame = checked(lambda: frame_of(params, center))
-    try:
-        flat = flatten_region(
-            mesh.vertices, mesh.faces[faces], frame, chart, threads=settings.threads
-        )
-    except TransformInputError as error:
-        # The parameters were checked above: what is left is about the file's vertices.
-        raise Problem(
-            422, f"mesh: {error.message}", "invalid-input", "mesh", error.indices
-        ) from None
+    explain = None
+    if fitting:
+        try:
+            fit = fit_region(
+                mesh.vertices,
+                mesh.faces[faces],
+                threads=settings.threads,
+                **_fit_arguments(params, center),
+            )
+        except TransformInputError as error:
+            raise _mesh_error(error) from None
+        flat, chart, frame = fit.region, fit.chart, fit.frame
+        explain = _explain(fit.explanation, faces) if isinstance(params, FitParams) else None
+    else:
+        chart = checked(lambda: chart_of(params))
+        frame = checked(lambda: frame_of(params, center))
+        try:
+            flat = flatten_region(
+                mesh.vertices, mesh.faces[faces], frame, chart, threads=settings.threads
+            )
+        except TransformInputError as error:
+            # The parameters were checked above: what is left is about the file's vertices.
+            raise _mesh_error(error) from None
     v = flat.validation
     face_ids = lambda positions: faces[positions]  # noqa: E731 - positions -> file ids
     d = flat.distortion
@@ -405,6 +472,8 @@ def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: b
             )
         },
     }
+    if explain is not None:
+        payload["explain"] = explain
     if full:
         payload["vertices"] = {
             "ids": flat.vertex_ids,
@@ -414,3 +483,52 @@ def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: b
         }
         payload["faces"] = {"ids": faces, "vertices": mesh.faces[faces]}
     return payload
+
+
+def _fit_arguments(params: MeshParams, center) -> dict:
+    """What :func:`transforms.fit_region` is given: the fixed parameters, None for the
+    chosen ones (in /v1/fit, also those not given)."""
+    fitting_all = isinstance(params, FitParams)
+    choose_center = params.center == "auto"
+    rotation, up = params.rotation, None
+    if rotation == "auto" or (fitting_all and rotation is None):
+        rotation = None
+    elif isinstance(rotation, AutoPole):
+        rotation, up = None, rotation.up
+    else:
+        rotation = checked(lambda: frame_of(params, np.zeros(3)))
+    sigma = params.sigma
+    if params.pole_angle_deg is not None and sigma is None:
+        sigma = checked(lambda: PoleCap.from_rho_deg(params.pole_angle_deg).sigma)
+    elif sigma == "auto" or (sigma is None and fitting_all):
+        sigma = None
+    elif sigma is None and params.method != "standard":
+        sigma = DEFAULT_SIGMA
+    return {
+        "method": params.method,
+        "center": None if choose_center else center,
+        "rotation": rotation,
+        "up": up,
+        "sigma": sigma,
+        "min_kernel_depth": params.min_kernel_depth,
+        "min_margin_deg": params.min_margin_deg,
+    }
+
+
+def _explain(explanation, faces: np.ndarray) -> dict:
+    """The ``explain`` block of /v1/fit."""
+    e = explanation
+    return {
+        "energy_start": e.energy_start,
+        "energy_end": e.energy_end,
+        "kernel_inscribed_radius": e.kernel_inscribed_radius,
+        "kernel_empty": e.kernel_empty,
+        "center_depth": e.center_depth,
+        "empty_cap_deg": e.empty_cap_deg,
+        "margin_deg": e.margin_deg,
+        "energy_at_sigma": [
+            {"sigma": sigma, "energy": energy} for sigma, energy in e.energy_at_sigma.items()
+        ],
+        "backfacing_faces": faces[e.backfacing_faces],
+        "notes": list(e.notes),
+    }

@@ -15,6 +15,7 @@ from .meshio import Mesh
 from .problems import Problem, from_transform_error
 
 Number = Annotated[float, Field(allow_inf_nan=False)]
+PositiveNumber = Annotated[float, Field(allow_inf_nan=False, gt=0)]
 Vector3 = Annotated[list[Number], Field(min_length=3, max_length=3)]
 Matrix3 = Annotated[list[Vector3], Field(min_length=3, max_length=3)]
 
@@ -60,10 +61,15 @@ class ChartParams(_Strict):
     @model_validator(mode="after")
     def _one_cap(self) -> ChartParams:
         if self.sigma is not None and self.pole_angle_deg is not None:
-            raise ValueError(
-                "sigma, pole_angle_deg: give one, not both (they set the same cap, "
-                "rho = 2 atan(sigma))"
+            # Both, as an answer's params hold them, are fine when they name the same cap.
+            agree = isinstance(self.sigma, float) and math.isclose(
+                math.degrees(2.0 * math.atan(self.sigma)), self.pole_angle_deg, rel_tol=1e-9
             )
+            if not agree:
+                raise ValueError(
+                    "sigma, pole_angle_deg: give one, not both, or two that agree (they set "
+                    "the same cap, rho = 2 atan(sigma))"
+                )
         if self.method == "standard" and (
             self.sigma is not None or self.pole_angle_deg is not None
         ):
@@ -172,13 +178,59 @@ MESH_PARAMS_EXAMPLE = {
 }
 
 
-class MeshParams(ChartParams):
-    """The JSON of the ``params`` field of /v1/flatten and /v1/validate."""
+class AutoPole(_Strict):
+    """The pole chosen by meshflat, the roll following a hint."""
 
-    center: Vector3 | Literal["centroid", "bbox_center"] = Field(
+    pole: Literal["auto"] = Field(description="Choose the pole (see /v1/fit).")
+    up: Vector3 | None = Field(
+        None,
+        description="World direction whose part orthogonal to the chosen pole becomes local "
+        "+Z. Default: the direction in which the region spreads most about the pole.",
+    )
+
+
+AUTO_DESCRIPTION = (
+    '"auto": chosen with the others to minimise the region\'s isometric energy within the '
+    "bounds min_kernel_depth and min_margin_deg (see /v1/fit)."
+)
+
+
+class MeshParams(ChartParams):
+    """The JSON of the ``params`` field of /v1/flatten, /v1/validate and /v1/fit."""
+
+    center: Vector3 | Literal["centroid", "bbox_center", "auto"] = Field(
         "bbox_center",
         description="The centre: world point, or the area-weighted centroid or bounding-box "
-        "centre of the region (of the whole mesh when the region is a cone).",
+        "centre of the region (of the whole mesh when the region is a cone), or "
+        + AUTO_DESCRIPTION
+        + " A cone region is then selected around the mesh's bounding-box centre.",
+    )
+    sigma: PositiveNumber | Literal["auto"] | None = Field(
+        None,
+        description="Warp parameter (> 0); the cap's angle is 2 atan(sigma). Default 0.3, or "
+        + AUTO_DESCRIPTION
+        + " At most one of sigma and pole_angle_deg; standard takes neither.",
+    )
+    rotation: Matrix3 | PoleUp | AutoPole | Literal["auto"] | None = Field(
+        None,
+        description="World-to-local rotation: a 3x3 matrix (rows), {pole, up}, "
+        '{"pole": "auto", "up": [x, y, z]} (the roll follows up), or '
+        + AUTO_DESCRIPTION
+        + " Default: identity.",
+    )
+    min_kernel_depth: Number = Field(
+        0.05,
+        ge=0,
+        le=1,
+        description="For auto: how deep the centre stays inside the region's kernel, as a "
+        "fraction of the kernel's inscribed radius.",
+    )
+    min_margin_deg: Number = Field(
+        2.0,
+        ge=0,
+        lt=90,
+        description="For auto: the least margin, in degrees, from the region to the seam and "
+        "the singular points.",
     )
     region: Region | None = Field(None, description="Which faces; null: the whole mesh.")
     format: Literal["obj", "gltf", "glb", "ply", "stl"] | None = Field(
@@ -186,6 +238,32 @@ class MeshParams(ChartParams):
     )
 
     model_config = ConfigDict(json_schema_extra={"examples": [MESH_PARAMS_EXAMPLE]})
+
+    @property
+    def auto(self) -> bool:
+        """Whether meshflat chooses any of centre, rotation and sigma."""
+        return (
+            self.center == "auto"
+            or self.sigma == "auto"
+            or self.rotation == "auto"
+            or isinstance(self.rotation, AutoPole)
+        )
+
+
+class FitParams(MeshParams):
+    """The JSON of the ``params`` field of /v1/fit: as for /v1/flatten, but centre, rotation
+    and sigma not given are chosen ("auto")."""
+
+    center: Vector3 | Literal["centroid", "bbox_center", "auto"] = Field(
+        "auto", description=MeshParams.model_fields["center"].description
+    )
+    rotation: Matrix3 | PoleUp | AutoPole | Literal["auto"] | None = Field(
+        "auto", description=MeshParams.model_fields["rotation"].description
+    )
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{"region": MESH_PARAMS_EXAMPLE["region"]}]}
+    )
 
 
 # -- resolution ------------------------------------------------------------------------
@@ -195,7 +273,7 @@ def chart_of(params: ChartParams) -> Chart:
     """The chart the parameters name (sigma 0.3 when neither sigma nor a pole angle is set)."""
     if params.method == "standard":
         return Chart.standard()
-    if params.pole_angle_deg is not None:
+    if params.pole_angle_deg is not None and params.sigma is None:
         cap = PoleCap.from_rho_deg(params.pole_angle_deg)
     else:
         cap = PoleCap.from_sigma(DEFAULT_SIGMA if params.sigma is None else params.sigma)
@@ -307,7 +385,7 @@ def _center(mesh: Mesh, faces: np.ndarray, center) -> np.ndarray:
     """A world point, or the area-weighted centroid or bounding-box centre of ``faces``."""
     if not isinstance(center, str):
         return np.asarray(center, dtype=np.float64)
-    if center == "bbox_center":
+    if center in ("bbox_center", "auto"):  # auto: a cone is selected around this one
         used = np.zeros(len(mesh.vertices), dtype=bool)
         used[mesh.faces[faces].ravel()] = True
         points = mesh.vertices[used]

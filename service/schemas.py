@@ -81,6 +81,46 @@ class ValidateResponse(BaseModel):
     metrics: Metrics
 
 
+class SigmaEnergy(BaseModel):
+    sigma: float
+    energy: float = Field(description="Isometric energy with the chosen centre and rotation.")
+
+
+class Explain(BaseModel):
+    energy_start: float = Field(
+        description="Area-weighted isometric energy of the starting choice (the kernel's "
+        "deepest point, the empty cap's pole, the best sigma for it)."
+    )
+    energy_end: float = Field(description="The same for the answer.")
+    kernel_inscribed_radius: float = Field(
+        description="Radius of the largest ball inside the region's kernel, closed over its "
+        "holes (0: the kernel is empty)."
+    )
+    kernel_empty: bool = Field(
+        description="No point sees every triangle from the front (scan noise, overhangs): the "
+        "centre then leaves the least back-facing area found."
+    )
+    center_depth: float = Field(
+        description="Distance from the centre to the nearest triangle plane; negative: "
+        "outside the kernel."
+    )
+    empty_cap_deg: float = Field(
+        description="Angular radius of the cap around the pole that holds no region vertex, "
+        "seen from the centre."
+    )
+    margin_deg: float = Field(description="The margin achieved to seam and singular points.")
+    energy_at_sigma: list[SigmaEnergy] = Field(description="The energy at sigma 0.3 and 1.")
+    backfacing_faces: list[int] = Field(description="Triangles seen from behind, if any.")
+    notes: list[str] = Field(description="What the fit could not do, in words.")
+
+
+class FitResponse(BaseModel):
+    params: ResolvedParams
+    validation: Validation
+    metrics: Metrics
+    explain: Explain
+
+
 class PointsResponse(BaseModel):
     theta: list[float] = Field(description="Polar angles, radians, in [0, pi].")
     phi: list[float] = Field(description="Azimuths, radians, in (-pi, pi].")

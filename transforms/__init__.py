@@ -1,6 +1,7 @@
 """meshflat's transform core: distorted-pole spherical coordinates over numpy arrays.
 
-Pure numpy (and scipy's sparse graphs); no web or file I/O. Every formula follows
+Pure numpy (and scipy's sparse graphs, linear programs, hulls and minimisers); no web or
+file I/O. Every formula follows
 ``shared/spec/MATH.md``: ``theta`` is the polar angle from local ``+Z``, ``phi`` the azimuth
 from ``+X`` towards ``+Y``, in the local frame ``q = R (p - c)``.
 
@@ -18,6 +19,7 @@ from .cap import RHO_MAX, RHO_MIN, SIGMA_MAX, SIGMA_MIN, PoleCap, check_rho, che
 from .chart import LAYOUT_ORIENTATION, Chart, Method, angles_to_world, world_to_angles
 from .errors import TransformInputError
 from .faces import DEGENERATE_RTOL, FaceMeasures, measure_faces
+from .fit import Fit, FitExplanation, fit_region
 from .frames import Frame, check_rotation
 from .margins import arcs_to_point, arcs_to_seam
 from .metrics import (
@@ -48,6 +50,8 @@ __all__ = [
     "Distortion",
     "FaceDistortion",
     "FaceMeasures",
+    "Fit",
+    "FitExplanation",
     "FlatRegion",
     "Frame",
     "Method",
@@ -68,6 +72,7 @@ __all__ = [
     "distorted_inverse",
     "distortion",
     "face_distortion",
+    "fit_region",
     "flatten_region",
     "measure_faces",
     "orient3d_sign",

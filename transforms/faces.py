@@ -245,9 +245,13 @@ def _norm2(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 #: Bits of a vertex's side code: for the plane x = 0 and, for each singular point s, the
 #: plane through the centre holding s and the x axis, whether the vertex is on the
 #: non-negative and on the non-positive side (both when within _SIDE_SLACK of the plane).
-_X_BITS = 0b000011
-_NORTH_BITS = 0b001100
-_SOUTH_BITS = 0b110000
+_X_BITS = 0b00000011
+_NORTH_BITS = 0b00001100
+_SOUTH_BITS = 0b00110000
+#: Whether the vertex is not behind the plane through the centre orthogonal to the north
+#: (south) singular point: a triangle with every corner behind it cannot meet the ray.
+_AHEAD_NORTH_BIT = 0b01000000
+_AHEAD_SOUTH_BIT = 0b10000000
 #: Far above the rounding of a plane distance (~1e-15 for coordinates below 1).
 _SIDE_SLACK = 1e-13
 
@@ -258,8 +262,9 @@ def _sides_of_singular_lines(rows: np.ndarray, cap: PoleCap, threads: int = 1) -
 
     Both singular points ``(0, cos rho, +-sin rho)`` lie in the plane ``x = 0``; the second
     plane for each has normal ``x_axis x s = (0, -+sin rho, cos rho)``. A triangle all on one
-    side of a plane through a line cannot meet that line, so only faces whose corners' codes
-    cover both sides of both planes need the exact test.
+    side of a plane through a line cannot meet that line, and one with every corner behind
+    the centre (``s . v < 0``) cannot meet the ray, so only faces whose corners' codes cover
+    both sides of both planes and have a corner ahead need the exact test.
     """
     _, cos_rho, sin_rho = cap.north
     codes = np.empty(rows.shape[1], dtype=np.uint8)
@@ -279,6 +284,12 @@ def _sides_of_singular_lines(rows: np.ndarray, cap: PoleCap, threads: int = 1) -
             out |= bit.view(np.uint8) * low_bit
             np.less_equal(distance, _SIDE_SLACK, out=bit)
             out |= bit.view(np.uint8) * (low_bit << np.uint8(1))
+        for along, ahead_bit in (
+            (cos_rho * y + sin_rho * z, _AHEAD_NORTH_BIT),
+            (cos_rho * y - sin_rho * z, _AHEAD_SOUTH_BIT),
+        ):
+            np.greater_equal(along, -_SIDE_SLACK, out=bit)
+            out |= bit.view(np.uint8) * np.uint8(ahead_bit)
 
     map_blocks(code, len(codes), threads)
     return codes
@@ -290,8 +301,9 @@ def _contains_singular_points(
     """Whether the ray from the centre through each singular point meets each closed triangle
     (MATH.md: "contains a singular point").
 
-    Only faces whose corners lie on both sides of both planes through the singular line (see
-    :func:`_sides_of_singular_lines`) can; for them, with ``e_ij = det[s, c_i, c_j]`` over the
+    Only faces whose corners lie on both sides of both planes through the singular line and
+    not all behind the centre as seen along the ray (see :func:`_sides_of_singular_lines`)
+    can; for them, with ``e_ij = det[s, c_i, c_j]`` over the
     three edges and ``d = det[c0, c1, c2]``, all exact, the ray along ``s`` hits when all
     ``e_ij >= 0`` and ``d > 0``, or all ``e_ij <= 0`` and ``d < 0`` (their sum is ``s . n``;
     the hit is at ``t = d / (s . n) > 0``). When ``d = 0`` the plane of the triangle holds the
@@ -299,7 +311,10 @@ def _contains_singular_points(
     """
     pairs = ((0, 1), (1, 2), (2, 0))
     for point, hit, bits in zip(
-        singular, (north_out, south_out), (_NORTH_BITS, _SOUTH_BITS), strict=True
+        singular,
+        (north_out, south_out),
+        (_NORTH_BITS | _AHEAD_NORTH_BIT, _SOUTH_BITS | _AHEAD_SOUTH_BIT),
+        strict=True,
     ):
         hit[:] = False
         both = _X_BITS | bits

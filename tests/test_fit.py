@@ -1,0 +1,202 @@
+"""Choosing centre, rotation and sigma: the core (transforms.fit) and /v1/fit."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from service.samples import SAMPLES
+from transforms import Chart, Frame, PoleCap, fit_region, flatten_region
+from transforms.emptycap import largest_empty_cap
+from transforms.kernel import chebyshev_center, kernel_planes
+
+from .conftest import load_sample, sphere_mesh
+
+#: Which way the top of each head points in its file.
+TOP = {"fsaverage-head.ply": 2, "lee-perry-smith.obj": 1}
+
+
+def scalp(name: str = "fsaverage-head.ply", half_angle_deg: float = 70.86):
+    """The sample and its scalp: faces within ``half_angle_deg`` of the top, from the box
+    centre."""
+    vertices, faces = load_sample(name)
+    centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    directions = vertices[faces].mean(axis=1) - centre
+    cosine = directions[:, TOP[name]] / np.linalg.norm(directions, axis=1)
+    return vertices, faces[cosine >= math.cos(math.radians(half_angle_deg))]
+
+
+@pytest.fixture(scope="module")
+def fsaverage_fit():
+    vertices, faces = scalp()
+    return vertices, faces, fit_region(vertices, faces)
+
+
+# -- the parts -----------------------------------------------------------------------------
+
+
+def test_chebyshev_centre_of_a_closed_sphere_is_its_centre():
+    vertices, faces = sphere_mesh(24, 48)
+    kernel = chebyshev_center(kernel_planes(vertices + np.array([3.0, -2.0, 1.0]), faces))
+    assert not kernel.empty
+    np.testing.assert_allclose(kernel.center, [3.0, -2.0, 1.0], atol=1e-9)
+    # The inscribed ball touches the facets: a little less than the unit radius.
+    assert 0.98 < kernel.inscribed_radius < 1.0
+
+
+def test_an_open_cap_is_closed_over_its_hole():
+    # The upper half of a sphere faces every point below it: the hole's plane bounds it.
+    vertices, faces = sphere_mesh(24, 48)
+    upper = faces[vertices[faces].mean(axis=1)[:, 2] > 0.0]
+    kernel = chebyshev_center(kernel_planes(vertices, upper))
+    assert not kernel.empty and 0.0 < kernel.center[2] < 0.6
+    assert kernel.inscribed_radius > 0.4
+
+
+def test_largest_empty_cap_finds_the_hole():
+    vertices, _ = sphere_mesh(24, 48)
+    directions = vertices[vertices[:, 2] < math.cos(math.radians(50.0))]  # no point near +Z
+    pole, radius = largest_empty_cap(directions)
+    np.testing.assert_allclose(pole, [0.0, 0.0, 1.0], atol=1e-9)
+    assert math.degrees(radius) >= 50.0
+
+
+# -- the fit ---------------------------------------------------------------------------------
+
+
+def test_auto_scalp_is_seam_free_and_star_shaped_with_the_margin(fsaverage_fit):
+    _, _, fit = fsaverage_fit
+    v, e = fit.region.validation, fit.explanation
+    assert v.seam_free and v.star_shaped
+    assert min(v.margin_deg_seam, v.margin_deg_north, v.margin_deg_south) >= 2.0
+    assert e.margin_deg >= 2.0 and not e.kernel_empty and not e.notes
+    assert e.energy_end <= e.energy_start
+    assert e.center_depth >= 0.05 * e.kernel_inscribed_radius
+    # The optimum of MATH.md's "Distortion": better than either reported sigma.
+    assert all(e.energy_end <= energy + 1e-9 for energy in e.energy_at_sigma.values())
+    assert fit.region.distortion.isometric.mean == pytest.approx(e.energy_end)
+
+
+@pytest.mark.parametrize("name", ["fsaverage-head.ply", "lee-perry-smith.obj"])
+def test_the_choice_turns_and_moves_with_the_mesh(name):
+    vertices, faces = scalp(name, 60.0)
+    up = np.array([0.3, 1.0, 0.2])
+    base = fit_region(vertices, faces, rotation=None, up=up)
+    for seed in range(2):
+        turn = Rotation.random(random_state=seed).as_matrix()
+        shift = np.random.default_rng(seed).normal(size=3) * 50.0
+        moved = fit_region(vertices @ turn.T + shift, faces, up=turn @ up)
+        np.testing.assert_allclose(moved.region.theta, base.region.theta, atol=1e-6, rtol=0)
+        np.testing.assert_allclose(moved.region.phi, base.region.phi, atol=1e-6, rtol=0)
+        np.testing.assert_allclose(moved.frame.center, turn @ base.frame.center + shift, atol=1e-6)
+
+
+def test_fixed_parameters_are_kept(fsaverage_fit):
+    vertices, faces, fit = fsaverage_fit
+    frame = Frame.from_pole_up([0, 0, -1], [0, 1, 0])
+    kept = fit_region(vertices, faces, center=fit.frame.center, rotation=frame, sigma=0.4)
+    assert kept.chart.cap.sigma == 0.4
+    np.testing.assert_array_equal(kept.frame.rotation, frame.rotation)
+    np.testing.assert_array_equal(kept.frame.center, fit.frame.center)
+    # Only sigma chosen: the answer is the best sigma for that centre and rotation.
+    only_sigma = fit_region(vertices, faces, center=fit.frame.center, rotation=frame)
+    energy = only_sigma.explanation.energy_end
+    for sigma in (0.2, 0.4, 0.8):
+        chart = Chart.distorted(PoleCap.from_sigma(sigma))
+        moved = Frame.from_matrix(frame.rotation, fit.frame.center)
+        other = flatten_region(vertices, faces, moved, chart).distortion.isometric.mean
+        assert energy <= other + 1e-3
+
+
+def test_an_empty_kernel_is_said_and_its_backfacing_faces_listed():
+    vertices, faces = load_sample("nefertiti-lowres.obj")
+    fit = fit_region(vertices, faces)
+    e = fit.explanation
+    assert e.kernel_empty and e.kernel_inscribed_radius == 0.0
+    assert len(e.backfacing_faces) > 0
+    np.testing.assert_array_equal(e.backfacing_faces, fit.region.validation.backfacing_faces)
+    assert any("kernel is empty" in note for note in e.notes)
+
+
+def test_bad_bounds_are_refused():
+    vertices, faces = sphere_mesh(6, 8)
+    from transforms import TransformInputError
+
+    with pytest.raises(TransformInputError, match="min_margin_deg"):
+        fit_region(vertices, faces, min_margin_deg=95.0)
+    with pytest.raises(TransformInputError, match="min_kernel_depth"):
+        fit_region(vertices, faces, min_kernel_depth=float("nan"))
+    with pytest.raises(TransformInputError, match="sigma"):
+        fit_region(vertices, faces, method="standard", sigma=0.3)
+
+
+# -- /v1/fit and "auto" ------------------------------------------------------------------------
+
+SCALP_REGION = {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}
+
+
+async def post(client, endpoint, params, name="fsaverage-head.ply"):
+    data = SAMPLES[name].path.read_bytes()
+    fields = {"params": json.dumps(params)}
+    return await client.post(endpoint, files={"mesh": (name, data)}, data=fields)
+
+
+@pytest.mark.anyio
+async def test_fit_answers_params_that_flatten_reproduces(client):
+    answer = await post(client, "/v1/fit", {"region": SCALP_REGION})
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    explain = body["explain"]
+    assert body["validation"]["seam_free"] and body["validation"]["star_shaped"]
+    assert explain["margin_deg"] >= 2.0 and explain["energy_end"] <= explain["energy_start"]
+    assert [item["sigma"] for item in explain["energy_at_sigma"]] == [0.3, 1.0]
+    assert body["metrics"]["isometric"]["mean"] == pytest.approx(explain["energy_end"])
+    # The resolved params sent back to /v1/flatten give the same map. The cone is selected
+    # around the mesh's box centre, so send the region as the faces fit used.
+    flat = await post(client, "/v1/flatten", {"region": SCALP_REGION, "center": "auto"})
+    faces = flat.json()["faces"]["ids"]
+    again = await post(client, "/v1/validate", {**body["params"], "region": {"faces": faces}})
+    assert again.status_code == 200, again.text
+    for name, summary in body["metrics"].items():
+        assert again.json()["metrics"][name] == pytest.approx(summary, rel=1e-9)
+    assert again.json()["validation"]["margin_deg"] == pytest.approx(
+        body["validation"]["margin_deg"]
+    )
+
+
+@pytest.mark.anyio
+async def test_auto_in_flatten_and_an_up_hint(client):
+    params = {
+        "region": SCALP_REGION,
+        "center": "auto",
+        "sigma": "auto",
+        "rotation": {"pole": "auto", "up": [0, 1, 0]},
+    }
+    answer = await post(client, "/v1/flatten", params)
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    assert "explain" not in body and body["validation"]["seam_free"]
+    rotation = np.array(body["params"]["rotation"])
+    assert rotation[2] @ [0, 1, 0] > 0.9  # local +Z follows the hint
+
+
+@pytest.mark.anyio
+@pytest.mark.parametrize(
+    ("params", "field"),
+    [
+        ({"min_margin_deg": 95}, "params.min_margin_deg"),
+        ({"min_kernel_depth": -0.1}, "params.min_kernel_depth"),
+        ({"method": "standard", "sigma": "auto"}, "params"),
+        ({"sigma": "auto", "pole_angle_deg": 30}, "params"),
+        ({"rotation": {"pole": "auto", "up": [0, 0, 0]}}, "params.up"),
+        ({"rotation": {"pole": "automatic"}}, "params.rotation"),
+    ],
+)
+async def test_bad_fit_params_name_the_field(client, params, field):
+    answer = await post(client, "/v1/fit", {"region": SCALP_REGION, **params})
+    assert answer.status_code == 422, answer.text
+    assert answer.json()["field"].startswith(field), answer.json()

@@ -1,0 +1,506 @@
+"""Choosing the centre, the pole (with the roll about it) and sigma for a region: the three
+parameters the paper leaves to the user (MATH.md: "Where the singular points and the seam
+go" and "Distortion").
+
+The choice minimises the region's area-weighted isometric energy, subject to two bounds:
+
+* the centre stays inside the region's kernel (:mod:`.kernel`) at a depth of at least
+  ``min_kernel_depth`` times the kernel's inscribed radius;
+* the margin from the region to the seam and the singular points stays at least
+  ``min_margin_deg``.
+
+It starts from choices that can be explained one by one: the centre is the kernel's deepest
+point (its Chebyshev centre), the pole the middle of the largest cap that holds no region
+direction seen from there (:mod:`.emptycap`), the roll the rule of :func:`roll_axis`, sigma
+the best of a 1D search with the cap inside the empty cap; then it refines the free ones
+together (Nelder-Mead). The search works on an area-weighted sample of the faces
+(:mod:`.sampling`) in a frame built from the starting choice, so its path does not depend on
+how the mesh is posed; the answer is checked, and its energy and margins reported, on every
+face. Any of the three may be fixed by the caller.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import minimize
+
+from .arrays import as_faces, as_points, as_vector, unit_rows
+from .cap import PoleCap
+from .chart import Chart, Method
+from .emptycap import cap_radius, largest_empty_cap
+from .errors import TransformInputError
+from .faces import measure_faces
+from .frames import Frame
+from .kernel import Kernel, chebyshev_center, kernel_planes
+from .metrics import distortion
+from .region import FlatRegion, flatten_region
+from .sampling import area_sample
+
+#: Faces the search evaluates each candidate on, and vertices the pole's hull is built from.
+SAMPLE_FACES = 4000
+HULL_VERTICES = 20000
+#: Where sigma is searched (beyond these the warp squeezes the region to a point or a line).
+SIGMA_SEARCH = (1e-3, 10.0)
+#: Planes nearest the start whose depth the refinement watches (besides the sampled ones).
+_NEAR_PLANES = 4096
+#: How far from the region's middle the centre may go, in region sizes.
+_REACH = 3.0
+#: Centres tried along the pole before the refinement, in inscribed radii from the deepest point.
+_SLIDE = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)
+#: The sigma search: grid points in log sigma, golden-section steps after, and the relative
+#: difference of energies below which they count as equal.
+_SIGMA_GRID = 17
+_GOLDEN_STEPS = 14
+_TIE = 1e-9
+#: Sigmas whose energy the explanation reports.
+REPORTED_SIGMAS = (0.3, 1.0)
+
+
+@dataclass(frozen=True)
+class FitExplanation:
+    """Why the parameters are what they are.
+
+    Attributes
+    ----------
+    energy_start : float, area-weighted isometric energy of the starting choice (all faces)
+    energy_end : float, the same for the answer
+    kernel_inscribed_radius : float, radius of the largest ball in the kernel (0: empty)
+    kernel_empty : bool
+    center_depth : float, distance from the answer's centre to the nearest kernel plane
+        (negative: outside the kernel)
+    empty_cap_deg : float, angular radius of the cap around the answer's pole that holds no
+        region vertex, seen from the answer's centre
+    margin_deg : float, the answer's margin to the seam and the singular points
+    energy_at_sigma : dict of float to float, the energy at the sigmas of ``REPORTED_SIGMAS``
+        with the answer's centre and rotation (empty for the standard method)
+    backfacing_faces : (k,) int, region face positions seen from behind from the answer's
+        centre
+    notes : list of str, what the fit could not do, in words
+    """
+
+    energy_start: float
+    energy_end: float
+    kernel_inscribed_radius: float
+    kernel_empty: bool
+    center_depth: float
+    empty_cap_deg: float
+    margin_deg: float
+    energy_at_sigma: dict
+    backfacing_faces: np.ndarray
+    notes: list = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Fit:
+    """The chosen frame and chart, the region flattened with them, and the explanation."""
+
+    frame: Frame
+    chart: Chart
+    region: FlatRegion
+    explanation: FitExplanation
+
+
+def fit_region(
+    vertices,
+    faces,
+    method: str | Method = Method.DISTORTED,
+    center=None,
+    rotation: Frame | None = None,
+    up=None,
+    sigma: float | None = None,
+    min_kernel_depth: float = 0.05,
+    min_margin_deg: float = 2.0,
+    threads: int = 1,
+) -> Fit:
+    """Choose the parameters left as ``None`` and flatten the region with them.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float, world coordinates
+    faces : (m, 3) int, the region's faces
+    method : the chart's method; ``standard`` has no sigma
+    center : (3,) float or None (choose)
+    rotation : Frame or None (choose the pole and the roll); only its rotation is used
+    up : (3,) float or None, a world direction the roll follows when the rotation is chosen
+        (local ``+Z`` is its part orthogonal to the pole); None: :func:`roll_axis`
+    sigma : float or None (choose)
+    min_kernel_depth : float >= 0, fraction of the kernel's inscribed radius
+    min_margin_deg : float >= 0
+    threads : int
+
+    Returns
+    -------
+    Fit
+
+    Raises
+    ------
+    TransformInputError
+        Bad input (as :func:`.region.flatten_region`), or bounds out of range.
+    """
+    method = Method(method)
+    points = as_points(vertices, "vertices")
+    faces = as_faces(faces, len(points))
+    if len(faces) == 0:
+        raise TransformInputError("faces", "the region has no faces")
+    for name, value in (("min_kernel_depth", min_kernel_depth), ("min_margin_deg", min_margin_deg)):
+        if not (isinstance(value, (int, float)) and 0.0 <= value < math.inf):
+            raise TransformInputError(name, f"must be a finite number >= 0, got {value!r}")
+    if min_margin_deg >= 90.0:
+        raise TransformInputError("min_margin_deg", f"must be below 90, got {min_margin_deg}")
+    if sigma is not None and method is Method.STANDARD:
+        raise TransformInputError("sigma", "method 'standard' has no warp, so it takes no sigma")
+    choose_sigma = sigma is None and method is not Method.STANDARD
+    problem = _Problem(points, faces, method, threads)
+    notes: list[str] = []
+
+    kernel = chebyshev_center(problem.planes)
+    move_center = center is None and not kernel.empty
+    if center is None:
+        center = kernel.center
+        if kernel.empty:
+            notes.append(
+                "the region's kernel is empty (no point sees every triangle from the front): "
+                "the centre leaves the least back-facing area it could find, and those "
+                "triangles are listed"
+            )
+    else:
+        center = as_vector(center, "center")
+    min_depth = min_kernel_depth * kernel.inscribed_radius
+
+    directions = problem.directions(center)
+    if rotation is None:
+        hull_rows = np.linspace(0, len(directions) - 1, min(HULL_VERTICES, len(directions)))
+        pole, _ = largest_empty_cap(directions[hull_rows.astype(np.int64)])
+        up = roll_axis(directions, pole) if up is None else as_vector(up, "up")
+        start_rotation = Frame.from_pole_up(pole, up).rotation
+    else:
+        start_rotation = rotation.rotation
+        pole = start_rotation[1]
+    margin = math.radians(min_margin_deg)
+    room = cap_radius(directions, pole) - margin
+    if room <= 0.0:
+        # A closed region, or one with no opening wider than the margin: no cap fits, so the
+        # margin cannot be kept; sigma then only minimises the energy.
+        notes.append(
+            "no cap free of the region's directions is wider than min_margin_deg: the region "
+            "cannot be seam-free from this centre, and sigma minimises the energy alone"
+        )
+        margin = None
+
+    if choose_sigma:
+        sigma = problem.best_sigma(center, start_rotation, math.pi if margin is None else room)
+    start = initial = _Candidate(center, start_rotation, sigma)
+    if move_center:
+        # The energy has shallow local minima near the deepest point; look along the pole
+        # first, towards the hole (a centre nearer the opening sees the region flatter).
+        start = problem.slide_towards_pole(start, kernel, min_depth, margin, choose_sigma)
+
+    # Where the kernel is empty, faces seen from behind fold over in the layout and their
+    # energy swamps the rest: refining would chase them. Keep the explainable start.
+    free = [move_center, rotation is None, choose_sigma]
+    refine = any(free) and not kernel.empty
+    best = problem.refine(start, free, kernel, min_depth, margin) if refine else start
+
+    # On every face: the answer's margin must hold (the search saw vertices, not edges).
+    flat = problem.flatten(best)
+    margin_deg = _margin_deg(flat)
+    for _ in range(6):
+        if not (choose_sigma and margin is not None and margin_deg < min_margin_deg):
+            break
+        shortfall = math.radians(min_margin_deg - margin_deg) + 1e-3
+        rho = max(PoleCap.from_sigma(best.sigma).rho - shortfall, 1e-4)
+        smaller = _Candidate(best.center, best.rotation, math.tan(rho / 2.0))
+        tried = problem.flatten(smaller)
+        if not _margin_deg(tried) > margin_deg:
+            break  # the region covers the pole itself: a smaller cap does not help
+        best, flat, margin_deg = smaller, tried, _margin_deg(tried)
+    if margin is not None and margin_deg < min_margin_deg:
+        notes.append(
+            f"the margin to the seam and the singular points is {margin_deg:.3g} degrees, "
+            f"below min_margin_deg ({min_margin_deg:g})"
+        )
+    depth = problem.planes.depth(best.center)
+    if not kernel.empty and depth < min_depth:
+        notes.append(
+            f"the centre is {depth:.4g} deep in the kernel, less than min_kernel_depth "
+            f"({min_kernel_depth:g} of the inscribed radius {kernel.inscribed_radius:.4g})"
+        )
+
+    energy_start = problem.flatten(initial).distortion.isometric.mean if any(free) else None
+    energy_end = flat.distortion.isometric.mean
+    energy_at_sigma = {}
+    if method is not Method.STANDARD:
+        for reported in REPORTED_SIGMAS:
+            candidate = _Candidate(best.center, best.rotation, reported)
+            energy_at_sigma[reported] = problem.flatten(candidate).distortion.isometric.mean
+    frame = Frame.from_matrix(best.rotation, best.center)
+    explanation = FitExplanation(
+        energy_start=energy_end if energy_start is None else energy_start,
+        energy_end=energy_end,
+        kernel_inscribed_radius=kernel.inscribed_radius,
+        kernel_empty=kernel.empty,
+        center_depth=depth,
+        empty_cap_deg=math.degrees(cap_radius(problem.directions(best.center), best.rotation[1])),
+        margin_deg=margin_deg,
+        energy_at_sigma=energy_at_sigma,
+        backfacing_faces=flat.validation.backfacing_faces,
+        notes=notes,
+    )
+    return Fit(frame=frame, chart=problem.chart(best.sigma), region=flat, explanation=explanation)
+
+
+def roll_axis(directions: np.ndarray, pole: np.ndarray) -> np.ndarray:
+    """The default roll: local ``+Z`` along the direction in which the region spreads most
+    about the pole.
+
+    That is the principal axis of the directions' parts orthogonal to ``pole`` (the
+    eigenvector of their second moment with the largest eigenvalue), pointing to the side
+    with the larger third moment. Both moments turn with the data, so rotating the whole
+    input rotates the axis with it.
+
+    Parameters
+    ----------
+    directions : (k, 3) float, unit directions from the centre to the region's vertices
+    pole : (3,) float, unit
+
+    Returns
+    -------
+    (3,) float, unit, orthogonal to ``pole``
+    """
+    across = directions - np.outer(directions @ pole, pole)
+    _, vectors = np.linalg.eigh(across.T @ across)
+    axis = vectors[:, -1] - (vectors[:, -1] @ pole) * pole
+    axis /= np.linalg.norm(axis)
+    if float(((across @ axis) ** 3).sum()) < 0.0:
+        axis = -axis
+    return axis
+
+
+def _margin_deg(flat: FlatRegion) -> float:
+    v = flat.validation
+    return min(v.margin_deg_seam, v.margin_deg_north, v.margin_deg_south)
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    center: np.ndarray
+    rotation: np.ndarray
+    sigma: float | None
+
+
+class _Problem:
+    """A region, its kernel planes, and its sample: what the search evaluates."""
+
+    def __init__(self, points: np.ndarray, faces: np.ndarray, method: Method, threads: int):
+        self.points, self.faces, self.method, self.threads = points, faces, method, threads
+        used = np.zeros(len(points), dtype=bool)
+        used[faces.ravel()] = True
+        self.used = np.flatnonzero(used)
+        self.region_points = points[self.used]
+        self.planes = kernel_planes(points, faces)
+        areas = np.zeros(len(faces))
+        areas[self.planes.faces] = self.planes.areas[: len(self.planes.faces)]
+        sample = faces[area_sample(areas, SAMPLE_FACES)]
+        self.sample_used, compact = np.unique(sample, return_inverse=True)
+        self.sample_faces = compact.reshape(-1, 3)
+        self.sample_points = points[self.sample_used]
+
+    def chart(self, sigma: float | None) -> Chart:
+        if self.method is Method.STANDARD:
+            return Chart.standard()
+        return Chart.from_method(self.method, PoleCap.from_sigma(sigma))
+
+    def directions(self, center: np.ndarray) -> np.ndarray:
+        """(n, 3) unit directions from ``center`` to the region's vertices."""
+        units, zero = unit_rows(self.region_points - center)
+        if zero.any():
+            raise TransformInputError(
+                "center",
+                "lies on a vertex of the region; the centre must be off the surface",
+                self.used[zero][:5],
+            )
+        return units
+
+    def flatten(self, candidate: _Candidate) -> FlatRegion:
+        frame = Frame.from_matrix(candidate.rotation, candidate.center)
+        return flatten_region(
+            self.points, self.faces, frame, self.chart(candidate.sigma), threads=self.threads
+        )
+
+    def energy(self, candidate: _Candidate) -> float:
+        """Area-weighted isometric energy on the sample (inf where it cannot be measured)."""
+        frame = Frame.from_matrix(candidate.rotation, candidate.center)
+        chart = self.chart(candidate.sigma)
+        try:
+            local = frame.to_local(self.sample_points)
+            theta, phi, _ = chart.forward(local)
+            measures = measure_faces(local, self.sample_faces, theta, phi, chart.cap)
+            return float(distortion(measures).isometric.mean)
+        except TransformInputError:
+            return math.inf
+
+    def best_sigma(self, center: np.ndarray, rotation: np.ndarray, largest_rho: float) -> float:
+        """The sigma of least sample energy with the cap's angle at most ``largest_rho``.
+
+        A grid in log sigma, then golden sections around its best point. Energies equal to
+        ``_TIE`` (relative) count as equal and the larger sigma wins, so that rounding, which
+        differs with the mesh's pose, cannot pick another point of a flat stretch.
+        """
+        low, high = SIGMA_SEARCH
+        high = min(high, math.tan(max(largest_rho, 2.0 * math.atan(low)) / 2.0))
+        if high <= low:
+            return high
+
+        def energy(log_sigma: float) -> float:
+            return self.energy(_Candidate(center, rotation, math.exp(log_sigma)))
+
+        def better(e1: float, x1: float, e2: float, x2: float) -> bool:
+            """Whether (e1 at x1) beats (e2 at x2)."""
+            if abs(e1 - e2) <= _TIE * max(abs(e1), abs(e2)):
+                return x1 > x2
+            return e1 < e2
+
+        grid = np.linspace(math.log(low), math.log(high), _SIGMA_GRID)
+        energies = [energy(x) for x in grid]
+        best = 0
+        for i in range(1, len(grid)):
+            if better(energies[i], grid[i], energies[best], grid[best]):
+                best = i
+        a, b = grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]
+        best_x, best_e = grid[best], energies[best]
+        ratio = (math.sqrt(5.0) - 1.0) / 2.0
+        for _ in range(_GOLDEN_STEPS):
+            x1, x2 = b - ratio * (b - a), a + ratio * (b - a)
+            e1, e2 = energy(x1), energy(x2)
+            if better(e1, x1, e2, x2):
+                b = x2
+                if better(e1, x1, best_e, best_x):
+                    best_x, best_e = x1, e1
+            else:
+                a = x1
+                if better(e2, x2, best_e, best_x):
+                    best_x, best_e = x2, e2
+        return math.exp(best_x)
+
+    def slide_towards_pole(
+        self,
+        start: _Candidate,
+        kernel: Kernel,
+        min_depth: float,
+        margin: float | None,
+        choose_sigma: bool,
+    ) -> _Candidate:
+        """The best of ``start`` and centres moved along its pole by multiples of the
+        inscribed radius (``_SLIDE``), each with its best sigma, inside the kernel."""
+        pole = start.rotation[1]
+        best, best_energy = start, self.energy(start)
+        for steps in _SLIDE:
+            center = start.center + steps * kernel.inscribed_radius * pole
+            if self.planes.depth(center) < min_depth:
+                break
+            try:
+                room = cap_radius(self.directions(center), pole) - (margin or 0.0)
+            except TransformInputError:
+                break
+            if margin is None:
+                room = math.pi
+            sigma = self.best_sigma(center, start.rotation, room) if choose_sigma else start.sigma
+            candidate = _Candidate(center, start.rotation, sigma)
+            energy = self.energy(candidate)
+            if energy < best_energy:
+                best, best_energy = candidate, energy
+        return best
+
+    def refine(
+        self,
+        start: _Candidate,
+        free: list[bool],
+        kernel: Kernel,
+        min_depth: float,
+        margin: float | None,
+    ) -> _Candidate:
+        """Nelder-Mead over the free parameters, in the start's frame: the centre's offset
+        (in units of the inscribed radius, along the start's axes), the pole's tilt (radians,
+        towards the start's local X and Z) and log sigma. The bounds are penalties."""
+        move_center, turn_pole, change_sigma = free
+        axes = start.rotation  # rows: local X, Y (the pole), Z
+        # The depth on the planes that can bind near the start (the exact one is checked after).
+        planes = self.planes
+        j = len(planes.faces)
+        nearest = np.argsort(planes.offsets[:j] - planes.normals[:j] @ start.center)
+        rows = np.union1d(nearest[:_NEAR_PLANES], area_sample(planes.areas[:j], SAMPLE_FACES))
+        normals, offsets = planes.normals[rows], planes.offsets[rows]
+
+        def depth(center: np.ndarray) -> float:
+            return float((offsets - normals @ center).min())
+
+        unit = max(kernel.inscribed_radius, 1e-3 * self.planes.size)
+        region = self.sample_points  # the margin is checked on every face afterwards
+
+        def candidate(x: np.ndarray) -> _Candidate:
+            x = list(x)
+            center = start.center
+            if move_center:
+                center = start.center + unit * (np.array(x[:3]) @ axes)
+                x = x[3:]
+            rotation = start.rotation
+            if turn_pole:
+                pole = axes[1] + x[0] * axes[0] + x[1] * axes[2]
+                rotation = Frame.from_pole_up(pole, axes[2]).rotation
+                x = x[2:]
+            sigma = math.exp(x[0]) if change_sigma else start.sigma
+            return _Candidate(center, rotation, sigma)
+
+        def cost(x: np.ndarray) -> float:
+            c = candidate(x)
+            penalty = 0.0
+            if move_center:
+                penalty += max(0.0, min_depth - depth(c.center)) / unit
+                # Far away every region looks flat: stay within a few region sizes.
+                away = float(np.linalg.norm(c.center - self.planes.middle))
+                penalty += max(0.0, away - _REACH * self.planes.size) / unit
+            units, zero = unit_rows(region - c.center)
+            if zero.any():
+                return math.inf
+            if margin is not None:
+                rho = PoleCap.from_sigma(c.sigma).rho if c.sigma is not None else math.pi / 2
+                penalty += max(0.0, rho + margin - cap_radius(units, c.rotation[1]))
+            return self.energy(c) + 100.0 * penalty
+
+        x0 = [0.0] * (3 * move_center + 2 * turn_pole)
+        steps = [0.5] * (3 * move_center) + [0.1] * (2 * turn_pole)
+        if change_sigma:
+            x0.append(math.log(start.sigma))
+            steps.append(0.3)
+        simplex = np.vstack([x0, np.array(x0) + np.diag(steps)])
+        found = minimize(
+            cost,
+            np.array(x0),
+            method="Nelder-Mead",
+            options={
+                "xatol": 1e-4,
+                "fatol": 1e-6,
+                "maxfev": 120 * len(x0),
+                "adaptive": True,
+                "initial_simplex": simplex,
+            },
+        )
+        best = candidate(found.x)
+        if cost(found.x) > cost(np.array(x0)):
+            return start
+        if move_center and planes.depth(best.center) < min_depth:
+            # A plane outside the subset binds: back towards the start, which is deep enough.
+            inside, outside = 0.0, 1.0
+            for _ in range(30):
+                middle = 0.5 * (inside + outside)
+                center = start.center + middle * (best.center - start.center)
+                if planes.depth(center) >= min_depth:
+                    inside = middle
+                else:
+                    outside = middle
+            center = start.center + inside * (best.center - start.center)
+            best = _Candidate(center, best.rotation, best.sigma)
+        return best

@@ -1,0 +1,290 @@
+"""The kernel of a region: the points every region triangle faces (MATH.md: back-facing is
+``dot(centroid - c, outward normal) <= 0``, so the kernel is where no face is back-facing).
+
+Each face keeps the centre on the inner side of its plane: ``n . c < n . v0`` with ``n`` its
+unit outward normal. An open region (a scalp) faces every point far enough behind it, so each
+boundary loop adds the plane that closes it (through the loop's centroid, against the loop's
+vector area): the kernel of the region with its holes closed. A box around the region in its
+own inertia frame keeps the problem bounded when the region is flat.
+
+The deepest point of the kernel (its Chebyshev centre: the centre of the largest ball inside)
+is one small linear program, solved with scipy's HiGHS on a sample of the faces and re-solved
+with the faces it violates added until it holds for every face.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import sparse
+from scipy.optimize import linprog
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from .errors import TransformInputError
+from .sampling import area_sample
+from .topology import region_edges
+
+#: Faces in the first linear program, and the most violated faces added per round.
+_FIRST_FACES = 4096
+_ADDED_FACES = 4096
+_ROUNDS = 30
+#: Faces in the least-back-facing programs when the kernel is empty, and their rounds.
+_EMPTY_KERNEL_FACES = 4096
+_REWEIGHTING_ROUNDS = 3
+
+
+@dataclass(frozen=True)
+class KernelPlanes:
+    """Half-spaces ``normals @ c < offsets`` whose intersection is the (closed) kernel.
+
+    Attributes
+    ----------
+    normals : (k, 3) float, unit outward normals: the region's non-degenerate faces first,
+        then one closing plane per boundary loop
+    offsets : (k,) float
+    areas : (k,) float, face areas (0 for the closing planes)
+    faces : (j,) int, which face of the region each of the first ``j`` planes is
+    winding : +1 when the file's triangles wind outward, -1 when they were flipped
+    size : float, the region's bounding radius (the box's half-width)
+    middle : (3,) float, the area-weighted centroid of the region
+    axes : (3, 3) float, the region's inertia axes (rows)
+    """
+
+    normals: np.ndarray
+    offsets: np.ndarray
+    areas: np.ndarray
+    faces: np.ndarray
+    winding: int
+    size: float
+    middle: np.ndarray
+    axes: np.ndarray
+
+    def depth(self, center: np.ndarray) -> float:
+        """Distance from ``center`` to the nearest face plane (the closing planes left out),
+        negative outside the region's own kernel."""
+        j = len(self.faces)
+        return float((self.offsets[:j] - self.normals[:j] @ center).min())
+
+    def backfacing(self, center: np.ndarray) -> np.ndarray:
+        """Region face positions whose plane ``center`` is not strictly inside of."""
+        j = len(self.faces)
+        return self.faces[self.offsets[:j] - self.normals[:j] @ center <= 0.0]
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """The chosen centre and what the kernel looks like from it.
+
+    Attributes
+    ----------
+    center : (3,) float, the Chebyshev centre, or where the kernel is empty the centre that
+        leaves the least area-weighted back-facing distance
+    inscribed_radius : float, radius of the largest ball in the kernel (0 when empty)
+    empty : bool
+    planes : KernelPlanes
+    """
+
+    center: np.ndarray
+    inscribed_radius: float
+    empty: bool
+    planes: KernelPlanes
+
+
+def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
+    """The half-spaces of a region's kernel.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float, world coordinates
+    faces : (m, 3) int, the region's faces
+
+    Raises
+    ------
+    TransformInputError
+        Every face is degenerate.
+    """
+    rows = np.ascontiguousarray(vertices.T)
+    ids = np.ascontiguousarray(faces.T)
+    corners = np.stack([np.take(rows[axis], ids) for axis in range(3)])  # (axis, corner, m)
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    cross = np.stack(
+        [e1[(i + 1) % 3] * e2[(i + 2) % 3] - e1[(i + 2) % 3] * e2[(i + 1) % 3] for i in range(3)]
+    )
+    double_area = np.sqrt((cross * cross).sum(axis=0))
+    keep = np.flatnonzero(double_area > 0)
+    if keep.size == 0:
+        raise TransformInputError("faces", "every face of the region has zero area")
+    weights = double_area[keep]
+    centroids = corners[:, :, keep].mean(axis=1)  # (axis, k)
+    middle = centroids @ weights / weights.sum()
+    spread = centroids - middle[:, None]
+    # The file's winding is outward when the signed volume seen from the middle is positive.
+    winding = 1 if float((cross[:, keep] * spread).sum()) >= 0 else -1
+    normals = (winding / weights) * cross[:, keep]
+    offsets = (normals * corners[:, 0, keep]).sum(axis=0)
+    normals = np.ascontiguousarray(normals.T)
+    spread_weighted = spread * weights
+    _, axes = np.linalg.eigh(spread_weighted @ spread.T)
+    size = float(np.sqrt((spread * spread).sum(axis=0).max()))
+    closing_normals, closing_offsets = _closing_planes(vertices, faces, winding)
+    return KernelPlanes(
+        normals=np.concatenate([normals, closing_normals]),
+        offsets=np.concatenate([offsets, closing_offsets]),
+        areas=np.concatenate([0.5 * weights, np.zeros(len(closing_offsets))]),
+        faces=keep,
+        winding=winding,
+        size=size,
+        middle=middle,
+        axes=axes.T,
+    )
+
+
+def _closing_planes(
+    vertices: np.ndarray, faces: np.ndarray, winding: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """One plane per boundary loop, ``(normals (l, 3), offsets (l,))``: through the loop's
+    centroid, its outward normal against the loop's vector area (the side the region's faces
+    turn away from)."""
+    used, compact = np.unique(faces, return_inverse=True)
+    compact = compact.reshape(-1, 3)
+    boundary = region_edges(compact, np.ones(len(compact), dtype=np.int8), len(used)).boundary
+    if len(boundary) == 0:
+        return np.zeros((0, 3)), np.zeros(0)
+    # Direct each boundary edge as its face runs it.
+    heads = compact.ravel()
+    tails = compact[:, [1, 2, 0]].ravel()
+    n = len(used)
+    keys = np.minimum(heads, tails) * n + np.maximum(heads, tails)
+    boundary_keys = np.sort(boundary[:, 0] * n + boundary[:, 1])
+    spot = np.minimum(np.searchsorted(boundary_keys, keys), len(boundary_keys) - 1)
+    on_boundary = boundary_keys[spot] == keys
+    starts, ends = heads[on_boundary], tails[on_boundary]
+    graph = coo_matrix((np.ones(len(starts)), (starts, ends)), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    loop = labels[starts]
+    loops = np.unique(loop)
+    points = vertices[used]
+    a, b = points[starts], points[ends]
+    vector_area = np.zeros((len(loops), 3))
+    np.add.at(vector_area, np.searchsorted(loops, loop), 0.5 * winding * np.cross(a, b))
+    centroid = np.zeros((len(loops), 3))
+    count = np.zeros(len(loops))
+    np.add.at(centroid, np.searchsorted(loops, loop), a)
+    np.add.at(count, np.searchsorted(loops, loop), 1.0)
+    centroid /= count[:, None]
+    length = np.linalg.norm(vector_area, axis=1)
+    keep = length > 0
+    normals = -vector_area[keep] / length[keep, None]
+    return normals, np.einsum("ij,ij->i", normals, centroid[keep])
+
+
+def chebyshev_center(planes: KernelPlanes) -> Kernel:
+    """The deepest point of the kernel; where the kernel is empty, the centre that minimises
+    the area-weighted distance by which faces are seen from behind.
+
+    Both are linear programs in the region's inertia frame, on an area-weighted sample of the
+    faces; the Chebyshev one adds the faces its answer violates and solves again until its
+    answer holds for all faces.
+    """
+    k = len(planes.normals)
+    j = len(planes.faces)
+    closing = np.arange(j, k)
+    rows = np.concatenate([area_sample(planes.areas[:j], _FIRST_FACES), closing])
+    for _ in range(_ROUNDS):
+        center, radius = _deepest(planes, rows)
+        if radius <= 1e-12 * planes.size:
+            break
+        slack = planes.offsets - planes.normals @ center - radius
+        violated = np.flatnonzero(slack < -1e-9 * planes.size)
+        if violated.size == 0:
+            return Kernel(center=center, inscribed_radius=radius, empty=False, planes=planes)
+        worst = violated[np.argsort(slack[violated], kind="stable")[:_ADDED_FACES]]
+        rows = np.union1d(rows, worst)
+    return Kernel(
+        center=_least_backfacing_area(planes), inscribed_radius=0.0, empty=True, planes=planes
+    )
+
+
+def _least_backfacing_area(planes: KernelPlanes) -> np.ndarray:
+    """A centre leaving little back-facing area: the minimiser of the area-weighted distance
+    by which faces are seen from behind, then of the same reweighted by one over each face's
+    distance (which approaches the area itself); the best of these and the region's middle,
+    by the back-facing area over all faces."""
+    j = len(planes.faces)
+    rows = area_sample(planes.areas[:j], _EMPTY_KERNEL_FACES)
+    weights = planes.areas[rows]
+    candidates = [planes.middle]
+    for _ in range(_REWEIGHTING_ROUNDS):
+        center = _least_backfacing(planes, rows, weights)
+        candidates.append(center)
+        behind = np.maximum(planes.normals[rows] @ center - planes.offsets[rows], 0.0)
+        weights = planes.areas[rows] / (behind + 1e-3 * planes.size)
+
+    def backfacing_area(center: np.ndarray) -> float:
+        behind = planes.offsets[:j] - planes.normals[:j] @ center <= 0.0
+        return float(planes.areas[:j][behind].sum())
+
+    return min(candidates, key=backfacing_area)
+
+
+def _box(planes: KernelPlanes) -> tuple[np.ndarray, np.ndarray]:
+    """Half-spaces of the box ``|axes @ (c - middle)| <= size`` around the region."""
+    normals = np.concatenate([planes.axes, -planes.axes])
+    return normals, normals @ planes.middle + planes.size
+
+
+def _deepest(planes: KernelPlanes, rows: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre and radius of the largest ball inside the planes ``rows`` and the box."""
+    box_normals, box_offsets = _box(planes)
+    normals = np.concatenate([planes.normals[rows], box_normals])
+    offsets = np.concatenate([planes.offsets[rows], box_offsets])
+    # In the region's frame, scaled by its size: the solver's tolerances are relative.
+    local = normals @ planes.axes.T
+    scaled = (offsets - normals @ planes.middle) / planes.size
+    ball = np.concatenate([np.ones(len(rows)), np.zeros(len(box_offsets))])
+    found = linprog(
+        c=[0.0, 0.0, 0.0, -1.0],
+        A_ub=np.column_stack([local, ball]),
+        b_ub=scaled,
+        bounds=[(None, None)] * 3 + [(None, 2.0)],
+        method="highs",
+    )
+    if found.status != 0:
+        return planes.middle.copy(), 0.0
+    x = found.x
+    return planes.middle + planes.size * (x[:3] @ planes.axes), max(float(x[3]), 0.0) * planes.size
+
+
+def _least_backfacing(planes: KernelPlanes, rows: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The centre minimising ``sum(weights * max(0, n . c - offset))`` over the faces
+    ``rows`` (in the box)."""
+    face_rows = rows
+    count = len(face_rows)
+    box_normals, box_offsets = _box(planes)
+    local = planes.normals[face_rows] @ planes.axes.T
+    scaled = (planes.offsets[face_rows] - planes.normals[face_rows] @ planes.middle) / planes.size
+    box_local = box_normals @ planes.axes.T
+    box_scaled = (box_offsets - box_normals @ planes.middle) / planes.size
+    # n . c - offset <= s_f (one slack per face), and the box; sparse: one slack per row.
+    a_ub = sparse.vstack(
+        [
+            sparse.hstack([sparse.csr_matrix(local), -sparse.identity(count, format="csr")]),
+            sparse.hstack(
+                [sparse.csr_matrix(box_local), sparse.csr_matrix((len(box_offsets), count))]
+            ),
+        ],
+        format="csr",
+    )
+    found = linprog(
+        c=np.concatenate([np.zeros(3), weights / weights.sum()]),
+        A_ub=a_ub,
+        b_ub=np.concatenate([scaled, box_scaled]),
+        bounds=[(None, None)] * 3 + [(0.0, None)] * count,
+        method="highs",
+    )
+    if found.status != 0:
+        return planes.middle.copy()
+    return planes.middle + planes.size * (found.x[:3] @ planes.axes)

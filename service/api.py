@@ -19,6 +19,7 @@ from transforms import (
     angles_to_world,
     fit_region,
     flatten_region,
+    locate,
     world_to_angles,
 )
 
@@ -31,6 +32,7 @@ from .params import (
     AutoPole,
     FitParams,
     InverseRequest,
+    LocateParams,
     MeshParams,
     PointsRequest,
     chart_of,
@@ -47,6 +49,7 @@ from .schemas import (
     FlattenResponse,
     Health,
     InverseResponse,
+    LocateResponse,
     PointsResponse,
     SampleInfo,
     ValidateResponse,
@@ -361,6 +364,62 @@ async def fit(request: Request) -> Response:
     return await run_job(request, fit_answer)
 
 
+@router.post(
+    "/v1/locate",
+    tags=["meshes"],
+    summary="Find the surface points of directions on the map",
+    response_model=LocateResponse,
+    responses=PROBLEMS,
+    openapi_extra=MULTIPART_BODY,
+    description="Multipart like /v1/flatten; `params` also holds the queries, `theta` and "
+    "`phi` (radians, in the frame the other params resolve to). Answers, per query, the "
+    "region triangle the ray from the centre in that direction meets first, the barycentric "
+    "weights of the hit (of the triangle's vertices in file order) and the hit point (world "
+    "coordinates), or null where the ray misses the region.\n" + MESH_RULES,
+)
+async def locate_points(request: Request) -> Response:
+    return await run_job(request, locate_answer)
+
+
+def locate_answer(body: bytes, content_type: str, settings: Settings) -> Response:
+    """The /v1/locate answer to a multipart body (CPU-bound: run it off the event loop)."""
+    timings = Timings()
+    with timings.measure("parse"):
+        params, mesh = _mesh_request(body, content_type, settings, LocateParams)
+        _check_count(len(params.theta), settings.max_points, "params.theta")
+    with timings.measure("compute"):
+        faces, center = region_faces(mesh, params)
+        if params.auto:
+            try:
+                fit = fit_region(
+                    mesh.vertices,
+                    mesh.faces[faces],
+                    threads=settings.threads,
+                    **_fit_arguments(params, center),
+                )
+            except TransformInputError as error:
+                raise _mesh_error(error) from None
+            chart, frame = fit.chart, fit.frame
+        else:
+            chart = checked(lambda: chart_of(params))
+            frame = checked(lambda: frame_of(params, center))
+        directions = checked(lambda: chart.inverse(params.theta, params.phi, 1.0))
+        region = mesh.faces[faces]
+        try:
+            hits = locate(frame.to_local(mesh.vertices), region, directions)
+        except TransformInputError as error:
+            raise _mesh_error(error) from None
+        found = hits.faces >= 0
+        world = frame.to_world(np.where(found[:, None], hits.points, 0.0))
+        ids = np.where(found, faces[np.maximum(hits.faces, 0)], -1).tolist()
+        weights = np.where(found[:, None], hits.barycentric, 0.0).tolist()
+        answer = [
+            {"face": face, "barycentric": weight, "point": point} if face >= 0 else None
+            for face, weight, point in zip(ids, weights, world.tolist(), strict=True)
+        ]
+    return json_response({"params": resolved(chart, frame), "hits": answer}, timings)
+
+
 def flatten_answer(body: bytes, content_type: str, settings: Settings) -> Response:
     """The /v1/flatten answer to a multipart body (CPU-bound: run it off the event loop)."""
     return _mesh_answer(body, content_type, settings, full=True)
@@ -385,25 +444,30 @@ def _mesh_answer(
 ) -> Response:
     timings = Timings()
     with timings.measure("parse"):
-        form = parse_form(body, content_type)
-        params = _mesh_params(form, model)
-        if "mesh" not in form:
-            raise Problem(422, "mesh: the form has no 'mesh' file field", "invalid-request", "mesh")
-        part = form["mesh"]
-        try:
-            fmt = format_of(part.filename, params.format)
-            mesh = read_mesh(bytes(part.data), fmt, settings.limits)
-        except MeshFormatError as error:
-            raise from_mesh_error(error) from None
+        params, mesh = _mesh_request(body, content_type, settings, model)
     with timings.measure("compute"):
         payload = _flatten_payload(mesh, params, settings, full)
     return json_response(payload, timings)
 
 
+def _mesh_request(body: bytes, content_type: str, settings: Settings, model: type[MeshParams]):
+    """The params and the mesh of a multipart mesh request."""
+    form = parse_form(body, content_type)
+    params = _mesh_params(form, model)
+    if "mesh" not in form:
+        raise Problem(422, "mesh: the form has no 'mesh' file field", "invalid-request", "mesh")
+    part = form["mesh"]
+    try:
+        fmt = format_of(part.filename, params.format)
+        mesh = read_mesh(bytes(part.data), fmt, settings.limits)
+    except MeshFormatError as error:
+        raise from_mesh_error(error) from None
+    return params, mesh
+
+
 def _mesh_params(form, model: type[MeshParams]) -> MeshParams:
-    if "params" not in form:
-        return model()
-    return parse_json(model, bytes(form["params"].data), "application/json", "params")
+    data = bytes(form["params"].data) if "params" in form else b"{}"  # no params: defaults
+    return parse_json(model, data, "application/json", "params")
 
 
 #: Core errors about these inputs are the parameters' fault; any other is the file's.

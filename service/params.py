@@ -431,3 +431,31 @@ def checked(call, prefix: str = "params."):
         return call()
     except TransformInputError as error:
         raise from_transform_error(error, prefix) from None
+
+
+class LocateParams(MeshParams):
+    """The JSON of the ``params`` field of /v1/locate: a region and its frame as for
+    /v1/flatten (``"auto"`` allowed), and the query directions."""
+
+    theta: Annotated[list[Number], Field(min_length=1)] = Field(
+        description="Polar angles of the query directions, radians, in [0, pi], in the frame "
+        "the other params resolve to."
+    )
+    phi: Annotated[list[Number], Field(min_length=1)] = Field(
+        description="Azimuths, radians, in [-pi, pi]; one per theta."
+    )
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [{**MESH_PARAMS_EXAMPLE, "theta": [1.5, 1.7], "phi": [-1.6, -1.4]}]
+        }
+    )
+
+    @model_validator(mode="after")
+    def _one_phi_per_theta(self) -> LocateParams:
+        if len(self.phi) != len(self.theta):
+            raise ValueError(
+                f"theta, phi: one phi per theta; got {len(self.theta)} theta and "
+                f"{len(self.phi)} phi"
+            )
+        return self

@@ -121,6 +121,19 @@ class FitResponse(BaseModel):
     explain: Explain
 
 
+class Hit(BaseModel):
+    face: int = Field(description="The region triangle's id in the file.")
+    barycentric: list[float] = Field(
+        description="Weights of the triangle's three vertices (file order) at the hit."
+    )
+    point: list[float] = Field(description="The hit point, world coordinates.")
+
+
+class LocateResponse(BaseModel):
+    params: ResolvedParams
+    hits: list[Hit | None] = Field(description="Per query; null where the ray misses.")
+
+
 class PointsResponse(BaseModel):
     theta: list[float] = Field(description="Polar angles, radians, in [0, pi].")
     phi: list[float] = Field(description="Azimuths, radians, in (-pi, pi].")

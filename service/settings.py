@@ -18,7 +18,7 @@ class Settings:
     max_upload_bytes : MESHFLAT_MAX_UPLOAD_BYTES, largest request body (and decoded glTF
         buffer); beyond it the answer is 413, decided while the body streams in
     max_vertices, max_faces : MESHFLAT_MAX_VERTICES, MESHFLAT_MAX_FACES, per mesh
-    max_points : MESHFLAT_MAX_POINTS, per /v1/points request
+    max_points : MESHFLAT_MAX_POINTS, per /v1/points or /v1/locate request
     threads : MESHFLAT_THREADS, threads one request's computation may use
     max_jobs : MESHFLAT_MAX_JOBS, requests computed at once; more wait for a slot
     """

@@ -200,3 +200,78 @@ async def test_bad_fit_params_name_the_field(client, params, field):
     answer = await post(client, "/v1/fit", {"region": SCALP_REGION, **params})
     assert answer.status_code == 422, answer.text
     assert answer.json()["field"].startswith(field), answer.json()
+
+
+# -- /v1/locate --------------------------------------------------------------------------------
+
+
+def test_locate_inverts_flatten_in_the_core():
+    from transforms import locate, world_to_angles
+
+    vertices, faces = scalp()
+    frame = Frame.from_pole_up([0, 0, -1], [0, 1, 0], (vertices.min(0) + vertices.max(0)) / 2)
+    chart = Chart.distorted(PoleCap.from_sigma(0.3))
+    rng = np.random.default_rng(7)
+    chosen = rng.integers(0, len(faces), 5000)
+    weights = rng.dirichlet([1.0, 1.0, 1.0], len(chosen))
+    points = np.einsum("kc,kcj->kj", weights, vertices[faces[chosen]])
+    theta, phi, _ = world_to_angles(points, frame, chart)
+    hits = locate(frame.to_local(vertices), faces, chart.inverse(theta, phi, 1.0))
+    np.testing.assert_array_equal(hits.faces, chosen)
+    np.testing.assert_allclose(hits.barycentric, weights, atol=1e-6)
+    np.testing.assert_allclose(frame.to_world(hits.points), points, atol=1e-6)
+    # A direction into the hole (the chin, straight down) meets no scalp triangle.
+    miss = locate(frame.to_local(vertices), faces, [[0.0, 1.0, 0.0]])
+    assert miss.faces[0] == -1 and np.isnan(miss.points).all()
+
+
+def test_locate_takes_the_nearest_of_two_layers():
+    # Two parallel squares in front of the centre: the ray meets the nearer one.
+    square = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], dtype=float)
+    lift = np.array([0.0, 0.0, 1.0])
+    vertices = np.concatenate([square + 2 * lift, square + lift])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    from transforms import locate
+
+    hits = locate(vertices, faces, [[0.1, 0.2, 1.0]])
+    assert hits.faces[0] in (2, 3)
+    np.testing.assert_allclose(hits.points[0], [0.1, 0.2, 1.0])
+
+
+@pytest.mark.anyio
+async def test_locate_through_the_api_inverts_flatten(client):
+    params = {
+        "region": SCALP_REGION,
+        "center": "bbox_center",
+        "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+    }
+    flat = (await post(client, "/v1/flatten", params)).json()
+    faces = np.array(flat["faces"]["ids"])
+    vertex_of = {vid: i for i, vid in enumerate(flat["vertices"]["ids"])}
+    # Each triangle's centroid in the (phi, theta) map is inside its layout triangle; the
+    # true inverse goes through the ray, so ask for the map points of the corners instead.
+    corners = np.array(flat["faces"]["vertices"])[:50]
+    first = [vertex_of[c[0]] for c in corners]
+    theta = [flat["vertices"]["theta"][i] for i in first]
+    phi = [flat["vertices"]["phi"][i] for i in first]
+    answer = await post(
+        client, "/v1/locate", {**params, "theta": [*theta, 0.0], "phi": [*phi, 0.0]}
+    )
+    assert answer.status_code == 200, answer.text
+    hits = answer.json()["hits"]
+    vertices, _ = load_sample("fsaverage-head.ply")
+    for corner, hit in zip(corners, hits[:-1], strict=True):
+        # A corner is shared by several triangles: any of them, with weight 1 on it.
+        assert hit is not None and hit["face"] in faces
+        np.testing.assert_allclose(hit["point"], vertices[corner[0]], atol=1e-6)
+        assert max(hit["barycentric"]) == pytest.approx(1.0, abs=1e-6)
+    assert hits[-1] is None  # theta = 0 is a singular point's direction, in the cap
+
+
+@pytest.mark.anyio
+async def test_locate_checks_its_queries(client):
+    params = {"region": SCALP_REGION}
+    answer = await post(client, "/v1/locate", {**params, "theta": [1.0, 2.0], "phi": [0.0]})
+    assert answer.status_code == 422 and "one phi per theta" in answer.json()["detail"]
+    answer = await post(client, "/v1/locate", {**params, "theta": [4.0], "phi": [0.0]})
+    assert answer.status_code == 422 and answer.json()["field"] == "params.theta", answer.json()

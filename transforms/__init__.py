@@ -21,6 +21,7 @@ from .errors import TransformInputError
 from .faces import DEGENERATE_RTOL, FaceMeasures, measure_faces
 from .fit import Fit, FitExplanation, fit_region
 from .frames import Frame, check_rotation
+from .locate import Hits, locate
 from .margins import arcs_to_point, arcs_to_seam
 from .metrics import (
     Distortion,
@@ -54,6 +55,7 @@ __all__ = [
     "FitExplanation",
     "FlatRegion",
     "Frame",
+    "Hits",
     "Method",
     "PoleCap",
     "RegionEdges",
@@ -74,6 +76,7 @@ __all__ = [
     "face_distortion",
     "fit_region",
     "flatten_region",
+    "locate",
     "measure_faces",
     "orient3d_sign",
     "pole_warp",

@@ -14,6 +14,7 @@ from starlette.requests import ClientDisconnect
 from starlette.responses import Response
 
 from transforms import (
+    Layout,
     PoleCap,
     TransformInputError,
     angles_to_world,
@@ -501,7 +502,12 @@ def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: b
         frame = checked(lambda: frame_of(params, center))
         try:
             flat = flatten_region(
-                mesh.vertices, mesh.faces[faces], frame, chart, threads=settings.threads
+                mesh.vertices,
+                mesh.faces[faces],
+                frame,
+                chart,
+                threads=settings.threads,
+                layout=params.layout,
             )
         except TransformInputError as error:
             # The parameters were checked above: what is left is about the file's vertices.
@@ -510,7 +516,7 @@ def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: b
     face_ids = lambda positions: faces[positions]  # noqa: E731 - positions -> file ids
     d = flat.distortion
     payload = {
-        "params": resolved(chart, frame),
+        "params": {**resolved(chart, frame), "layout": flat.layout.value},
         "validation": {
             "seam_free": v.seam_free,
             "star_shaped": v.star_shaped,
@@ -545,6 +551,8 @@ def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: b
             "phi": flat.phi,
             "r": flat.r,
         }
+        if flat.layout is not Layout.THETA_PHI:
+            payload["vertices"] |= {"x": flat.x, "y": flat.y}
         payload["faces"] = {"ids": faces, "vertices": mesh.faces[faces]}
     return payload
 
@@ -576,6 +584,7 @@ def _fit_arguments(params: MeshParams, center) -> dict:
         "sigma": sigma,
         "min_kernel_depth": params.min_kernel_depth,
         "min_margin_deg": params.min_margin_deg,
+        "layout": params.layout,
     }
 
 

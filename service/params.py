@@ -218,6 +218,13 @@ class MeshParams(ChartParams):
         + AUTO_DESCRIPTION
         + " Default: identity.",
     )
+    layout: Literal["theta_phi", "mercator"] = Field(
+        "theta_phi",
+        description="The 2D layout: theta_phi, the paper's (phi, theta); or mercator, x = phi, "
+        "y = ln tan((pi - theta) / 2), conformal apart from the radial projection. The "
+        "metrics (and for auto, the energy) are measured on it; /v1/flatten then also answers "
+        "x and y per vertex.",
+    )
     min_kernel_depth: Number = Field(
         0.05,
         ge=0,

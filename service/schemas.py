@@ -16,6 +16,9 @@ class ResolvedParams(BaseModel):
     )
     center: list[float] = Field(description="The centre used, world coordinates.")
     rotation: list[list[float]] = Field(description="The world-to-local rotation used (rows).")
+    layout: Literal["theta_phi", "mercator"] | None = Field(
+        None, description="The 2D layout of a mesh answer."
+    )
 
 
 class FlatVertices(BaseModel):
@@ -23,6 +26,10 @@ class FlatVertices(BaseModel):
     theta: list[float] = Field(description="Polar angle from local +Z, radians, per id.")
     phi: list[float] = Field(description="Azimuth from +X towards +Y, radians, per id.")
     r: list[float] = Field(description="Distance from the centre, per id.")
+    x: list[float] | None = Field(None, description="Layout x per id (mercator only: phi).")
+    y: list[float] | None = Field(
+        None, description="Layout y per id (mercator only: ln tan((pi - theta) / 2))."
+    )
 
 
 class FlatFaces(BaseModel):

@@ -275,3 +275,42 @@ async def test_locate_checks_its_queries(client):
     assert answer.status_code == 422 and "one phi per theta" in answer.json()["detail"]
     answer = await post(client, "/v1/locate", {**params, "theta": [4.0], "phi": [0.0]})
     assert answer.status_code == 422 and answer.json()["field"] == "params.theta", answer.json()
+
+
+# -- layouts ---------------------------------------------------------------------------------
+
+
+def test_mercator_layout_is_measured_as_returned():
+    vertices, faces = scalp()
+    frame = Frame.from_pole_up([0, 0, -1], [0, 1, 0], (vertices.min(0) + vertices.max(0)) / 2)
+    chart = Chart.distorted(PoleCap.from_sigma(0.3))
+    paper = flatten_region(vertices, faces, frame, chart)
+    mercator = flatten_region(vertices, faces, frame, chart, layout="mercator")
+    np.testing.assert_array_equal(mercator.x, mercator.phi)
+    np.testing.assert_allclose(mercator.y, np.log(np.tan((np.pi - mercator.theta) / 2)))
+    np.testing.assert_array_equal(paper.y, paper.theta)
+    # Mercator keeps the sphere's angles: only the radial projection bends them.
+    assert mercator.distortion.conformal.mean < paper.distortion.conformal.mean
+    # The same triangles are flagged: validation reads the angles, not the layout.
+    assert mercator.validation.folded_faces.tolist() == paper.validation.folded_faces.tolist()
+
+
+@pytest.mark.anyio
+async def test_mercator_through_the_api(client):
+    params = {
+        "region": SCALP_REGION,
+        "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+        "layout": "mercator",
+    }
+    answer = await post(client, "/v1/flatten", params)
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    vertices = body["vertices"]
+    assert body["params"]["layout"] == "mercator"
+    np.testing.assert_allclose(vertices["x"], vertices["phi"])
+    np.testing.assert_allclose(
+        vertices["y"], np.log(np.tan((np.pi - np.array(vertices["theta"])) / 2))
+    )
+    paper = (await post(client, "/v1/flatten", {**params, "layout": "theta_phi"})).json()
+    assert "x" not in paper["vertices"]
+    assert body["metrics"]["conformal"]["mean"] < paper["metrics"]["conformal"]["mean"]

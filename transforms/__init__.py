@@ -21,6 +21,7 @@ from .errors import TransformInputError
 from .faces import DEGENERATE_RTOL, FaceMeasures, measure_faces
 from .fit import Fit, FitExplanation, fit_region
 from .frames import Frame, check_rotation
+from .layouts import Layout, layout_xy
 from .locate import Hits, locate
 from .margins import arcs_to_point, arcs_to_seam
 from .metrics import (
@@ -56,6 +57,7 @@ __all__ = [
     "FlatRegion",
     "Frame",
     "Hits",
+    "Layout",
     "Method",
     "PoleCap",
     "RegionEdges",
@@ -76,6 +78,7 @@ __all__ = [
     "face_distortion",
     "fit_region",
     "flatten_region",
+    "layout_xy",
     "locate",
     "measure_faces",
     "orient3d_sign",

@@ -80,7 +80,7 @@ class FaceMeasures:
 
 
 def measure_faces(
-    vertices_local, faces, theta, phi, cap: PoleCap, threads: int = 1
+    vertices_local, faces, theta, phi, cap: PoleCap, threads: int = 1, layout_theta=None
 ) -> FaceMeasures:
     """Measure every face of a region.
 
@@ -88,7 +88,9 @@ def measure_faces(
     ----------
     vertices_local : (n, 3) float, vertices in the local frame (centre at the origin)
     faces : (m, 3) int, indices into ``vertices_local``; at least one face
-    theta, phi : (n,) float, the vertices' layout coordinates
+    theta, phi : (n,) float, the vertices' angles; ``(phi, theta)`` is the layout measured
+    layout_theta : (n,) float or None, the layout's second coordinate instead of ``theta``
+        (increasing with it; see :mod:`.layouts`)
     cap : PoleCap, the chart's cap (its singular points are tested)
     threads : int, threads to spread the blocks over
 
@@ -110,6 +112,10 @@ def measure_faces(
         raise TransformInputError(
             "theta", f"theta and phi need one value per vertex ({len(vertices)}), got {theta.shape}"
         )
+    if layout_theta is not None:  # the layout's second coordinate, in theta's place
+        theta = np.ascontiguousarray(layout_theta, dtype=np.float64)
+        if theta.shape != phi.shape or not np.isfinite(theta).all():
+            raise TransformInputError("layout_theta", "must be finite, one value per vertex")
     largest = float(np.abs(vertices).max())
     scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
     rows = np.ascontiguousarray(vertices.T)

@@ -35,6 +35,7 @@ from .errors import TransformInputError
 from .faces import measure_faces
 from .frames import Frame
 from .kernel import Kernel, chebyshev_center, kernel_planes
+from .layouts import Layout, measured_second
 from .metrics import distortion
 from .region import FlatRegion, flatten_region
 from .sampling import area_sample
@@ -114,6 +115,7 @@ def fit_region(
     min_kernel_depth: float = 0.05,
     min_margin_deg: float = 2.0,
     threads: int = 1,
+    layout: Layout | str = Layout.THETA_PHI,
 ) -> Fit:
     """Choose the parameters left as ``None`` and flatten the region with them.
 
@@ -130,6 +132,7 @@ def fit_region(
     min_kernel_depth : float >= 0, fraction of the kernel's inscribed radius
     min_margin_deg : float >= 0
     threads : int
+    layout : the layout whose energy is minimised and returned (:mod:`.layouts`)
 
     Returns
     -------
@@ -153,7 +156,7 @@ def fit_region(
     if sigma is not None and method is Method.STANDARD:
         raise TransformInputError("sigma", "method 'standard' has no warp, so it takes no sigma")
     choose_sigma = sigma is None and method is not Method.STANDARD
-    problem = _Problem(points, faces, method, threads)
+    problem = _Problem(points, faces, method, threads, Layout(layout))
     notes: list[str] = []
 
     kernel = chebyshev_center(problem.planes)
@@ -294,8 +297,11 @@ class _Candidate:
 class _Problem:
     """A region, its kernel planes, and its sample: what the search evaluates."""
 
-    def __init__(self, points: np.ndarray, faces: np.ndarray, method: Method, threads: int):
+    def __init__(
+        self, points: np.ndarray, faces: np.ndarray, method: Method, threads: int, layout: Layout
+    ):
         self.points, self.faces, self.method, self.threads = points, faces, method, threads
+        self.layout = layout
         used = np.zeros(len(points), dtype=bool)
         used[faces.ravel()] = True
         self.used = np.flatnonzero(used)
@@ -327,7 +333,12 @@ class _Problem:
     def flatten(self, candidate: _Candidate) -> FlatRegion:
         frame = Frame.from_matrix(candidate.rotation, candidate.center)
         return flatten_region(
-            self.points, self.faces, frame, self.chart(candidate.sigma), threads=self.threads
+            self.points,
+            self.faces,
+            frame,
+            self.chart(candidate.sigma),
+            threads=self.threads,
+            layout=self.layout,
         )
 
     def energy(self, candidate: _Candidate) -> float:
@@ -337,7 +348,8 @@ class _Problem:
         try:
             local = frame.to_local(self.sample_points)
             theta, phi, _ = chart.forward(local)
-            measures = measure_faces(local, self.sample_faces, theta, phi, chart.cap)
+            second = measured_second(theta, self.layout)
+            measures = measure_faces(local, self.sample_faces, theta, phi, chart.cap, 1, second)
             return float(distortion(measures).isometric.mean)
         except TransformInputError:
             return math.inf

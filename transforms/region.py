@@ -12,6 +12,7 @@ from .cap import PoleCap
 from .chart import Chart
 from .faces import measure_faces
 from .frames import Frame
+from .layouts import Layout, layout_xy, measured_second
 from .metrics import Distortion, distortion
 from .validation import RegionValidation, validate
 
@@ -24,6 +25,8 @@ class FlatRegion:
     ----------
     vertex_ids : (k,) int, ascending: the rows of the input vertices the region uses
     theta, phi, r : (k,) float, their coordinates (``theta`` polar, ``phi`` azimuth)
+    layout : Layout, the 2D layout the metrics were measured on
+    x, y : (k,) float, the vertices in that layout
     faces : (m, 3) int, the region's faces as positions in ``vertex_ids``, in input order
     validation : RegionValidation, face lists by position in the region's face list
     distortion : Distortion
@@ -33,6 +36,9 @@ class FlatRegion:
     theta: np.ndarray
     phi: np.ndarray
     r: np.ndarray
+    layout: Layout
+    x: np.ndarray
+    y: np.ndarray
     faces: np.ndarray
     validation: RegionValidation
     distortion: Distortion
@@ -45,6 +51,7 @@ def flatten_region(
     chart: Chart,
     winding: int | None = None,
     threads: int = 1,
+    layout: Layout | str = Layout.THETA_PHI,
 ) -> FlatRegion:
     """Flatten the faces of a mesh region and check the result.
 
@@ -56,6 +63,7 @@ def flatten_region(
     chart : Chart, the method and its cap
     winding : +1 or -1 to fix which way normals point (see :func:`.validation.validate`)
     threads : int, threads to share the work
+    layout : the 2D layout returned and measured (:mod:`.layouts`)
 
     Returns
     -------
@@ -77,12 +85,19 @@ def flatten_region(
     compact = position[faces]
     local = frame.to_local(vertices[vertex_ids])
     theta, phi, r = chart.forward(local, threads, "vertices", "vertex", vertex_ids)
-    validation, metrics = assess_region(local, compact, theta, phi, chart.cap, winding, threads)
+    layout = Layout(layout)
+    validation, metrics = assess_region(
+        local, compact, theta, phi, chart.cap, winding, threads, measured_second(theta, layout)
+    )
+    x, y = layout_xy(theta, phi, layout)
     return FlatRegion(
         vertex_ids=vertex_ids,
         theta=theta,
         phi=phi,
         r=r,
+        layout=layout,
+        x=x,
+        y=y,
         faces=compact,
         validation=validation,
         distortion=metrics,
@@ -97,6 +112,7 @@ def assess_region(
     cap: PoleCap,
     winding: int | None = None,
     threads: int = 1,
+    layout_theta=None,
 ) -> tuple[RegionValidation, Distortion]:
     """Validation and distortion metrics of a region already in the local frame.
 
@@ -108,11 +124,13 @@ def assess_region(
     cap : PoleCap, the chart's cap
     winding : +1 or -1 to fix which way normals point (see :func:`.validation.validate`)
     threads : int, threads to share the work
+    layout_theta : (n,) float or None, the measured layout's second coordinate (see
+        :func:`.faces.measure_faces`)
 
     Returns
     -------
     (RegionValidation, Distortion)
     """
-    measures = measure_faces(vertices_local, faces, theta, phi, cap, threads)
+    measures = measure_faces(vertices_local, faces, theta, phi, cap, threads, layout_theta)
     # One after the other: side by side on two threads they only compete for memory.
     return validate(measures, winding, threads), distortion(measures)

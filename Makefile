@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-service openapi clean
+.PHONY: serve test bench bench-fit bench-service openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -32,6 +32,10 @@ test: $(VENV)/.installed-test
 
 bench: $(VENV)/.installed-bench
 	$(BIN)/python -m benchmarks.transforms_bench $(BENCH_ARGS)
+
+# BLAS on one thread, as in the service (service/__init__.py).
+bench-fit: $(VENV)/.installed-bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.fit_bench $(BENCH_ARGS)
 
 # Needs curl (the end-to-end client) besides the bench extra.
 bench-service: $(VENV)/.installed-bench

@@ -154,7 +154,8 @@ class Frame:
         -------
         (n, 3) float, local frame
         """
-        return np.ascontiguousarray(self.local_rows(as_points(points)).T)
+        # (p - c) R^T: one matrix product straight into (n, 3) rows, no transposed copy.
+        return (as_points(points) - self._center) @ self._rotation.T
 
     def local_rows(self, points: np.ndarray) -> np.ndarray:
         """Local coordinates of already checked ``(n, 3)`` points as rows ``x, y, z`` (3, n).

@@ -77,9 +77,7 @@ def flatten_region(
     """
     vertices = as_points(vertices, "vertices")
     faces = as_faces(faces, len(vertices))
-    used = np.zeros(len(vertices), dtype=bool)
-    used[faces.ravel()] = True
-    vertex_ids = np.flatnonzero(used)
+    vertex_ids = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(vertices)))
     position = np.empty(len(vertices), dtype=faces.dtype)  # int32 where the ids fit
     position[vertex_ids] = np.arange(len(vertex_ids))
     compact = position[faces]

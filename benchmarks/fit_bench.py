@@ -32,13 +32,13 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from benchmarks.transforms_bench import DOCS, machine, subdivided
+from benchmarks.docs import record
+from benchmarks.transforms_bench import machine, subdivided
 from service.allocator import keep_large_blocks
 from transforms import Chart, Frame, PoleCap, fit_region, flatten_region, locate
 from transforms.faces import measure_faces
 from transforms.metrics import distortion
 
-BEGIN, END = "<!-- fit-bench:begin -->", "<!-- fit-bench:end -->"
 #: Targets from the issue on the large region, as multiples of the harmonic map's time.
 FLATTEN_SPEEDUP, FIT_SPEEDUP = 100.0, 5.0
 QUERIES = 100_000
@@ -228,13 +228,7 @@ def main(argv: list[str] | None = None) -> int:
     report = measure(args.runs)
     print(report)
     if args.write_docs:
-        text = DOCS.read_text()
-        if BEGIN not in text:
-            text += f"\n## Automatic parameters and locate against libigl\n\n{BEGIN}\n{END}\n"
-        head, rest = text.split(BEGIN, 1)
-        _, tail = rest.split(END, 1)
-        DOCS.write_text(f"{head}{BEGIN}\n{report}\n{END}{tail}")
-        print(f"\nrecorded in {DOCS}", file=sys.stderr)
+        record("fit-bench", "Automatic parameters and locate against libigl", report)
     return 0
 
 

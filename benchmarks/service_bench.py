@@ -38,6 +38,7 @@ import httpx
 import numpy as np
 import trimesh
 
+from benchmarks.docs import record
 from benchmarks.transforms_bench import machine, subdivided
 from service.allocator import keep_large_blocks
 from service.api import flatten_answer
@@ -45,8 +46,6 @@ from service.examples import MULTIPART, multipart_body
 from service.meshio import format_of, read_mesh
 from service.settings import Settings
 
-DOCS = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
-BEGIN, END = "<!-- service-bench:begin -->", "<!-- service-bench:end -->"
 PARAMS = {"rotation": {"pole": [0, -1, 0], "up": [0, 0, 1]}}
 
 
@@ -238,12 +237,7 @@ def main(argv: list[str] | None = None) -> int:
     table = "\n".join(lines)
     print(table)
     if args.write_docs:
-        text = DOCS.read_text()
-        if BEGIN not in text:
-            text += f"\n## The service end to end\n\n{BEGIN}\n{END}\n"
-        head, rest = text.split(BEGIN, 1)
-        _, tail = rest.split(END, 1)
-        DOCS.write_text(f"{head}{BEGIN}\n{table}\n{END}{tail}")
+        record("service-bench", "The service end to end", table)
     return 0
 
 

@@ -36,12 +36,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from benchmarks.docs import record
 from service.allocator import keep_large_blocks
 from service.samples import SAMPLES
 from transforms import Chart, Frame, PoleCap, assess_region, world_to_angles
 
-DOCS = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
-BEGIN, END = "<!-- transforms-bench:begin -->", "<!-- transforms-bench:end -->"
 #: Targets from the issue, as multiples of VTK's time.
 TARGETS = {"distorted forward": 1.0, "validation + metrics": 5.0}
 
@@ -202,11 +201,7 @@ def main(argv: list[str] | None = None) -> int:
     report = "\n\n".join(sections)
     print(report)
     if args.write_docs:
-        text = DOCS.read_text() if DOCS.exists() else f"# Benchmarks\n\n{BEGIN}\n{END}\n"
-        head, rest = text.split(BEGIN, 1)
-        _, tail = rest.split(END, 1)
-        DOCS.write_text(f"{head}{BEGIN}\n{report}\n{END}{tail}")
-        print(f"\nrecorded in {DOCS}", file=sys.stderr)
+        record("transforms-bench", "Transform core against VTK", report)
     return 0
 
 

@@ -314,43 +314,47 @@ def _check_count(count: int, limit: int, field: str) -> None:
 # -- meshes --------------------------------------------------------------------------------
 
 
-@router.post(
+def _mesh_route(path: str, summary: str, model: type[BaseModel], description: str):
+    """A multipart mesh route: a ``mesh`` file and a ``params`` JSON field."""
+    return router.post(
+        path,
+        tags=["meshes"],
+        summary=summary,
+        response_model=model,
+        responses=PROBLEMS,
+        openapi_extra=MULTIPART_BODY,
+        description=f"{description}\n{MESH_RULES}",
+    )
+
+
+@_mesh_route(
     "/v1/flatten",
-    tags=["meshes"],
-    summary="Flatten a region of a mesh",
-    response_model=FlattenResponse,
-    responses=PROBLEMS,
-    openapi_extra=MULTIPART_BODY,
-    description="Multipart: a `mesh` file and a `params` JSON field (MeshParams). Answers "
+    "Flatten a region of a mesh",
+    FlattenResponse,
+    "Multipart: a `mesh` file and a `params` JSON field (MeshParams). Answers "
     "the resolved parameters, (theta, phi, r) of every vertex the region uses, the region's "
-    "triangles, the validation report and the distortion metrics.\n" + MESH_RULES,
+    "triangles, the validation report and the distortion metrics.",
 )
 async def flatten(request: Request) -> Response:
     return await run_job(request, flatten_answer)
 
 
-@router.post(
+@_mesh_route(
     "/v1/validate",
-    tags=["meshes"],
-    summary="Validate a region of a mesh",
-    response_model=ValidateResponse,
-    responses=PROBLEMS,
-    openapi_extra=MULTIPART_BODY,
-    description="The same input as /v1/flatten; answers only the resolved parameters, the "
-    "validation report and the distortion metrics.\n" + MESH_RULES,
+    "Validate a region of a mesh",
+    ValidateResponse,
+    "The same input as /v1/flatten; answers only the resolved parameters, the "
+    "validation report and the distortion metrics.",
 )
 async def validate(request: Request) -> Response:
     return await run_job(request, validate_answer)
 
 
-@router.post(
+@_mesh_route(
     "/v1/fit",
-    tags=["meshes"],
-    summary="Choose the centre, rotation and sigma for a region",
-    response_model=FitResponse,
-    responses=PROBLEMS,
-    openapi_extra=MULTIPART_BODY,
-    description="The same input as /v1/flatten, but centre, rotation and sigma not given are "
+    "Choose the centre, rotation and sigma for a region",
+    FitResponse,
+    "The same input as /v1/flatten, but centre, rotation and sigma not given are "
     'chosen ("auto"); any of them may be fixed. They are chosen together to minimise the '
     "region's area-weighted isometric energy, keeping the centre inside the region's kernel "
     "at a depth of at least min_kernel_depth of its inscribed radius and the margin to the "
@@ -359,24 +363,21 @@ async def validate(request: Request) -> Response:
     "directions as the pole, the roll along the region's widest spread about the pole (or "
     "the up hint), and the best sigma with that cap; then refines the free ones together on "
     "an area-weighted sample of the triangles. Answers the resolved parameters, the "
-    "validation and metrics they give on every triangle, and `explain`.\n" + MESH_RULES,
+    "validation and metrics they give on every triangle, and `explain`.",
 )
 async def fit(request: Request) -> Response:
     return await run_job(request, fit_answer)
 
 
-@router.post(
+@_mesh_route(
     "/v1/locate",
-    tags=["meshes"],
-    summary="Find the surface points of directions on the map",
-    response_model=LocateResponse,
-    responses=PROBLEMS,
-    openapi_extra=MULTIPART_BODY,
-    description="Multipart like /v1/flatten; `params` also holds the queries, `theta` and "
+    "Find the surface points of directions on the map",
+    LocateResponse,
+    "Multipart like /v1/flatten; `params` also holds the queries, `theta` and "
     "`phi` (radians, in the frame the other params resolve to). Answers, per query, the "
     "region triangle the ray from the centre in that direction meets first, the barycentric "
     "weights of the hit (of the triangle's vertices in file order) and the hit point (world "
-    "coordinates), or null where the ray misses the region.\n" + MESH_RULES,
+    "coordinates), or null where the ray misses the region.",
 )
 async def locate_points(request: Request) -> Response:
     return await run_job(request, locate_answer)

@@ -1,0 +1,22 @@
+"""Where the benchmarks record their latest tables: sections of docs/benchmarks.md between
+HTML comment markers, rewritten by each run with ``--write-docs``."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+DOCS = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
+
+
+def record(name: str, heading: str, report: str) -> None:
+    """Put ``report`` between the ``<!-- name:begin -->`` and ``<!-- name:end -->`` markers,
+    adding a section titled ``heading`` at the end when the page has none yet."""
+    begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
+    text = DOCS.read_text() if DOCS.exists() else "# Benchmarks\n"
+    if begin not in text:
+        text += f"\n## {heading}\n\n{begin}\n{end}\n"
+    head, rest = text.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    DOCS.write_text(f"{head}{begin}\n{report}\n{end}{tail}")
+    print(f"\nrecorded in {DOCS}", file=sys.stderr)

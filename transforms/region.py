@@ -78,10 +78,13 @@ def flatten_region(
     vertices = as_points(vertices, "vertices")
     faces = as_faces(faces, len(vertices))
     vertex_ids = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(vertices)))
-    position = np.empty(len(vertices), dtype=faces.dtype)  # int32 where the ids fit
-    position[vertex_ids] = np.arange(len(vertex_ids))
-    compact = position[faces]
-    local = frame.to_local(vertices[vertex_ids])
+    if len(vertex_ids) == len(vertices):  # every vertex used (the whole mesh): no renumbering
+        compact, local = faces, frame.to_local(vertices)
+    else:
+        position = np.empty(len(vertices), dtype=faces.dtype)  # int32 where the ids fit
+        position[vertex_ids] = np.arange(len(vertex_ids))
+        compact = position[faces]
+        local = frame.to_local(vertices[vertex_ids])
     theta, phi, r = chart.forward(local, threads, "vertices", "vertex", vertex_ids)
     layout = Layout(layout)
     validation, metrics = assess_region(

@@ -87,15 +87,24 @@ def test_auto_scalp_is_seam_free_and_star_shaped_with_the_margin(fsaverage_fit):
     assert fit.region.distortion.isometric.mean == pytest.approx(e.energy_end)
 
 
-@pytest.mark.parametrize("name", ["fsaverage-head.ply", "lee-perry-smith.obj"])
-def test_the_choice_turns_and_moves_with_the_mesh(name):
+@pytest.mark.parametrize(
+    ("name", "up"),
+    [
+        ("fsaverage-head.ply", [0.3, 1.0, 0.2]),
+        ("lee-perry-smith.obj", [0.3, 0.2, 1.0]),
+        ("fsaverage-head.ply", None),  # the roll rule
+        ("lee-perry-smith.obj", None),
+    ],
+)
+def test_the_choice_turns_and_moves_with_the_mesh(name, up):
     vertices, faces = scalp(name)
-    up = np.array([0.3, 1.0, 0.2])
+    up = None if up is None else np.array(up)
     base = fit_region(vertices, faces, rotation=None, up=up)
     for seed in range(2):
         turn = Rotation.random(random_state=seed).as_matrix()
         shift = np.random.default_rng(seed).normal(size=3) * 50.0
-        moved = fit_region(vertices @ turn.T + shift, faces, up=turn @ up)
+        turned_up = None if up is None else turn @ up
+        moved = fit_region(vertices @ turn.T + shift, faces, up=turned_up)
         np.testing.assert_allclose(moved.region.theta, base.region.theta, atol=1e-6, rtol=0)
         np.testing.assert_allclose(moved.region.phi, base.region.phi, atol=1e-6, rtol=0)
         np.testing.assert_allclose(moved.frame.center, turn @ base.frame.center + shift, atol=1e-6)

@@ -12,9 +12,10 @@ from scipy.spatial.transform import Rotation
 from service.samples import SAMPLES
 from transforms import Chart, Frame, PoleCap, fit_region, flatten_region
 from transforms.emptycap import largest_empty_cap
+from transforms.fit import SIGMA_SEARCH
 from transforms.kernel import chebyshev_center, kernel_planes
 
-from .conftest import load_sample, sphere_mesh
+from .conftest import grid_mesh, load_sample, sphere_mesh
 
 #: The scalps of the samples: faces whose centroid lies within an angle of the top axis, seen
 #: from a point inside the head (None: the box centre; Lee Perry-Smith's box holds the
@@ -135,6 +136,18 @@ def test_an_empty_kernel_is_said_and_its_backfacing_faces_listed():
     assert len(e.backfacing_faces) > 0
     np.testing.assert_array_equal(e.backfacing_faces, fit.region.validation.backfacing_faces)
     assert any("kernel is empty" in note for note in e.notes)
+
+
+@pytest.mark.parametrize("shape", ["one triangle", "flat square"])
+def test_small_and_flat_regions_get_a_centre_behind_them(shape):
+    if shape == "one triangle":
+        vertices, faces = np.array([[0, 0, 1.0], [1, 0, 1], [0, 1, 1]]), np.array([[0, 1, 2]])
+    else:
+        vertices, faces = grid_mesh(np.linspace(-1, 1, 12), np.linspace(-1, 1, 12), 0.0)
+    fit = fit_region(vertices, faces)
+    assert not fit.explanation.kernel_empty and fit.explanation.kernel_inscribed_radius > 0
+    assert fit.region.validation.seam_free and fit.region.validation.star_shaped
+    assert SIGMA_SEARCH[0] <= fit.chart.cap.sigma <= SIGMA_SEARCH[1]
 
 
 def test_bad_bounds_are_refused():

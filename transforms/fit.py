@@ -463,7 +463,12 @@ class _Problem:
                 pole = axes[1] + x[0] * axes[0] + x[1] * axes[2]
                 rotation = Frame.from_pole_up(pole, axes[2]).rotation
                 x = x[2:]
-            sigma = math.exp(x[0]) if change_sigma else start.sigma
+            low, high = SIGMA_SEARCH  # a flat landscape must not drift beyond the search
+            sigma = (
+                math.exp(min(max(x[0], math.log(low)), math.log(high)))
+                if change_sigma
+                else start.sigma
+            )
             return _Candidate(center, rotation, sigma)
 
         def cost(x: np.ndarray) -> float:

@@ -128,7 +128,8 @@ def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
     normals = np.ascontiguousarray(normals.T)
     spread_weighted = spread * weights
     _, axes = np.linalg.eigh(spread_weighted @ spread.T)
-    size = float(np.sqrt((spread * spread).sum(axis=0).max()))
+    reach = corners[:, :, keep] - middle[:, None, None]  # every corner, not only centroids
+    size = float(np.sqrt((reach * reach).sum(axis=0).max()))
     closing_normals, closing_offsets = _closing_planes(vertices, faces, winding)
     return KernelPlanes(
         normals=np.concatenate([normals, closing_normals]),
@@ -189,23 +190,36 @@ def chebyshev_center(planes: KernelPlanes) -> Kernel:
     faces; the Chebyshev one adds the faces its answer violates and solves again until its
     answer holds for all faces.
     """
-    k = len(planes.normals)
     j = len(planes.faces)
-    closing = np.arange(j, k)
-    rows = np.concatenate([area_sample(planes.areas[:j], _FIRST_FACES), closing])
-    for _ in range(_ROUNDS):
-        center, radius = _deepest(planes, rows)
-        if radius <= 1e-12 * planes.size:
-            break
-        slack = planes.offsets - planes.normals @ center - radius
-        violated = np.flatnonzero(slack < -1e-9 * planes.size)
-        if violated.size == 0:
+    # A flat or nearly flat region's closing planes leave no room: its own half-spaces (and
+    # the box) then make the kernel.
+    for count in (len(planes.normals), j):
+        found = _chebyshev(planes, count)
+        if found is not None:
+            center, radius = found
             return Kernel(center=center, inscribed_radius=radius, empty=False, planes=planes)
-        worst = violated[np.argsort(slack[violated], kind="stable")[:_ADDED_FACES]]
-        rows = np.union1d(rows, worst)
     return Kernel(
         center=_least_backfacing_area(planes), inscribed_radius=0.0, empty=True, planes=planes
     )
+
+
+def _chebyshev(planes: KernelPlanes, count: int) -> tuple[np.ndarray, float] | None:
+    """The largest ball inside the first ``count`` planes (faces first, then the closing
+    ones) and the box, by constraint generation; None when there is none."""
+    j = len(planes.faces)
+    rows = np.concatenate([area_sample(planes.areas[:j], _FIRST_FACES), np.arange(j, count)])
+    normals, offsets = planes.normals[:count], planes.offsets[:count]
+    for _ in range(_ROUNDS):
+        center, radius = _deepest(planes, rows)
+        if radius <= 1e-12 * planes.size:
+            return None
+        slack = offsets - normals @ center - radius
+        violated = np.flatnonzero(slack < -1e-9 * planes.size)
+        if violated.size == 0:
+            return center, radius
+        worst = violated[np.argsort(slack[violated], kind="stable")[:_ADDED_FACES]]
+        rows = np.union1d(rows, worst)
+    return None
 
 
 def _least_backfacing_area(planes: KernelPlanes) -> np.ndarray:

@@ -407,10 +407,16 @@ def locate_answer(body: bytes, content_type: str, settings: Settings) -> Respons
             frame = checked(lambda: frame_of(params, center))
         directions = checked(lambda: chart.inverse(params.theta, params.phi, 1.0))
         region = mesh.faces[faces]
+        used = np.flatnonzero(np.bincount(region.ravel(), minlength=len(mesh.vertices)))
+        position = np.empty(len(mesh.vertices), dtype=np.int64)
+        position[used] = np.arange(len(used))
         try:
-            hits = locate(frame.to_local(mesh.vertices), region, directions)
+            hits = locate(frame.to_local(mesh.vertices[used]), position[region], directions)
         except TransformInputError as error:
-            raise _mesh_error(error) from None
+            # Name the file's vertex ids, not the region's.
+            ids = used[list(error.indices)].tolist()
+            detail = f"mesh: vertex {ids[0]} is at the centre (no direction)" if ids else str(error)
+            raise Problem(422, detail, "invalid-input", "mesh", ids) from None
         found = hits.faces >= 0
         world = frame.to_world(np.where(found[:, None], hits.points, 0.0))
         ids = np.where(found, faces[np.maximum(hits.faces, 0)], -1).tolist()

@@ -60,6 +60,11 @@ class ChartParams(_Strict):
 
     @model_validator(mode="after")
     def _one_cap(self) -> ChartParams:
+        if self.sigma == "auto" and self.pole_angle_deg is not None:
+            raise ValueError(
+                'sigma, pole_angle_deg: sigma "auto" chooses the cap, so pole_angle_deg '
+                "cannot be given too"
+            )
         if self.sigma is not None and self.pole_angle_deg is not None:
             # Both, as an answer's params hold them, are fine when they name the same cap.
             agree = isinstance(self.sigma, float) and math.isclose(

@@ -342,3 +342,68 @@ async def test_mercator_through_the_api(client):
     paper = (await post(client, "/v1/flatten", {**params, "layout": "theta_phi"})).json()
     assert "x" not in paper["vertices"]
     assert body["metrics"]["conformal"]["mean"] < paper["metrics"]["conformal"]["mean"]
+
+
+# -- found by probing --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_turned_flat_region_is_never_answered_worse_than_the_start(seed):
+    vertices, faces = grid_mesh(np.arange(7.0), np.arange(4.0), 0.0)
+    turned = vertices @ Rotation.random(random_state=seed).as_matrix().T
+    fit = fit_region(turned, faces)
+    e = fit.explanation
+    assert e.energy_end <= e.energy_start + 1e-12
+    assert fit.region.validation.seam_free and e.margin_deg >= 2.0
+
+
+@pytest.mark.parametrize("scale", [1e90, 1e-100])
+def test_huge_and_tiny_coordinates(scale):
+    tetrahedron = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float) * scale
+    faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    fit = fit_region(tetrahedron, faces)
+    assert not fit.explanation.kernel_empty
+    np.testing.assert_allclose(
+        fit.explanation.kernel_inscribed_radius, scale / (3 + math.sqrt(3)), rtol=1e-9
+    )
+    assert np.isfinite(fit.region.theta).all() and np.isfinite(fit.explanation.energy_end)
+
+
+def test_a_margin_larger_than_the_starting_cap_is_still_kept(fsaverage_fit):
+    vertices, faces, _ = fsaverage_fit
+    fit = fit_region(vertices, faces, min_margin_deg=60.0)
+    assert fit.explanation.margin_deg >= 60.0 or any("below" in n for n in fit.explanation.notes)
+    assert not any("closed" in note for note in fit.explanation.notes)
+
+
+def test_a_closed_region_gets_the_sigma_of_least_energy():
+    vertices, faces = sphere_mesh(8, 12)
+    fit = fit_region(vertices * 3.0, faces, center=[0.0, 0.0, 0.0])
+    e = fit.explanation
+    assert any("closed" in note for note in e.notes)
+    assert e.energy_end <= min(e.energy_at_sigma.values()) + 1e-9
+
+
+def test_an_up_hint_along_the_chosen_pole_falls_back_to_the_rule(fsaverage_fit):
+    vertices, faces, fit = fsaverage_fit
+    # The pole the search starts from, seen from that centre.
+    directions = vertices[np.unique(faces)] - fit.frame.center
+    pole, _ = largest_empty_cap(directions / np.linalg.norm(directions, axis=1)[:, None])
+    hinted = fit_region(vertices, faces, center=fit.frame.center, up=pole)
+    assert any("parallel" in note for note in hinted.explanation.notes)
+
+
+@pytest.mark.anyio
+async def test_locate_ignores_vertices_outside_the_region(client):
+    obj = b"v 0 0 1\nv 1 0 1\nv 0 1 1\nv 0 0 0\nf 1 2 3\n"
+    params = {"center": [0, 0, 0], "theta": [0.1], "phi": [0.5]}
+    answer = await client.post(
+        "/v1/locate", files={"mesh": ("t.obj", obj)}, data={"params": json.dumps(params)}
+    )
+    assert answer.status_code == 200, answer.text
+    obj = b"v 0 0 0\nv 1 0 1\nv 0 1 1\nf 1 2 3\n"  # now the region's own vertex 0
+    answer = await client.post(
+        "/v1/locate", files={"mesh": ("t.obj", obj)}, data={"params": json.dumps(params)}
+    )
+    assert answer.status_code == 422 and answer.json()["indices"] == [0], answer.text
+    assert "vertex 0" in answer.json()["detail"]

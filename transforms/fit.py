@@ -56,6 +56,8 @@ _SLIDE = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)
 _SIGMA_GRID = 17
 _GOLDEN_STEPS = 14
 _TIE = 1e-9
+#: Below this sine of the angle between the up hint and the chosen pole, the hint is ignored.
+_PARALLEL = 1e-6
 #: Sigmas whose energy the explanation reports.
 REPORTED_SIGMAS = (0.3, 1.0)
 
@@ -177,24 +179,34 @@ def fit_region(
     if rotation is None:
         hull_rows = np.linspace(0, len(directions) - 1, min(HULL_VERTICES, len(directions)))
         pole, _ = largest_empty_cap(directions[hull_rows.astype(np.int64)])
-        up = roll_axis(directions, pole) if up is None else as_vector(up, "up")
+        if up is not None:
+            up = as_vector(up, "up")
+            length = float(np.linalg.norm(up))
+            if length > 0 and np.linalg.norm(np.cross(up / length, pole)) < _PARALLEL:
+                notes.append(
+                    "the up hint is parallel to the chosen pole, so it fixes no roll: the "
+                    "roll follows the region's widest spread instead"
+                )
+                up = None
+        if up is None:
+            up = roll_axis(directions, pole)
         start_rotation = Frame.from_pole_up(pole, up).rotation
     else:
         start_rotation = rotation.rotation
         pole = start_rotation[1]
     margin = math.radians(min_margin_deg)
-    room = cap_radius(directions, pole) - margin
-    if room <= 0.0:
-        # A closed region, or one with no opening wider than the margin: no cap fits, so the
-        # margin cannot be kept; sigma then only minimises the energy.
+    if problem.closed:
+        # A closed region seen from inside covers every direction: no cap fits, no margin can
+        # be kept, and sigma only minimises the energy.
         notes.append(
-            "no cap free of the region's directions is wider than min_margin_deg: the region "
-            "cannot be seam-free from this centre, and sigma minimises the energy alone"
+            "the region is closed (no boundary): it covers every direction seen from inside, "
+            "so it cannot be seam-free, and sigma minimises the energy alone"
         )
         margin = None
+    room = math.pi if margin is None else cap_radius(directions, pole) - margin
 
     if choose_sigma:
-        sigma = problem.best_sigma(center, start_rotation, math.pi if margin is None else room)
+        sigma = problem.best_sigma(center, start_rotation, room)
     start = initial = _Candidate(center, start_rotation, sigma)
     if move_center:
         # The energy has shallow local minima near the deepest point; look along the pole
@@ -220,6 +232,15 @@ def fit_region(
         if not _margin_deg(tried) > margin_deg:
             break  # the region covers the pole itself: a smaller cap does not help
         best, flat, margin_deg = smaller, tried, _margin_deg(tried)
+    energy_start = None
+    if any(free):
+        first = problem.flatten(initial)
+        energy_start = first.distortion.isometric.mean
+        # The search saw a sample; on every face the start may still be the better answer.
+        first_margin = _margin_deg(first)
+        keeps_margin = margin is None or first_margin >= min(margin_deg, min_margin_deg)
+        if energy_start < flat.distortion.isometric.mean and keeps_margin:
+            best, flat, margin_deg = initial, first, first_margin
     if margin is not None and margin_deg < min_margin_deg:
         notes.append(
             f"the margin to the seam and the singular points is {margin_deg:.3g} degrees, "
@@ -232,7 +253,6 @@ def fit_region(
             f"({min_kernel_depth:g} of the inscribed radius {kernel.inscribed_radius:.4g})"
         )
 
-    energy_start = problem.flatten(initial).distortion.isometric.mean if any(free) else None
     energy_end = flat.distortion.isometric.mean
     energy_at_sigma = {}
     if method is not Method.STANDARD:
@@ -313,6 +333,18 @@ class _Problem:
         self.sample_used, compact = np.unique(sample, return_inverse=True)
         self.sample_faces = compact.reshape(-1, 3)
         self.sample_points = points[self.sample_used]
+
+    @property
+    def closed(self) -> bool:
+        """Whether the region has no boundary (no closing planes)."""
+        return len(self.planes.normals) == len(self.planes.faces)
+
+    def within_reach(self, center: np.ndarray, slack: bool = False):
+        """Whether ``center`` is within ``_REACH`` region sizes of the region's middle (far
+        away every region looks flat); with ``slack``, by how much (negative: beyond)."""
+        away = float(np.linalg.norm(center - self.planes.middle))
+        room = _REACH * self.planes.size - away
+        return room if slack else room >= 0.0
 
     def chart(self, sigma: float | None) -> Chart:
         if self.method is Method.STANDARD:
@@ -411,7 +443,7 @@ class _Problem:
         best, best_energy = start, self.energy(start)
         for steps in _SLIDE:
             center = start.center + steps * kernel.inscribed_radius * pole
-            if self.planes.depth(center) < min_depth:
+            if self.planes.depth(center) < min_depth or not self.within_reach(center):
                 break
             try:
                 room = cap_radius(self.directions(center), pole) - (margin or 0.0)
@@ -476,9 +508,7 @@ class _Problem:
             penalty = 0.0
             if move_center:
                 penalty += max(0.0, min_depth - depth(c.center)) / unit
-                # Far away every region looks flat: stay within a few region sizes.
-                away = float(np.linalg.norm(c.center - self.planes.middle))
-                penalty += max(0.0, away - _REACH * self.planes.size) / unit
+                penalty += max(0.0, -self.within_reach(c.center, slack=True)) / unit
             units, zero = unit_rows(region - c.center)
             if zero.any():
                 return math.inf

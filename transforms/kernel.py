@@ -14,6 +14,7 @@ with the faces it violates added until it holds for every face.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +50,7 @@ class KernelPlanes:
     winding : +1 when the file's triangles wind outward, -1 when they were flipped
     size : float, the region's bounding radius (the box's half-width)
     middle : (3,) float, the area-weighted centroid of the region
+    box_middle : (3,) float, the centre of its bounding box
     axes : (3, 3) float, the region's inertia axes (rows)
     """
 
@@ -59,6 +61,7 @@ class KernelPlanes:
     winding: int
     size: float
     middle: np.ndarray
+    box_middle: np.ndarray
     axes: np.ndarray
 
     def depth(self, center: np.ndarray) -> float:
@@ -105,7 +108,12 @@ def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
     TransformInputError
         Every face is degenerate.
     """
-    rows = np.ascontiguousarray(vertices.T)
+    # In units where the largest coordinate is below 1 (a power of two: exact), so that no
+    # square or product of coordinates over- or underflows; the planes are scaled back.
+    largest = float(np.abs(vertices).max())
+    scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
+    scaled = vertices * scale
+    rows = np.ascontiguousarray(scaled.T)
     ids = np.ascontiguousarray(faces.T)
     corners = np.stack([np.take(rows[axis], ids) for axis in range(3)])  # (axis, corner, m)
     e1 = corners[:, 1] - corners[:, 0]
@@ -130,15 +138,16 @@ def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
     _, axes = np.linalg.eigh(spread_weighted @ spread.T)
     reach = corners[:, :, keep] - middle[:, None, None]  # every corner, not only centroids
     size = float(np.sqrt((reach * reach).sum(axis=0).max()))
-    closing_normals, closing_offsets = _closing_planes(vertices, faces, winding)
+    closing_normals, closing_offsets = _closing_planes(scaled, faces, winding)
     return KernelPlanes(
         normals=np.concatenate([normals, closing_normals]),
-        offsets=np.concatenate([offsets, closing_offsets]),
-        areas=np.concatenate([0.5 * weights, np.zeros(len(closing_offsets))]),
+        offsets=np.concatenate([offsets, closing_offsets]) / scale,
+        areas=np.concatenate([0.5 * weights, np.zeros(len(closing_offsets))]) / scale**2,
         faces=keep,
         winding=winding,
-        size=size,
-        middle=middle,
+        size=size / scale,
+        middle=middle / scale,
+        box_middle=(corners.min(axis=(1, 2)) + corners.max(axis=(1, 2))) / (2.0 * scale),
         axes=axes.T,
     )
 
@@ -225,12 +234,12 @@ def _chebyshev(planes: KernelPlanes, count: int) -> tuple[np.ndarray, float] | N
 def _least_backfacing_area(planes: KernelPlanes) -> np.ndarray:
     """A centre leaving little back-facing area: the minimiser of the area-weighted distance
     by which faces are seen from behind, then of the same reweighted by one over each face's
-    distance (which approaches the area itself); the best of these and the region's middle,
-    by the back-facing area over all faces."""
+    distance (which approaches the area itself); the best of these, the region's middle and
+    its box's centre, by the back-facing area over all faces."""
     j = len(planes.faces)
     rows = area_sample(planes.areas[:j], _EMPTY_KERNEL_FACES)
     weights = planes.areas[rows]
-    candidates = [planes.middle]
+    candidates = [planes.middle, planes.box_middle]
     for _ in range(_REWEIGHTING_ROUNDS):
         center = _least_backfacing(planes, rows, weights)
         candidates.append(center)

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .arrays import as_faces, as_points, unit_rows
-from .errors import TransformInputError
+from .errors import TransformInputError, listed_rows
 
 #: Neighbours asked of a tree per query at first; doubled where that many are within reach.
 _FIRST_NEIGHBOURS = 8
@@ -69,9 +69,11 @@ def locate(vertices_local, faces, directions) -> Hits:
         raise TransformInputError("directions", "a direction is zero", np.flatnonzero(zero))
     corner_units, at_centre = unit_rows(points)
     if at_centre.any():
-        raise TransformInputError(
-            "vertices", "a vertex is at the centre", np.flatnonzero(at_centre)
-        )
+        used = np.zeros(len(points), dtype=bool)
+        used[faces.ravel()] = True
+        if (at_centre & used).any():  # a vertex no triangle uses may be anywhere
+            text, rows = listed_rows(at_centre & used, "vertex")
+            raise TransformInputError("vertices", f"{text}: at the centre, no direction", rows)
     k = len(rays)
     hit_face = np.full(k, -1, dtype=np.int64)
     hit_depth = np.full(k, np.inf)

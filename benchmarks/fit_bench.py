@@ -23,7 +23,6 @@ import datetime
 import math
 import statistics
 import sys
-import time
 from collections.abc import Callable
 from importlib.metadata import version
 
@@ -33,7 +32,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from benchmarks.docs import record
-from benchmarks.transforms_bench import machine, subdivided
+from benchmarks.transforms_bench import machine, subdivided, timed
 from service.allocator import keep_large_blocks
 from transforms import Chart, Frame, PoleCap, fit_region, flatten_region, locate
 from transforms.faces import measure_faces
@@ -108,15 +107,16 @@ def lscm(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return found[0] if isinstance(found, tuple) else found
 
 
-def timed(work: Callable[[], object], runs: int, warm_up: bool = True) -> tuple[float, object]:
-    """Median seconds of ``runs`` calls (after a warm-up call), and the last result."""
-    result = work() if warm_up else None
-    times = []
-    for _ in range(runs):
-        start = time.perf_counter()
-        result = work()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), result
+def timed_with_result(
+    work: Callable[[], object], runs: int, warm_up: bool = True
+) -> tuple[float, object]:
+    """Median seconds of ``runs`` calls (:func:`transforms_bench.timed`) and the last result."""
+    last = [None]
+
+    def call() -> None:
+        last[0] = work()
+
+    return statistics.median(timed(call, runs, warm_up)), last[0]
 
 
 def region_rows(title: str, vertices: np.ndarray, faces: np.ndarray, runs: int) -> list[str]:
@@ -124,20 +124,24 @@ def region_rows(title: str, vertices: np.ndarray, faces: np.ndarray, runs: int) 
     frame = Frame.from_pole_up([0, 0, -1], [0, 1, 0], (vertices.min(0) + vertices.max(0)) / 2)
     chart = Chart.distorted(PoleCap.from_sigma(0.3))
     progress(f"{title}: meshflat")
-    fixed_time, fixed = timed(lambda: flatten_region(vertices, faces, frame, chart), runs)
+    fixed_time, fixed = timed_with_result(
+        lambda: flatten_region(vertices, faces, frame, chart), runs
+    )
     # Also on both cores (MESHFLAT_THREADS=2); libigl's solvers use one.
-    fixed_two_time, _ = timed(
+    fixed_two_time, _ = timed_with_result(
         lambda: flatten_region(vertices, faces, frame, chart, threads=2), runs
     )
-    fit_time, fit = timed(lambda: fit_region(vertices, faces), runs)
+    fit_time, fit = timed_with_result(lambda: fit_region(vertices, faces), runs)
     # The peers take tens of seconds (LSCM minutes) on the large region: no warm-up there,
     # and LSCM once.
     large = len(faces) >= 1_000_000
     progress(f"{title}: harmonic")
-    harmonic_time, harmonic_uv = timed(lambda: harmonic(vertices, faces), runs, not large)
+    harmonic_time, harmonic_uv = timed_with_result(
+        lambda: harmonic(vertices, faces), runs, not large
+    )
     progress(f"{title}: LSCM")
     lscm_runs = 1 if large else runs
-    lscm_time, lscm_uv = timed(lambda: lscm(vertices, faces), lscm_runs, not large)
+    lscm_time, lscm_uv = timed_with_result(lambda: lscm(vertices, faces), lscm_runs, not large)
     rng = np.random.default_rng(0)
     picked = rng.integers(0, len(faces), QUERIES)
     weights = rng.dirichlet([1.0, 1.0, 1.0], QUERIES)
@@ -145,7 +149,7 @@ def region_rows(title: str, vertices: np.ndarray, faces: np.ndarray, runs: int) 
     local = fit.frame.to_local(vertices)
     theta, phi, _ = fit.chart.forward(fit.frame.to_local(points))
     directions = fit.chart.inverse(theta, phi, 1.0)
-    locate_time, hits = timed(lambda: locate(local, faces, directions), runs)
+    locate_time, hits = timed_with_result(lambda: locate(local, faces, directions), runs)
     assert (hits.faces == picked).all(), "locate did not invert flatten"
     harmonic_energy = layout_energy(vertices, faces, harmonic_uv)
     lscm_energy = layout_energy(vertices, faces, lscm_uv)

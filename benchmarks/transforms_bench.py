@@ -107,9 +107,10 @@ def cases(subdivisions: int) -> list[Case]:
     ]
 
 
-def timed(work: Callable[[], object], runs: int) -> list[float]:
-    """Seconds per call for ``runs`` calls after one warm-up call."""
-    work()
+def timed(work: Callable[[], object], runs: int, warm_up: bool = True) -> list[float]:
+    """Seconds per call for ``runs`` calls (after one warm-up call)."""
+    if warm_up:
+        work()
     times = []
     for _ in range(runs):
         start = time.perf_counter()

@@ -15,7 +15,6 @@ from starlette.responses import Response
 
 from transforms import (
     Layout,
-    PoleCap,
     TransformInputError,
     angles_to_world,
     fit_region,
@@ -28,7 +27,6 @@ from .encoding import Timings, json_response
 from .meshio import Mesh, MeshFormatError, format_of, read_mesh
 from .multipart import parse_form
 from .params import (
-    DEFAULT_SIGMA,
     MESH_PARAMS_EXAMPLE,
     AutoPole,
     FitParams,
@@ -391,32 +389,12 @@ def locate_answer(body: bytes, content_type: str, settings: Settings) -> Respons
         _check_count(len(params.theta), settings.max_points, "params.theta")
     with timings.measure("compute"):
         faces, center = region_faces(mesh, params)
-        if params.auto:
-            try:
-                fit = fit_region(
-                    mesh.vertices,
-                    mesh.faces[faces],
-                    threads=settings.threads,
-                    **_fit_arguments(params, center),
-                )
-            except TransformInputError as error:
-                raise _mesh_error(error) from None
-            chart, frame = fit.chart, fit.frame
-        else:
-            chart = checked(lambda: chart_of(params))
-            frame = checked(lambda: frame_of(params, center))
+        chart, frame, _ = _chart_frame_fit(mesh, faces, center, params, settings)
         directions = checked(lambda: chart.inverse(params.theta, params.phi, 1.0))
-        region = mesh.faces[faces]
-        used = np.flatnonzero(np.bincount(region.ravel(), minlength=len(mesh.vertices)))
-        position = np.empty(len(mesh.vertices), dtype=np.int64)
-        position[used] = np.arange(len(used))
-        try:
-            hits = locate(frame.to_local(mesh.vertices[used]), position[region], directions)
+        try:  # every vertex given, so that an error names the file's vertex ids
+            hits = locate(frame.to_local(mesh.vertices), mesh.faces[faces], directions)
         except TransformInputError as error:
-            # Name the file's vertex ids, not the region's.
-            ids = used[list(error.indices)].tolist()
-            detail = f"mesh: vertex {ids[0]} is at the centre (no direction)" if ids else str(error)
-            raise Problem(422, detail, "invalid-input", "mesh", ids) from None
+            raise _mesh_error(error) from None
         found = hits.faces >= 0
         world = frame.to_world(np.where(found[:, None], hits.points, 0.0))
         ids = np.where(found, faces[np.maximum(hits.faces, 0)], -1).tolist()
@@ -479,34 +457,48 @@ def _mesh_params(form, model: type[MeshParams]) -> MeshParams:
 
 
 #: Core errors about these inputs are the parameters' fault; any other is the file's.
-_PARAMETER_FIELDS = {"center", "up", "pole", "rotation", "sigma", "min_kernel_depth"}
+_PARAMETER_FIELDS = {
+    "center",
+    "up",
+    "pole",
+    "rotation",
+    "sigma",
+    "min_kernel_depth",
+    "min_margin_deg",
+}
 
 
 def _mesh_error(error: TransformInputError) -> Problem:
-    if error.field in _PARAMETER_FIELDS | {"min_margin_deg"}:
+    if error.field in _PARAMETER_FIELDS:
         return from_transform_error(error, "params.")
     return Problem(422, f"mesh: {error.message}", "invalid-input", "mesh", error.indices)
 
 
+def _chart_frame_fit(mesh: Mesh, faces: np.ndarray, center, params: MeshParams, settings):
+    """The chart and frame the parameters name, fitted (with the fit) where any is "auto"."""
+    if not params.auto:
+        chart = checked(lambda: chart_of(params))
+        return chart, checked(lambda: frame_of(params, center)), None
+    try:
+        fit = fit_region(
+            mesh.vertices,
+            mesh.faces[faces],
+            threads=settings.threads,
+            **_fit_arguments(params, center),
+        )
+    except TransformInputError as error:
+        raise _mesh_error(error) from None
+    return fit.chart, fit.frame, fit
+
+
 def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: bool) -> dict:
-    fitting = isinstance(params, FitParams) or params.auto
     faces, center = region_faces(mesh, params)
+    chart, frame, fit = _chart_frame_fit(mesh, faces, center, params, settings)
     explain = None
-    if fitting:
-        try:
-            fit = fit_region(
-                mesh.vertices,
-                mesh.faces[faces],
-                threads=settings.threads,
-                **_fit_arguments(params, center),
-            )
-        except TransformInputError as error:
-            raise _mesh_error(error) from None
-        flat, chart, frame = fit.region, fit.chart, fit.frame
+    if fit is not None:
+        flat = fit.region
         explain = _explain(fit.explanation, faces) if isinstance(params, FitParams) else None
     else:
-        chart = checked(lambda: chart_of(params))
-        frame = checked(lambda: frame_of(params, center))
         try:
             flat = flatten_region(
                 mesh.vertices,
@@ -566,26 +558,20 @@ def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: b
 
 def _fit_arguments(params: MeshParams, center) -> dict:
     """What :func:`transforms.fit_region` is given: the fixed parameters, None for the
-    chosen ones (in /v1/fit, also those not given)."""
-    fitting_all = isinstance(params, FitParams)
-    choose_center = params.center == "auto"
+    chosen ones."""
     rotation, up = params.rotation, None
-    if rotation == "auto" or (fitting_all and rotation is None):
+    if rotation == "auto":
         rotation = None
     elif isinstance(rotation, AutoPole):
         rotation, up = None, rotation.up
     else:
         rotation = checked(lambda: frame_of(params, np.zeros(3)))
-    sigma = params.sigma
-    if params.pole_angle_deg is not None and sigma is None:
-        sigma = checked(lambda: PoleCap.from_rho_deg(params.pole_angle_deg).sigma)
-    elif sigma == "auto" or (sigma is None and fitting_all):
-        sigma = None
-    elif sigma is None and params.method != "standard":
-        sigma = DEFAULT_SIGMA
+    sigma = None
+    if params.sigma != "auto" and params.method != "standard":
+        sigma = checked(lambda: chart_of(params)).cap.sigma  # given, or the default
     return {
         "method": params.method,
-        "center": None if choose_center else center,
+        "center": None if params.center == "auto" else center,
         "rotation": rotation,
         "up": up,
         "sigma": sigma,

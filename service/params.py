@@ -277,6 +277,20 @@ class FitParams(MeshParams):
         json_schema_extra={"examples": [{"region": MESH_PARAMS_EXAMPLE["region"]}]}
     )
 
+    @model_validator(mode="after")
+    def _choose_what_is_not_given(self) -> FitParams:
+        if self.rotation is None:
+            self.rotation = "auto"
+        if self.sigma is None and self.pole_angle_deg is None and self.method != "standard":
+            self.sigma = "auto"
+        return self
+
+    @property
+    def auto(self) -> bool:
+        """Always: /v1/fit answers through the fit (and its explanation) even when the caller
+        fixed all three."""
+        return True
+
 
 # -- resolution ------------------------------------------------------------------------
 

@@ -116,6 +116,21 @@ def measure_faces(
         theta = np.ascontiguousarray(layout_theta, dtype=np.float64)
         if theta.shape != phi.shape or not np.isfinite(theta).all():
             raise TransformInputError("layout_theta", "must be finite, one value per vertex")
+    return measure_checked(vertices, faces, theta, phi, cap, threads)
+
+
+def measure_checked(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    theta: np.ndarray,
+    phi: np.ndarray,
+    cap: PoleCap,
+    threads: int = 1,
+) -> FaceMeasures:
+    """:func:`measure_faces` on input already checked: ``vertices`` (n, 3) C-contiguous
+    finite float64, ``faces`` (m >= 1, 3) C-contiguous indices in range, ``theta`` (the
+    layout's second coordinate) and ``phi`` (n,) finite float64. For callers that made them
+    (:func:`.region.flatten_region`), so that nothing is checked twice."""
     largest = float(np.abs(vertices).max())
     scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
     rows = np.ascontiguousarray(vertices.T)

@@ -32,7 +32,7 @@ from .cap import PoleCap
 from .chart import Chart, Method
 from .emptycap import cap_radius, largest_empty_cap
 from .errors import TransformInputError
-from .faces import measure_faces
+from .faces import measure_checked
 from .frames import Frame
 from .kernel import Kernel, chebyshev_center, kernel_planes
 from .layouts import Layout, measured_second
@@ -322,17 +322,15 @@ class _Problem:
     ):
         self.points, self.faces, self.method, self.threads = points, faces, method, threads
         self.layout = layout
-        used = np.zeros(len(points), dtype=bool)
-        used[faces.ravel()] = True
-        self.used = np.flatnonzero(used)
+        self.used = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(points)))
         self.region_points = points[self.used]
         self.planes = kernel_planes(points, faces)
         areas = np.zeros(len(faces))
         areas[self.planes.faces] = self.planes.areas[: len(self.planes.faces)]
         sample = faces[area_sample(areas, SAMPLE_FACES)]
-        self.sample_used, compact = np.unique(sample, return_inverse=True)
+        sample_used, compact = np.unique(sample, return_inverse=True)
         self.sample_faces = compact.reshape(-1, 3)
-        self.sample_points = points[self.sample_used]
+        self.sample_points = points[sample_used]
 
     @property
     def closed(self) -> bool:
@@ -381,7 +379,7 @@ class _Problem:
             local = frame.to_local(self.sample_points)
             theta, phi, _ = chart.forward(local)
             second = measured_second(theta, self.layout)
-            measures = measure_faces(local, self.sample_faces, theta, phi, chart.cap, 1, second)
+            measures = measure_checked(local, self.sample_faces, second, phi, chart.cap)
             return float(distortion(measures).isometric.mean)
         except TransformInputError:
             return math.inf
@@ -446,11 +444,10 @@ class _Problem:
             if self.planes.depth(center) < min_depth or not self.within_reach(center):
                 break
             try:
-                room = cap_radius(self.directions(center), pole) - (margin or 0.0)
-            except TransformInputError:
+                directions = self.directions(center)
+            except TransformInputError:  # the centre met a vertex
                 break
-            if margin is None:
-                room = math.pi
+            room = math.pi if margin is None else cap_radius(directions, pole) - margin
             sigma = self.best_sigma(center, start.rotation, room) if choose_sigma else start.sigma
             candidate = _Candidate(center, start.rotation, sigma)
             energy = self.energy(candidate)

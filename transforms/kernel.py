@@ -34,6 +34,8 @@ _ROUNDS = 30
 #: Faces in the least-back-facing programs when the kernel is empty, and their rounds.
 _EMPTY_KERNEL_FACES = 4096
 _REWEIGHTING_ROUNDS = 3
+#: The box around the region, as the solver's bounds on the frame coordinates (``_in_frame``).
+_IN_THE_BOX = [(-1.0, 1.0)] * 3
 
 
 @dataclass(frozen=True)
@@ -47,7 +49,6 @@ class KernelPlanes:
     offsets : (k,) float
     areas : (k,) float, face areas (0 for the closing planes)
     faces : (j,) int, which face of the region each of the first ``j`` planes is
-    winding : +1 when the file's triangles wind outward, -1 when they were flipped
     size : float, the region's bounding radius (the box's half-width)
     middle : (3,) float, the area-weighted centroid of the region
     box_middle : (3,) float, the centre of its bounding box
@@ -58,7 +59,6 @@ class KernelPlanes:
     offsets: np.ndarray
     areas: np.ndarray
     faces: np.ndarray
-    winding: int
     size: float
     middle: np.ndarray
     box_middle: np.ndarray
@@ -70,10 +70,10 @@ class KernelPlanes:
         j = len(self.faces)
         return float((self.offsets[:j] - self.normals[:j] @ center).min())
 
-    def backfacing(self, center: np.ndarray) -> np.ndarray:
-        """Region face positions whose plane ``center`` is not strictly inside of."""
+    def backfacing_area(self, center: np.ndarray) -> float:
+        """Area of the faces whose plane ``center`` is not strictly inside of."""
         j = len(self.faces)
-        return self.faces[self.offsets[:j] - self.normals[:j] @ center <= 0.0]
+        return float(self.areas[:j][self.offsets[:j] - self.normals[:j] @ center <= 0.0].sum())
 
 
 @dataclass(frozen=True)
@@ -86,13 +86,11 @@ class Kernel:
         leaves the least area-weighted back-facing distance
     inscribed_radius : float, radius of the largest ball in the kernel (0 when empty)
     empty : bool
-    planes : KernelPlanes
     """
 
     center: np.ndarray
     inscribed_radius: float
     empty: bool
-    planes: KernelPlanes
 
 
 def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
@@ -144,7 +142,6 @@ def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
         offsets=np.concatenate([offsets, closing_offsets]) / scale,
         areas=np.concatenate([0.5 * weights, np.zeros(len(closing_offsets))]) / scale**2,
         faces=keep,
-        winding=winding,
         size=size / scale,
         middle=middle / scale,
         box_middle=(corners.min(axis=(1, 2)) + corners.max(axis=(1, 2))) / (2.0 * scale),
@@ -206,10 +203,8 @@ def chebyshev_center(planes: KernelPlanes) -> Kernel:
         found = _chebyshev(planes, count)
         if found is not None:
             center, radius = found
-            return Kernel(center=center, inscribed_radius=radius, empty=False, planes=planes)
-    return Kernel(
-        center=_least_backfacing_area(planes), inscribed_radius=0.0, empty=True, planes=planes
-    )
+            return Kernel(center=center, inscribed_radius=radius, empty=False)
+    return Kernel(center=_least_backfacing_area(planes), inscribed_radius=0.0, empty=True)
 
 
 def _chebyshev(planes: KernelPlanes, count: int) -> tuple[np.ndarray, float] | None:
@@ -245,69 +240,51 @@ def _least_backfacing_area(planes: KernelPlanes) -> np.ndarray:
         candidates.append(center)
         behind = np.maximum(planes.normals[rows] @ center - planes.offsets[rows], 0.0)
         weights = planes.areas[rows] / (behind + 1e-3 * planes.size)
-
-    def backfacing_area(center: np.ndarray) -> float:
-        behind = planes.offsets[:j] - planes.normals[:j] @ center <= 0.0
-        return float(planes.areas[:j][behind].sum())
-
-    return min(candidates, key=backfacing_area)
+    return min(candidates, key=planes.backfacing_area)
 
 
-def _box(planes: KernelPlanes) -> tuple[np.ndarray, np.ndarray]:
-    """Half-spaces of the box ``|axes @ (c - middle)| <= size`` around the region."""
-    normals = np.concatenate([planes.axes, -planes.axes])
-    return normals, normals @ planes.middle + planes.size
+def _in_frame(planes: KernelPlanes, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The planes ``rows`` in the region's inertia frame, lengths in units of its size (the
+    solver's tolerances are relative): ``local @ x <= scaled`` for ``c = middle + size x @
+    axes``. In that frame the box around the region is ``|x_i| <= 1``: the solver's bounds."""
+    normals = planes.normals[rows]
+    return normals @ planes.axes.T, (planes.offsets[rows] - normals @ planes.middle) / planes.size
+
+
+def _from_frame(planes: KernelPlanes, x: np.ndarray) -> np.ndarray:
+    """World point of frame coordinates ``x`` (3,)."""
+    return planes.middle + planes.size * (x[:3] @ planes.axes)
 
 
 def _deepest(planes: KernelPlanes, rows: np.ndarray) -> tuple[np.ndarray, float]:
     """Centre and radius of the largest ball inside the planes ``rows`` and the box."""
-    box_normals, box_offsets = _box(planes)
-    normals = np.concatenate([planes.normals[rows], box_normals])
-    offsets = np.concatenate([planes.offsets[rows], box_offsets])
-    # In the region's frame, scaled by its size: the solver's tolerances are relative.
-    local = normals @ planes.axes.T
-    scaled = (offsets - normals @ planes.middle) / planes.size
-    ball = np.concatenate([np.ones(len(rows)), np.zeros(len(box_offsets))])
+    local, scaled = _in_frame(planes, rows)
     found = linprog(
         c=[0.0, 0.0, 0.0, -1.0],
-        A_ub=np.column_stack([local, ball]),
+        A_ub=np.column_stack([local, np.ones(len(rows))]),
         b_ub=scaled,
-        bounds=[(None, None)] * 3 + [(None, 2.0)],
+        bounds=[*_IN_THE_BOX, (None, 2.0)],
         method="highs",
     )
     if found.status != 0:
         return planes.middle.copy(), 0.0
-    x = found.x
-    return planes.middle + planes.size * (x[:3] @ planes.axes), max(float(x[3]), 0.0) * planes.size
+    return _from_frame(planes, found.x), max(float(found.x[3]), 0.0) * planes.size
 
 
 def _least_backfacing(planes: KernelPlanes, rows: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """The centre minimising ``sum(weights * max(0, n . c - offset))`` over the faces
     ``rows`` (in the box)."""
-    face_rows = rows
-    count = len(face_rows)
-    box_normals, box_offsets = _box(planes)
-    local = planes.normals[face_rows] @ planes.axes.T
-    scaled = (planes.offsets[face_rows] - planes.normals[face_rows] @ planes.middle) / planes.size
-    box_local = box_normals @ planes.axes.T
-    box_scaled = (box_offsets - box_normals @ planes.middle) / planes.size
-    # n . c - offset <= s_f (one slack per face), and the box; sparse: one slack per row.
-    a_ub = sparse.vstack(
-        [
-            sparse.hstack([sparse.csr_matrix(local), -sparse.identity(count, format="csr")]),
-            sparse.hstack(
-                [sparse.csr_matrix(box_local), sparse.csr_matrix((len(box_offsets), count))]
-            ),
-        ],
-        format="csr",
-    )
+    local, scaled = _in_frame(planes, rows)
+    count = len(rows)
+    # n . c - offset <= s_f: one slack per face, so sparse.
+    a_ub = sparse.hstack([sparse.csr_matrix(local), -sparse.identity(count, format="csr")])
     found = linprog(
         c=np.concatenate([np.zeros(3), weights / weights.sum()]),
-        A_ub=a_ub,
-        b_ub=np.concatenate([scaled, box_scaled]),
-        bounds=[(None, None)] * 3 + [(0.0, None)] * count,
+        A_ub=a_ub.tocsr(),
+        b_ub=scaled,
+        bounds=[*_IN_THE_BOX] + [(0.0, None)] * count,
         method="highs",
     )
     if found.status != 0:
         return planes.middle.copy()
-    return planes.middle + planes.size * (found.x[:3] @ planes.axes)
+    return _from_frame(planes, found.x)

@@ -69,8 +69,7 @@ def locate(vertices_local, faces, directions) -> Hits:
         raise TransformInputError("directions", "a direction is zero", np.flatnonzero(zero))
     corner_units, at_centre = unit_rows(points)
     if at_centre.any():
-        used = np.zeros(len(points), dtype=bool)
-        used[faces.ravel()] = True
+        used = np.bincount(faces.ravel(), minlength=len(points)) > 0
         if (at_centre & used).any():  # a vertex no triangle uses may be anywhere
             text, rows = listed_rows(at_centre & used, "vertex")
             raise TransformInputError("vertices", f"{text}: at the centre, no direction", rows)
@@ -90,8 +89,8 @@ def locate(vertices_local, faces, directions) -> Hits:
     # A cap of 90 degrees or more may not hold its triangle (it is not convex): such huge
     # triangles (next to the centre) are tested against every query.
     huge = reach >= np.sqrt(2.0) * (1.0 - 1e-9)
+    everyone = np.arange(k)
     for face in np.flatnonzero(huge):
-        everyone = np.arange(k)
         _test(points, faces, rays, everyone, np.full(k, face), hit_face, hit_depth, weights)
     for members in _size_classes(reach, np.flatnonzero(~huge)):
         tree = cKDTree(middle[members])

@@ -10,7 +10,8 @@ import numpy as np
 from .arrays import as_faces, as_points
 from .cap import PoleCap
 from .chart import Chart
-from .faces import measure_faces
+from .errors import TransformInputError
+from .faces import FaceMeasures, measure_checked, measure_faces
 from .frames import Frame
 from .layouts import Layout, layout_xy, measured_second
 from .metrics import Distortion, distortion
@@ -77,6 +78,8 @@ def flatten_region(
     """
     vertices = as_points(vertices, "vertices")
     faces = as_faces(faces, len(vertices))
+    if len(faces) == 0:
+        raise TransformInputError("faces", "the region has no faces")
     vertex_ids = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(vertices)))
     if len(vertex_ids) == len(vertices):  # every vertex used (the whole mesh): no renumbering
         compact, local = faces, frame.to_local(vertices)
@@ -87,9 +90,11 @@ def flatten_region(
         local = frame.to_local(vertices[vertex_ids])
     theta, phi, r = chart.forward(local, threads, "vertices", "vertex", vertex_ids)
     layout = Layout(layout)
-    validation, metrics = assess_region(
-        local, compact, theta, phi, chart.cap, winding, threads, measured_second(theta, layout)
+    # Everything here was made checked: measure without checking again.
+    measures = measure_checked(
+        local, compact, measured_second(theta, layout), phi, chart.cap, threads
     )
+    validation, metrics = _judge(measures, winding, threads)
     x, y = layout_xy(theta, phi, layout)
     return FlatRegion(
         vertex_ids=vertex_ids,
@@ -133,5 +138,11 @@ def assess_region(
     (RegionValidation, Distortion)
     """
     measures = measure_faces(vertices_local, faces, theta, phi, cap, threads, layout_theta)
+    return _judge(measures, winding, threads)
+
+
+def _judge(
+    measures: FaceMeasures, winding: int | None, threads: int
+) -> tuple[RegionValidation, Distortion]:
     # One after the other: side by side on two threads they only compete for memory.
     return validate(measures, winding, threads), distortion(measures)

@@ -40,6 +40,19 @@ def test_edge_on_and_non_manifold_edges_are_outline():
     assert (1, 2) in as_set(found.outline)
 
 
+def test_an_edge_with_thousands_of_faces_is_counted_exactly():
+    # 2^13 + 2 faces on the edge (0, 1): 3 seen edge-on (side 0), the rest from behind. In
+    # 13 count bits its sum would read as a smooth edge's (count 2, sides 0 and 4): the
+    # classification must notice and count in 64 bits.
+    uses = 2**13 + 2
+    faces = [[0, 1, 2 + k] for k in range(uses)]
+    orientation = [0, 0, 0] + [-1] * (uses - 3)
+    found = edges_of(faces, orientation)
+    assert (0, 1) in as_set(found.outline)
+    assert (0, 1) not in as_set(found.boundary)
+    assert len(found.boundary) == 2 * uses
+
+
 def test_loops_of_disk_annulus_and_closed_surface():
     vertices, faces = grid_mesh(np.arange(6.0), np.arange(6.0), 1.0)
     ones = np.ones(len(faces), dtype=np.int8)

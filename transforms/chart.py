@@ -135,15 +135,22 @@ class Chart:
             Non-finite coordinates or a point at the centre.
         """
         points = as_points(points_local, field)
-        return self._forward(points, None, threads, (field, noun, row_ids))
+        return self.forward_checked(points, None, threads, (field, noun, row_ids))
 
-    def _forward(
-        self, points: np.ndarray, frame: Frame | None, threads: int, naming: tuple
+    def forward_checked(
+        self,
+        points: np.ndarray,
+        frame: Frame | None,
+        threads: int,
+        naming: tuple,
+        rows_out: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The map on checked ``(n, 3)`` points, moved to the local frame first when ``frame``
-        is given. ``naming`` is ``(field, noun, row_ids)`` for errors."""
+        """The map on ``(n, 3)`` points already checked (``arrays.as_points``), moved to the
+        local frame first when ``frame`` is given. ``naming`` is ``(field, noun, row_ids)``
+        for errors; ``rows_out`` (3, n) receives the local rows
+        (:func:`.spherical.points_to_angles`)."""
         local_rows = None if frame is None else frame.local_rows
-        return points_to_angles(points, self._kernel(), local_rows, threads, *naming)
+        return points_to_angles(points, self._kernel(), local_rows, threads, *naming, rows_out)
 
     def _kernel(self) -> AngleKernel:
         if self._method is Method.STANDARD:
@@ -199,7 +206,7 @@ def world_to_angles(
     TransformInputError
         Non-finite coordinates or a point at the centre.
     """
-    return chart._forward(as_points(points, field), frame, threads, (field, noun, None))
+    return chart.forward_checked(as_points(points, field), frame, threads, (field, noun, None))
 
 
 def angles_to_world(theta, phi, r, frame: Frame, chart: Chart) -> np.ndarray:

@@ -116,25 +116,25 @@ def measure_faces(
         theta = np.ascontiguousarray(layout_theta, dtype=np.float64)
         if theta.shape != phi.shape or not np.isfinite(theta).all():
             raise TransformInputError("layout_theta", "must be finite, one value per vertex")
-    return measure_checked(vertices, faces, theta, phi, cap, threads)
+    return measure_checked(np.ascontiguousarray(vertices.T), faces, theta, phi, cap, threads)
 
 
 def measure_checked(
-    vertices: np.ndarray,
+    rows: np.ndarray,
     faces: np.ndarray,
     theta: np.ndarray,
     phi: np.ndarray,
     cap: PoleCap,
     threads: int = 1,
 ) -> FaceMeasures:
-    """:func:`measure_faces` on input already checked: ``vertices`` (n, 3) C-contiguous
-    finite float64, ``faces`` (m >= 1, 3) C-contiguous indices in range, ``theta`` (the
-    layout's second coordinate) and ``phi`` (n,) finite float64. For callers that made them
-    (:func:`.region.flatten_region`), so that nothing is checked twice."""
-    largest = float(np.abs(vertices).max())
+    """:func:`measure_faces` on input already checked: ``rows`` (3, n), the vertices in the
+    local frame as C-contiguous finite float64 rows ``x, y, z``; ``faces`` (m >= 1, 3)
+    C-contiguous indices in range; ``theta`` (the layout's second coordinate) and ``phi``
+    (n,) finite float64. For callers that made them (:func:`.region.flatten_region`, the
+    fit's energy), so that nothing is checked twice."""
+    largest = float(np.abs(rows).max())
     scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
-    rows = np.ascontiguousarray(vertices.T)
-    rows *= scale
+    unscaled_rows, rows = rows, rows * scale
 
     m = len(faces)
     out = {
@@ -149,20 +149,21 @@ def measure_checked(
         "stretch_min": np.empty(m),
     }
     singular = (cap.north, cap.south)
+    plane = np.empty(len(phi), dtype=np.complex128)
+    plane.real, plane.imag = phi, theta
     sides = _sides_of_singular_lines(rows, cap, threads)
 
     def measure(block: slice) -> None:
         ids = faces[block].T.astype(np.intp, order="C")  # take() converts int32 every call
         corners = np.empty((3, 3, ids.shape[1]))  # (axis, corner, face)
-        layout = np.empty((2, 3, ids.shape[1]))  # (phi|theta, corner, face)
         for axis in range(3):
             np.take(rows[axis], ids, out=corners[axis])
-        np.take(phi, ids, out=layout[0])
-        np.take(theta, ids, out=layout[1])
+        # (phi|theta, corner, face), gathered as pairs: one take instead of two.
+        layout = np.take(plane, ids).view(np.float64).reshape(*ids.shape, 2).transpose(2, 0, 1)
         face_sides = np.bitwise_or.reduce(np.take(sides, ids), axis=0)
 
-        def unscaled(rows: np.ndarray) -> np.ndarray:
-            return vertices[ids[:, rows]].transpose(2, 0, 1)  # (axis, corner, k)
+        def unscaled(picked: np.ndarray) -> np.ndarray:
+            return unscaled_rows[:, ids[:, picked]]  # (axis, corner, k)
 
         views = {k: v[block] for k, v in out.items()}
         return _measure_block(corners, layout, unscaled, singular, face_sides, views)

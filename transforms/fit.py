@@ -376,10 +376,12 @@ class _Problem:
         frame = Frame.from_matrix(candidate.rotation, candidate.center)
         chart = self.chart(candidate.sigma)
         try:
-            local = frame.to_local(self.sample_points)
-            theta, phi, _ = chart.forward(local)
+            rows = np.empty((3, len(self.sample_points)))
+            theta, phi, _ = chart.forward_checked(
+                self.sample_points, frame, 1, ("vertices", "vertex", None), rows_out=rows
+            )
             second = measured_second(theta, self.layout)
-            measures = measure_checked(local, self.sample_faces, second, phi, chart.cap)
+            measures = measure_checked(rows, self.sample_faces, second, phi, chart.cap)
             return float(distortion(measures).isometric.mean)
         except TransformInputError:
             return math.inf

@@ -82,17 +82,20 @@ def flatten_region(
         raise TransformInputError("faces", "the region has no faces")
     vertex_ids = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(vertices)))
     if len(vertex_ids) == len(vertices):  # every vertex used (the whole mesh): no renumbering
-        compact, local = faces, frame.to_local(vertices)
+        compact, used = faces, vertices
     else:
         position = np.empty(len(vertices), dtype=faces.dtype)  # int32 where the ids fit
         position[vertex_ids] = np.arange(len(vertex_ids))
-        compact = position[faces]
-        local = frame.to_local(vertices[vertex_ids])
-    theta, phi, r = chart.forward(local, threads, "vertices", "vertex", vertex_ids)
+        compact, used = position[faces], vertices[vertex_ids]
+    # The local rows come out of the same pass as the angles; measured without checking
+    # again, since everything here was made checked.
+    rows = np.empty((3, len(used)))
+    theta, phi, r = chart.forward_checked(
+        used, frame, threads, ("vertices", "vertex", vertex_ids), rows_out=rows
+    )
     layout = Layout(layout)
-    # Everything here was made checked: measure without checking again.
     measures = measure_checked(
-        local, compact, measured_second(theta, layout), phi, chart.cap, threads
+        rows, compact, measured_second(theta, layout), phi, chart.cap, threads
     )
     validation, metrics = _judge(measures, winding, threads)
     x, y = layout_xy(theta, phi, layout)

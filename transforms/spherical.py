@@ -55,6 +55,7 @@ def points_to_angles(
     field: str = "points",
     noun: str = "point",
     row_ids: np.ndarray | None = None,
+    rows_out: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Run an angle kernel over checked points, block by block so temporaries stay in cache.
 
@@ -67,6 +68,8 @@ def points_to_angles(
     threads : int, threads to spread the blocks over
     field, noun, row_ids : how the error for a point at the centre names the input, a row,
         and each row's id (see :func:`check_radii`)
+    rows_out : (3, n) float or None, receives the local rows ``x, y, z`` (for callers that
+        measure the points next, without a second pass over them)
 
     Returns
     -------
@@ -80,6 +83,8 @@ def points_to_angles(
             x, y, z = np.ascontiguousarray(points[block].T)
         else:
             x, y, z = local_rows(points[block])
+        if rows_out is not None:
+            rows_out[0, block], rows_out[1, block], rows_out[2, block] = x, y, z
         radius = radii(x, y, z)
         check_radii(radius, field, noun, block.start, row_ids)
         r[block] = radius
@@ -92,8 +97,9 @@ def points_to_angles(
 def eq1_angles(
     x: np.ndarray, y: np.ndarray, z: np.ndarray, r: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. 1 as an :data:`AngleKernel` (``r`` is not needed)."""
-    return angles(x, y, z)
+    """Eq. 1 as an :data:`AngleKernel`, on the unit directions (see :func:`angles`)."""
+    to_unit = np.reciprocal(r)
+    return angles(x * to_unit, y * to_unit, z * to_unit)
 
 
 def spherical_to_cartesian(theta, phi, r=1.0) -> np.ndarray:
@@ -133,18 +139,23 @@ def angles(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.
     """Eq. 1's two angles of the directions ``(x, y, z)``.
 
     Both are ``atan2`` of ratios, so any positive common factor of ``x, y, z`` may be left
-    out: the warp and the separable method use this to skip normalising.
+    out (the warp uses this to skip dividing by its denominator). ``sqrt(x^2 + y^2)`` is
+    formed directly, without ``hypot``'s rescaling (several times slower): callers pass
+    directions scaled to about unit length, whose squares neither overflow nor, above
+    ``1e-150``, underflow.
 
     Parameters
     ----------
-    x, y, z : (n,) float, not all zero in a row
+    x, y, z : (n,) float, not all zero in a row, each at most ``1e150`` in magnitude
 
     Returns
     -------
     theta : (n,) float, ``atan2(sqrt(x^2 + y^2), z)`` in ``[0, pi]``
     phi : (n,) float, ``atan2(y, x)`` in ``(-pi, pi]``
     """
-    return np.arctan2(np.hypot(x, y), z), half_open_azimuth(np.arctan2(y, x))
+    across = x * x
+    across += y * y
+    return np.arctan2(np.sqrt(across, out=across), z), half_open_azimuth(np.arctan2(y, x))
 
 
 def half_open_azimuth(phi: np.ndarray) -> np.ndarray:

@@ -43,18 +43,20 @@ class RegionEdges:
         return int(connected_components(graph, directed=False)[0])
 
 
-#: Per half-edge value summed per edge: the count in the low 32 bits, (side + 1)^2 above.
-#: Two uses with sides -1 and +1 (a smooth interior edge) sum to exactly _SMOOTH; any other
-#: count or pair of sides gives another sum.
-_COUNT_BITS = 32
-_COUNT_MASK = (1 << _COUNT_BITS) - 1
-_SMOOTH = 2 + (4 << _COUNT_BITS)
-_VALUE_OF_SIDE_PLUS_ONE = [1 + (k * k << _COUNT_BITS) for k in range(3)]
-#: The value by ``3 * backwards + orientation + 1``, where ``backwards`` is 1 when the
-#: half-edge runs from the higher to the lower index (its side is then minus the orientation).
-_VALUE_OF_BACKWARDS_AND_ORIENTATION = np.array(
-    _VALUE_OF_SIDE_PLUS_ONE + _VALUE_OF_SIDE_PLUS_ONE[::-1], dtype=np.int64
-)
+#: Per half-edge value summed per edge: the count in the low bits, (side + 1)^2 above. Two
+#: uses with sides -1 and +1 (a smooth interior edge) sum to exactly 2 + (4 << count bits);
+#: any other count or pair of sides gives another sum. int32 values (half the memory to
+#: scatter) hold every sum while no edge has 2^13 uses: the sides then sum below 2^15.
+_NARROW = (np.int32, 13)
+_WIDE = (np.int64, 32)
+
+
+def _value_table(dtype, count_bits: int) -> np.ndarray:
+    """The value by ``3 * backwards + orientation + 1``, where ``backwards`` is 1 when the
+    half-edge runs from the higher to the lower index (its side is then minus the
+    orientation)."""
+    by_side_plus_one = [1 + (k * k << count_bits) for k in range(3)]
+    return np.array(by_side_plus_one + by_side_plus_one[::-1], dtype=dtype)
 
 
 def region_edges(
@@ -68,9 +70,11 @@ def region_edges(
     from the centre (``det[v0, v1, v2]`` is the same for all three cyclic orders), negated
     when the edge runs from the higher to the lower index.
 
-    Each half-edge contributes ``1 + 2^32 (side + 1)^2`` at ``(low, high)`` of a sparse
+    Each half-edge contributes ``1 + 2^b (side + 1)^2`` at ``(low, high)`` of a sparse
     matrix whose construction sums the uses of each edge (a counting sort by row, no full
-    sort): a smooth edge sums to ``2 + 4 * 2^32``, a boundary edge has count 1.
+    sort): a smooth edge sums to ``2 + 4 * 2^b``, a boundary edge has count 1. With ``b = 13``
+    first; should an edge have ``2^13`` uses or more (the counts then do not add up to the
+    half-edges), once more with ``b = 32`` and 64-bit sums.
 
     Parameters
     ----------
@@ -87,30 +91,33 @@ def region_edges(
     index = np.int32 if n_vertices < 2**31 else np.int64  # what scipy would convert to
     low = np.empty(3 * m, dtype=index)
     high = np.empty(3 * m, dtype=index)
-    value = np.empty(3 * m, dtype=np.int64)
+    code = np.empty(3 * m, dtype=np.int8)  # 3 * backwards + orientation + 1
 
     def half_edges(block: slice) -> bool:
-        heads = faces[block].ravel()
-        tails = np.empty_like(heads)  # the other end of each half-edge: the next corner
-        tails[:-1] = heads[1:]
-        tails[2::3] = heads[::3]
+        heads = faces[block].T  # (corner, face); each half-edge runs to the next corner
+        tails = heads[[1, 2, 0]]
         rows = slice(3 * block.start, 3 * block.stop)
-        np.minimum(heads, tails, out=low[rows], casting="unsafe")
-        np.maximum(heads, tails, out=high[rows], casting="unsafe")
-        # side + 1 = orientation + 1, or 1 - orientation when the edge runs downwards.
-        backwards = (heads > tails).view(np.int8)
-        backwards *= 3
-        backwards += np.repeat(orientation[block] + 1, 3)
-        np.take(_VALUE_OF_BACKWARDS_AND_ORIENTATION, backwards, out=value[rows])
+        shape = heads.shape
+        np.minimum(heads, tails, out=low[rows].reshape(shape), casting="unsafe")
+        np.maximum(heads, tails, out=high[rows].reshape(shape), casting="unsafe")
+        codes = code[rows].reshape(shape)
+        np.greater(heads, tails, out=codes.view(bool))
+        codes *= 3
+        codes += orientation[block] + 1
         return bool((heads == tails).any())  # a face repeating a vertex
 
     loops = any(map_blocks(half_edges, m, threads))
     if loops:  # an edge from a vertex to itself is no edge
         keep = low != high
-        low, high, value = low[keep], high[keep], value[keep]
-    sums = csr_matrix((value, (low, high)), shape=(n_vertices, n_vertices))
-    outline = np.flatnonzero(sums.data != _SMOOTH)
-    boundary = outline[(sums.data[outline] & _COUNT_MASK) == 1]
+        low, high, code = low[keep], high[keep], code[keep]
+    for dtype, count_bits in (_NARROW, _WIDE):
+        value = np.take(_value_table(dtype, count_bits), code)
+        sums = csr_matrix((value, (low, high)), shape=(n_vertices, n_vertices))
+        counts = sums.data & ((1 << count_bits) - 1)
+        if int(counts.sum(dtype=np.int64)) == len(low):
+            break
+    outline = np.flatnonzero(sums.data != 2 + (4 << count_bits))
+    boundary = outline[counts[outline] == 1]
     return RegionEdges(boundary=_pairs(sums, boundary), outline=_pairs(sums, outline))
 
 

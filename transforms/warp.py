@@ -46,7 +46,7 @@ def pole_warp(directions, sigma: float) -> np.ndarray:
         raise TransformInputError("directions", f"{text}: zero vector has no direction", rows)
     x, y, z = u.T
     s2 = sigma * sigma
-    one_plus_y, one_minus_y = _plus_minus(x, y, z, 1.0)
+    one_plus_y, one_minus_y = _plus_minus(x, y, z)
     denominator = s2 * one_plus_y + one_minus_y  # >= 2 min(sigma^2, 1) > 0 on the sphere
     warped = (
         np.stack([2.0 * sigma * x, s2 * one_plus_y - one_minus_y, 2.0 * sigma * z], axis=1)
@@ -83,12 +83,13 @@ def warped_angles(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Eq. 1's angles of ``W_sigma(q / r)`` for already checked local coordinates.
 
-    Multiplying the stable form by ``r D > 0`` changes no angle, so with
-    ``a = 2 sigma x``, ``b = sigma^2 (r + y) - (r - y)``, ``c = 2 sigma z`` the angles are
-    ``theta = atan2(sqrt(a^2 + b^2), c)``, ``phi = atan2(b, a)``: no division by ``D``, no
-    normalisation, and for ``sigma = 1`` exactly eq. 1 (``a, b, c = 2 x, 2 y, 2 z``). Near
-    ``-Y`` the sum ``r + y`` cancels; there it is ``(x^2 + z^2) / (r - y)`` instead (and
-    ``r - y`` likewise near ``+Y``), which keeps full precision for any sigma.
+    Multiplying the stable form by ``D > 0`` changes no angle, so on the unit direction
+    ``u = q / r``, with ``a = 2 sigma u_x``, ``b = sigma^2 (1 + u_y) - (1 - u_y)``,
+    ``c = 2 sigma u_z``, the angles are ``theta = atan2(sqrt(a^2 + b^2), c)``,
+    ``phi = atan2(b, a)``: no division by ``D``, and for ``sigma = 1`` exactly eq. 1. Near
+    ``-Y`` the sum ``1 + u_y`` cancels; there it is ``(u_x^2 + u_z^2) / (1 - u_y)`` instead
+    (and ``1 - u_y`` likewise near ``+Y``), which keeps full precision for any sigma. On the
+    unit direction ``|a|, |b| <= 2 SIGMA_MAX^2``: their squares cannot overflow.
 
     Parameters
     ----------
@@ -100,28 +101,35 @@ def warped_angles(
     -------
     theta, phi : (n,) float
     """
-    a = x * (2.0 * sigma)
-    c = z * (2.0 * sigma)
+    to_unit = np.reciprocal(r)
+    a = x * to_unit
+    c = z * to_unit
+    unit_y = y * to_unit
     if sigma == 1.0:
-        return angles(a, y * 2.0, c)
-    plus, minus = _plus_minus(x, y, z, r)
+        return angles(a, unit_y, c)
+    plus, minus = _plus_minus(a, unit_y, c)
     plus *= sigma * sigma
     plus -= minus
+    a *= 2.0 * sigma
+    c *= 2.0 * sigma
     return angles(a, plus, c)
 
 
-def _plus_minus(x, y, z, r) -> tuple[np.ndarray, np.ndarray]:
-    """``r + y`` and ``r - y`` without cancellation, for ``r = |(x, y, z)|``.
+def _plus_minus(x, y, z) -> tuple[np.ndarray, np.ndarray]:
+    """``1 + y`` and ``1 - y`` without cancellation, for a unit ``(x, y, z)``.
 
     Near ``-Y`` the sum cancels and near ``+Y`` the difference; there each is the other's
-    complement ``(x^2 + z^2) / (r -+ y)`` (their product is ``x^2 + z^2``), exact to rounding.
+    complement ``(x^2 + z^2) / (1 -+ y)`` (their product is ``x^2 + z^2``), exact to rounding.
+    The one without cancellation is ``1 + |y|``.
     """
-    across = x * x
-    across += z * z
-    plus, minus = r + y, r - y
-    with np.errstate(divide="ignore", invalid="ignore"):
-        plus = np.where(y < 0.0, across / minus, plus)
-        minus = np.where(y > 0.0, across / plus, minus)
+    exact = np.abs(y)
+    exact += 1.0
+    complement = x * x
+    complement += z * z
+    complement /= exact
+    negative = y < 0.0
+    plus = np.where(negative, complement, exact)
+    minus = np.where(negative, exact, complement)
     return plus, minus
 
 

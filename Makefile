@@ -21,7 +21,7 @@ $(VENV)/.installed-run: pyproject.toml | $(BIN)/python
 	touch $@
 
 serve: $(VENV)/.installed-run
-	$(BIN)/python -m uvicorn service.app:app --host $(HOST) --port $(PORT)
+	$(BIN)/meshflat serve --host $(HOST) --port $(PORT)
 
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import json
-from functools import cache
+from dataclasses import dataclass
+from functools import cache, partial
 
 import anyio
 import numpy as np
@@ -14,6 +15,9 @@ from starlette.requests import ClientDisconnect
 from starlette.responses import Response
 
 from transforms import (
+    Chart,
+    FlatRegion,
+    Frame,
     Layout,
     TransformInputError,
     angles_to_world,
@@ -23,13 +27,17 @@ from transforms import (
     world_to_angles,
 )
 
-from .encoding import Timings, json_response
+from .encoding import Timings, encode, json_response
 from .meshio import Mesh, MeshFormatError, format_of, read_mesh
 from .multipart import parse_form
+from .outputs import Output, choose_output
+from .outputs.draw import to_png, to_svg
+from .outputs.glb import layout_uv, region_glb
+from .outputs.picture import describe
 from .params import (
-    MESH_PARAMS_EXAMPLE,
     AutoPole,
     FitParams,
+    FlattenParams,
     InverseRequest,
     LocateParams,
     MeshParams,
@@ -57,36 +65,34 @@ from .settings import Settings
 
 router = APIRouter()
 
-MULTIPART_BODY = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "required": ["mesh"],
-                    "properties": {
-                        "mesh": {
-                            "type": "string",
-                            "format": "binary",
-                            "description": "The mesh file: OBJ, glTF (embedded buffers), GLB, "
-                            "PLY or STL; the format comes from the file name's extension "
-                            "or params.format.",
-                        },
-                        "params": {
-                            "type": "string",
-                            "contentMediaType": "application/json",
-                            "contentSchema": {"$ref": "#/components/schemas/MeshParams"},
-                            "description": "JSON, as the MeshParams schema; default {}.",
-                            "example": json.dumps(MESH_PARAMS_EXAMPLE),
-                        },
-                    },
-                },
-                "encoding": {"params": {"contentType": "application/json"}},
-            }
-        },
+
+def multipart_body(model: type[BaseModel]) -> dict:
+    """The OpenAPI request body of a mesh route whose ``params`` field is ``model``."""
+    name = model.__name__
+    example = model.model_config["json_schema_extra"]["examples"][0]
+    mesh = {
+        "type": "string",
+        "format": "binary",
+        "description": "The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the "
+        "format comes from the file name's extension or params.format.",
     }
-}
+    params = {
+        "type": "string",
+        "contentMediaType": "application/json",
+        "contentSchema": {"$ref": f"#/components/schemas/{name}"},
+        "description": f"JSON, as the {name} schema; default {{}}.",
+        "example": json.dumps(example),
+    }
+    form = {
+        "schema": {
+            "type": "object",
+            "required": ["mesh"],
+            "properties": {"mesh": mesh, "params": params},
+        },
+        "encoding": {"params": {"contentType": "application/json"}},
+    }
+    return {"requestBody": {"required": True, "content": {"multipart/form-data": form}}}
+
 
 MESH_RULES = """
 Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a
@@ -99,6 +105,32 @@ node transforms applied; groups are mesh and node names. PLY polygons are fan-tr
 like OBJ's; other elements and properties are skipped. STL triangles keep their own corners
 (nothing is merged).
 """
+
+
+GLB_RULES = """
+The GLB holds one triangle mesh: `POSITION`, the file's coordinates of the region's vertices
+in the order of `vertices.ids`; `TEXCOORD_0`, the layout scaled into [0, 1] by one factor
+(`u = (x - x_min) * scale`, `v = (s - s_min) * scale`, with `s = s_sign * y` growing with
+theta: +1 for theta_phi, -1 for mercator; the numbers are in `asset.extras.meshflat.uv`);
+`_VERTEX_ID`, each vertex's file id (float32, exact below 2^24); and a material that shows a
+checker through the UVs. Triangle `k` (indices `3k .. 3k+2`) is file face `faces.ids[k]`;
+the ids are also the accessor named by `asset.extras.meshflat.face_ids_accessor`.
+`asset.extras.meshflat` also holds the resolved `params`, the validation summary (counts of
+flagged faces) and the metrics.
+"""
+
+_BINARY = {"schema": {"type": "string", "format": "binary"}}
+FLATTEN_FORMS = {
+    200: {
+        "content": {
+            "model/gltf-binary": _BINARY,
+            "image/svg+xml": {"schema": {"type": "string"}},
+            "image/png": _BINARY,
+        },
+        "description": "The flattened region, in the form asked for.",
+    },
+    406: PROBLEMS[422] | {"description": "Accept allows none of the forms /v1/flatten answers."},
+}
 
 
 def settings_of(request: Request) -> Settings:
@@ -312,15 +344,22 @@ def _check_count(count: int, limit: int, field: str) -> None:
 # -- meshes --------------------------------------------------------------------------------
 
 
-def _mesh_route(path: str, summary: str, model: type[BaseModel], description: str):
-    """A multipart mesh route: a ``mesh`` file and a ``params`` JSON field."""
+def _mesh_route(
+    path: str,
+    summary: str,
+    model: type[BaseModel],
+    params: type[MeshParams],
+    description: str,
+    responses: dict | None = None,
+):
+    """A multipart mesh route: a ``mesh`` file and a ``params`` JSON field (``params``)."""
     return router.post(
         path,
         tags=["meshes"],
         summary=summary,
         response_model=model,
-        responses=PROBLEMS,
-        openapi_extra=MULTIPART_BODY,
+        responses=PROBLEMS | (responses or {}),
+        openapi_extra=multipart_body(params),
         description=f"{description}\n{MESH_RULES}",
     )
 
@@ -329,18 +368,24 @@ def _mesh_route(path: str, summary: str, model: type[BaseModel], description: st
     "/v1/flatten",
     "Flatten a region of a mesh",
     FlattenResponse,
-    "Multipart: a `mesh` file and a `params` JSON field (MeshParams). Answers "
+    FlattenParams,
+    "Multipart: a `mesh` file and a `params` JSON field (FlattenParams). Answers "
     "the resolved parameters, (theta, phi, r) of every vertex the region uses, the region's "
-    "triangles, the validation report and the distortion metrics.",
+    "triangles, the validation report and the distortion metrics; or, by the Accept header "
+    "or params.output, the region as a GLB (model/gltf-binary) whose TEXCOORD_0 is the "
+    "layout, or a picture of the map (image/svg+xml, image/png).\n" + GLB_RULES,
+    responses=FLATTEN_FORMS,
 )
 async def flatten(request: Request) -> Response:
-    return await run_job(request, flatten_answer)
+    accept = request.headers.get("accept")
+    return await run_job(request, partial(flatten_answer, accept=accept))
 
 
 @_mesh_route(
     "/v1/validate",
     "Validate a region of a mesh",
     ValidateResponse,
+    MeshParams,
     "The same input as /v1/flatten; answers only the resolved parameters, the "
     "validation report and the distortion metrics.",
 )
@@ -352,6 +397,7 @@ async def validate(request: Request) -> Response:
     "/v1/fit",
     "Choose the centre, rotation and sigma for a region",
     FitResponse,
+    FitParams,
     "The same input as /v1/flatten, but centre, rotation and sigma not given are "
     'chosen ("auto"); any of them may be fixed. They are chosen together to minimise the '
     "region's area-weighted isometric energy, keeping the centre inside the region's kernel "
@@ -371,6 +417,7 @@ async def fit(request: Request) -> Response:
     "/v1/locate",
     "Find the surface points of directions on the map",
     LocateResponse,
+    LocateParams,
     "Multipart like /v1/flatten; `params` also holds the queries, `theta` and "
     "`phi` (radians, in the frame the other params resolve to). Answers, per query, the "
     "region triangle the ray from the centre in that direction meets first, the barycentric "
@@ -406,34 +453,67 @@ def locate_answer(body: bytes, content_type: str, settings: Settings) -> Respons
     return json_response({"params": resolved(chart, frame), "hits": answer}, timings)
 
 
-def flatten_answer(body: bytes, content_type: str, settings: Settings) -> Response:
-    """The /v1/flatten answer to a multipart body (CPU-bound: run it off the event loop)."""
-    return _mesh_answer(body, content_type, settings, full=True)
+def flatten_answer(
+    body: bytes, content_type: str, settings: Settings, accept: str | None = None
+) -> Response:
+    """The /v1/flatten answer to a multipart body, in the form ``Accept`` or
+    ``params.output`` asks for (CPU-bound: run it off the event loop)."""
+    timings = Timings()
+    with timings.measure("parse"):
+        params, mesh = _mesh_request(body, content_type, settings, FlattenParams)
+        output = choose_output(accept, params.output)
+    data = flatten_output(mesh, params, settings, output, timings)
+    headers = {"Server-Timing": timings.header(), "Vary": "Accept"}
+    if output is not Output.JSON:
+        headers["Content-Disposition"] = f'inline; filename="region.{output.value}"'
+    return Response(data, media_type=output.media_type, headers=headers)
+
+
+def flatten_output(
+    mesh: Mesh, params: FlattenParams, settings: Settings, output: Output, timings: Timings
+) -> bytes:
+    """What /v1/flatten (and ``meshflat flatten``) answers, as bytes of ``output``."""
+    with timings.measure("compute"):
+        region = _flattened(mesh, params, settings)
+    with timings.measure("encode"):
+        if output is Output.JSON:
+            return encode(_payload(region, mesh, full=True))
+        if output is Output.GLB:
+            return _glb(region, mesh)
+        picture = describe(
+            region.flat,
+            region.payload_params(),
+            len(region.faces),
+            params.image_width,
+            params.image_height,
+        )
+        return to_svg(picture) if output is Output.SVG else to_png(picture)
 
 
 def validate_answer(body: bytes, content_type: str, settings: Settings) -> Response:
     """The /v1/validate answer to a multipart body (CPU-bound: run it off the event loop)."""
-    return _mesh_answer(body, content_type, settings, full=False)
+    return _mesh_answer(body, content_type, settings, MeshParams)
 
 
 def fit_answer(body: bytes, content_type: str, settings: Settings) -> Response:
     """The /v1/fit answer to a multipart body (CPU-bound: run it off the event loop)."""
-    return _mesh_answer(body, content_type, settings, full=False, model=FitParams)
+    return _mesh_answer(body, content_type, settings, FitParams)
 
 
 def _mesh_answer(
-    body: bytes,
-    content_type: str,
-    settings: Settings,
-    full: bool,
-    model: type[MeshParams] = MeshParams,
+    body: bytes, content_type: str, settings: Settings, model: type[MeshParams]
 ) -> Response:
     timings = Timings()
     with timings.measure("parse"):
         params, mesh = _mesh_request(body, content_type, settings, model)
+    return json_response(report(mesh, params, settings, timings), timings)
+
+
+def report(mesh: Mesh, params: MeshParams, settings: Settings, timings: Timings) -> dict:
+    """What /v1/validate and /v1/fit (and ``meshflat validate``, ``fit``) answer: params,
+    validation, metrics, and for the fit its ``explain``; no per-vertex arrays."""
     with timings.measure("compute"):
-        payload = _flatten_payload(mesh, params, settings, full)
-    return json_response(payload, timings)
+        return _payload(_flattened(mesh, params, settings), mesh, full=False)
 
 
 def _mesh_request(body: bytes, content_type: str, settings: Settings, model: type[MeshParams]):
@@ -443,17 +523,26 @@ def _mesh_request(body: bytes, content_type: str, settings: Settings, model: typ
     if "mesh" not in form:
         raise Problem(422, "mesh: the form has no 'mesh' file field", "invalid-request", "mesh")
     part = form["mesh"]
+    return params, load_mesh(bytes(part.data), part.filename, params, settings)
+
+
+def load_mesh(data: bytes, filename: str | None, params: MeshParams, settings: Settings) -> Mesh:
+    """The mesh in ``data`` (its format from ``params.format`` or the file name), read within
+    the settings' limits; a problem naming the cause otherwise."""
     try:
-        fmt = format_of(part.filename, params.format)
-        mesh = read_mesh(bytes(part.data), fmt, settings.limits)
+        return read_mesh(data, format_of(filename, params.format), settings.limits)
     except MeshFormatError as error:
         raise from_mesh_error(error) from None
-    return params, mesh
+
+
+def mesh_params(model: type[MeshParams], text: bytes) -> MeshParams:
+    """The ``params`` JSON validated as ``model`` (a 422 naming the field otherwise)."""
+    return parse_json(model, text, "application/json", "params")
 
 
 def _mesh_params(form, model: type[MeshParams]) -> MeshParams:
     data = bytes(form["params"].data) if "params" in form else b"{}"  # no params: defaults
-    return parse_json(model, data, "application/json", "params")
+    return mesh_params(model, data)
 
 
 #: Core errors about these inputs are the parameters' fault; any other is the file's.
@@ -491,7 +580,22 @@ def _chart_frame_fit(mesh: Mesh, faces: np.ndarray, center, params: MeshParams, 
     return fit.chart, fit.frame, fit
 
 
-def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: bool) -> dict:
+@dataclass(frozen=True)
+class _Flattened:
+    """A region flattened for a mesh request: its file face ids, the chart and frame used,
+    the result, and the fit's ``explain`` block (for /v1/fit)."""
+
+    faces: np.ndarray
+    chart: Chart
+    frame: Frame
+    flat: FlatRegion
+    explain: dict | None
+
+    def payload_params(self) -> dict:
+        return {**resolved(self.chart, self.frame), "layout": self.flat.layout.value}
+
+
+def _flattened(mesh: Mesh, params: MeshParams, settings: Settings) -> _Flattened:
     faces, center = region_faces(mesh, params)
     chart, frame, fit = _chart_frame_fit(mesh, faces, center, params, settings)
     explain = None
@@ -511,38 +615,49 @@ def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: b
         except TransformInputError as error:
             # The parameters were checked above: what is left is about the file's vertices.
             raise _mesh_error(error) from None
-    v = flat.validation
-    face_ids = lambda positions: faces[positions]  # noqa: E731 - positions -> file ids
-    d = flat.distortion
-    payload = {
-        "params": {**resolved(chart, frame), "layout": flat.layout.value},
-        "validation": {
-            "seam_free": v.seam_free,
-            "star_shaped": v.star_shaped,
-            "singular_point_faces": face_ids(v.singular_point_faces),
-            "seam_faces": face_ids(v.seam_faces),
-            "folded_faces": face_ids(v.folded_faces),
-            "backfacing_faces": face_ids(v.backfacing_faces),
-            "degenerate_faces": face_ids(v.degenerate_faces),
-            "margin_deg": {
-                "seam": v.margin_deg_seam,
-                "north": v.margin_deg_north,
-                "south": v.margin_deg_south,
-            },
-            "boundary_loops": v.boundary_loops,
-            "winding": "outward" if v.winding == 1 else "inward",
+    return _Flattened(faces, chart, frame, flat, explain)
+
+
+def _validation_summary(region: _Flattened) -> dict:
+    """The validation block with file face ids."""
+    v, faces = region.flat.validation, region.faces
+    return {
+        "seam_free": v.seam_free,
+        "star_shaped": v.star_shaped,
+        "singular_point_faces": faces[v.singular_point_faces],
+        "seam_faces": faces[v.seam_faces],
+        "folded_faces": faces[v.folded_faces],
+        "backfacing_faces": faces[v.backfacing_faces],
+        "degenerate_faces": faces[v.degenerate_faces],
+        "margin_deg": {
+            "seam": v.margin_deg_seam,
+            "north": v.margin_deg_north,
+            "south": v.margin_deg_south,
         },
-        "metrics": {
-            name: {"mean": s.mean, "p95": s.p95, "max": s.max}
-            for name, s in (
-                ("conformal", d.conformal),
-                ("area", d.area),
-                ("isometric", d.isometric),
-            )
-        },
+        "boundary_loops": v.boundary_loops,
+        "winding": "outward" if v.winding == 1 else "inward",
     }
-    if explain is not None:
-        payload["explain"] = explain
+
+
+def _metrics(region: _Flattened) -> dict:
+    d = region.flat.distortion
+    return {
+        name: {"mean": s.mean, "p95": s.p95, "max": s.max}
+        for name, s in (("conformal", d.conformal), ("area", d.area), ("isometric", d.isometric))
+    }
+
+
+def _payload(region: _Flattened, mesh: Mesh, full: bool) -> dict:
+    """The JSON answer: params, validation, metrics (and explain for /v1/fit); with
+    ``full``, the vertices' coordinates and the region's faces too."""
+    flat = region.flat
+    payload = {
+        "params": region.payload_params(),
+        "validation": _validation_summary(region),
+        "metrics": _metrics(region),
+    }
+    if region.explain is not None:
+        payload["explain"] = region.explain
     if full:
         payload["vertices"] = {
             "ids": flat.vertex_ids,
@@ -552,8 +667,43 @@ def _flatten_payload(mesh: Mesh, params: MeshParams, settings: Settings, full: b
         }
         if flat.layout is not Layout.THETA_PHI:
             payload["vertices"] |= {"x": flat.x, "y": flat.y}
-        payload["faces"] = {"ids": faces, "vertices": mesh.faces[faces]}
+        payload["faces"] = {"ids": region.faces, "vertices": mesh.faces[region.faces]}
     return payload
+
+
+#: Vertex ids travel in the GLB as float32 (glTF allows no 32-bit integer attributes).
+_FLOAT32_EXACT = 2**24
+
+
+def _glb(region: _Flattened, mesh: Mesh) -> bytes:
+    """The region as a GLB (:mod:`.outputs.glb`)."""
+    flat = region.flat
+    largest = int(flat.vertex_ids[-1])
+    if largest >= _FLOAT32_EXACT:
+        raise Problem(
+            422,
+            f"params.output: a GLB carries vertex ids as float32, exact below "
+            f"{_FLOAT32_EXACT:,}; this region uses vertex {largest:,}. Ask for JSON instead.",
+            "invalid-request",
+            "params.output",
+            [largest],
+        )
+    s_sign = 1.0 if flat.layout is Layout.THETA_PHI else -1.0  # s grows with theta
+    uv, affine = layout_uv(flat.x, s_sign * flat.y)
+    validation = _validation_summary(region)
+    summary = {
+        key: value if not isinstance(value, np.ndarray) else len(value)
+        for key, value in validation.items()
+    }
+    extras = {
+        "params": region.payload_params(),
+        "validation": summary,
+        "metrics": _metrics(region),
+        "uv": affine | {"s_sign": s_sign, "layout": flat.layout.value},
+    }
+    return region_glb(
+        mesh.vertices[flat.vertex_ids], uv, flat.vertex_ids, flat.faces, region.faces, extras
+    )
 
 
 def _fit_arguments(params: MeshParams, center) -> dict:

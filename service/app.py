@@ -12,12 +12,19 @@ from fastapi.openapi.utils import get_openapi
 from pydantic.json_schema import models_json_schema
 from starlette.concurrency import run_in_threadpool
 
-from . import problems
+from . import demo, problems
 from .allocator import keep_large_blocks
 from .api import router
 from .bodylimit import BodySizeLimit
 from .examples import add_examples
-from .params import InverseRequest, MeshParams, PointsRequest
+from .params import (
+    FitParams,
+    FlattenParams,
+    InverseRequest,
+    LocateParams,
+    MeshParams,
+    PointsRequest,
+)
 from .problems import ProblemDetails
 from .selfcheck import run_self_check
 from .settings import Settings
@@ -73,6 +80,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.openapi = lambda: _openapi(app)
     problems.install(app)
     app.include_router(router)
+    app.include_router(demo.router)
+    app.mount("/static", demo.static_files(), name="static")
     app.add_middleware(BodySizeLimit, limit=settings.max_upload_bytes)
     app.add_middleware(problems.UnexpectedErrors)
     return app
@@ -92,6 +101,9 @@ def _openapi(app: FastAPI) -> dict:
         _, definitions = models_json_schema(
             [
                 (MeshParams, "validation"),
+                (FlattenParams, "validation"),
+                (FitParams, "validation"),
+                (LocateParams, "validation"),
                 (PointsRequest, "validation"),
                 (InverseRequest, "validation"),
                 (ProblemDetails, "serialization"),

@@ -485,3 +485,24 @@ class LocateParams(MeshParams):
                 f"{len(self.phi)} phi"
             )
         return self
+
+
+class FlattenParams(MeshParams):
+    """The JSON of the ``params`` field of /v1/flatten: as for /v1/validate, and the form of
+    the answer."""
+
+    output: Literal["json", "glb", "svg", "png"] | None = Field(
+        None,
+        description="The answer's form, for clients that cannot set Accept: json "
+        "(application/json), glb (model/gltf-binary: the region with TEXCOORD_0 from the "
+        "layout), svg (image/svg+xml) or png (image/png): a picture of the map. Default: "
+        "from the Accept header, JSON without one.",
+    )
+    image_width: int = Field(
+        1200, ge=480, le=4096, description="Width of an SVG or PNG answer, pixels."
+    )
+    image_height: int = Field(
+        800, ge=360, le=4096, description="Height of an SVG or PNG answer, pixels."
+    )
+
+    model_config = ConfigDict(json_schema_extra={"examples": [MESH_PARAMS_EXAMPLE]})

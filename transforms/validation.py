@@ -65,6 +65,8 @@ class RegionValidation:
         (j,) int arrays
     margin_deg_seam, margin_deg_north, margin_deg_south : float, degrees in [0, 180]
     boundary_loops : int
+    boundary_edges : (k, 2) int, vertex pairs (indices as in the measured faces) of the edges
+        only one region face uses
     winding : int, +1 when the file's winding is outward, -1 when it was flipped
     """
 
@@ -77,6 +79,7 @@ class RegionValidation:
     margin_deg_north: float
     margin_deg_south: float
     boundary_loops: int
+    boundary_edges: np.ndarray
     winding: int
 
     @property
@@ -147,6 +150,7 @@ def validate(
         margin_deg_north=0.0 if contains_north else math.degrees(north),
         margin_deg_south=0.0 if contains_south else math.degrees(south),
         boundary_loops=edges.boundary_loops(),
+        boundary_edges=edges.boundary,
         winding=winding,
     )
 

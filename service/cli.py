@@ -1,0 +1,198 @@
+"""``meshflat``: the service's computations from a shell, and the server itself.
+
+    meshflat serve [--host 127.0.0.1] [--port 8000] [--workers 1]
+    meshflat flatten MESH --region-cone AXIS:DEG [--sigma S | --pole-angle DEG | --auto]
+                          [--center X,Y,Z | bbox_center | centroid] [--pole X,Y,Z --up X,Y,Z]
+                          [--layout theta_phi|mercator] [--params JSON] --out FILE
+    meshflat validate MESH ... [--out FILE.json]
+    meshflat fit MESH ... [--out FILE.json]
+
+``flatten`` writes JSON, GLB, SVG or PNG by the extension of ``--out``. The parameters are the
+API's (``--params`` takes any of them as JSON, the options override it), checked by the same
+models, and the answers are the API's bytes; errors are the API's messages, on stderr, with
+exit status 2 (1 for anything unexpected).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import orjson
+
+from .outputs import Output
+from .problems import Problem
+from .settings import Settings
+
+_OUTPUTS = {".json": Output.JSON, ".glb": Output.GLB, ".svg": Output.SVG, ".png": Output.PNG}
+
+
+class Progress:
+    """A one-line progress bar on stderr (only on a terminal, or when asked)."""
+
+    def __init__(self, steps: list[str], enabled: bool) -> None:
+        self.steps, self.enabled, self.done = steps, enabled, 0
+
+    @contextmanager
+    def step(self, name: str) -> Iterator[None]:
+        self._draw(name)
+        yield
+        self.done += 1
+        self._draw(name if self.done < len(self.steps) else "done")
+        if self.enabled and self.done == len(self.steps):
+            sys.stderr.write("\n")
+
+    def _draw(self, name: str) -> None:
+        if not self.enabled:
+            return
+        width = 24
+        filled = width * self.done // len(self.steps)
+        bar = "#" * filled + "-" * (width - filled)
+        sys.stderr.write(f"\r[{bar}] {self.done}/{len(self.steps)} {name:<12}")
+        sys.stderr.flush()
+
+
+def _vector(text: str, option: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 3:
+        raise Problem(422, f"{option}: expected three numbers X,Y,Z, got {text!r}", field=option)
+    return values
+
+
+def params_of(args: argparse.Namespace) -> dict:
+    """The API's params from the command line: ``--params`` JSON, then the options."""
+    try:
+        params = json.loads(args.params) if args.params else {}
+    except json.JSONDecodeError as error:
+        raise Problem(422, f"--params: not JSON ({error})", field="--params") from None
+    if not isinstance(params, dict):
+        raise Problem(422, "--params: must be a JSON object", field="--params")
+    if args.region_cone:
+        axis, _, degrees = args.region_cone.rpartition(":")
+        try:
+            half_angle = float(degrees)
+        except ValueError:
+            raise Problem(
+                422,
+                f"--region-cone: expected AXIS:DEG such as 0,1,0:60, got {args.region_cone!r}",
+                field="--region-cone",
+            ) from None
+        params["region"] = {
+            "cone": {"axis": _vector(axis, "--region-cone"), "half_angle_deg": half_angle}
+        }
+    if args.auto:
+        params.update(center="auto", rotation="auto", sigma="auto")
+    if args.sigma is not None:
+        params["sigma"] = args.sigma
+    if args.pole_angle is not None:
+        params["pole_angle_deg"] = args.pole_angle
+    if args.center:
+        known = ("bbox_center", "centroid", "auto")
+        params["center"] = args.center if args.center in known else _vector(args.center, "--center")
+    if args.pole or args.up:
+        if not (args.pole and args.up):
+            raise Problem(422, "--pole, --up: give both", field="--pole")
+        params["rotation"] = {"pole": _vector(args.pole, "--pole"), "up": _vector(args.up, "--up")}
+    if args.layout:
+        params["layout"] = args.layout
+    return params
+
+
+def run(args: argparse.Namespace) -> bytes:
+    """The answer's bytes for a ``flatten``, ``validate`` or ``fit`` command."""
+    from . import api  # the service's own code paths (imported here: serve does not need them)
+    from .encoding import Timings, encode
+    from .params import FitParams, FlattenParams, MeshParams
+
+    settings = Settings.from_env()
+    output = Output.JSON
+    if args.command == "flatten":
+        suffix = Path(args.out).suffix.lower() if args.out else ".json"
+        if suffix not in _OUTPUTS:
+            raise Problem(422, f"--out: {args.out!r}: use .json, .glb, .svg or .png", field="--out")
+        output = _OUTPUTS[suffix]
+    model = {"flatten": FlattenParams, "validate": MeshParams, "fit": FitParams}[args.command]
+    work = "fitting" if args.command == "fit" or args.auto else "flattening"
+    progress = Progress(["reading", work, "writing"], args.progress or sys.stderr.isatty())
+    timings = Timings()
+    with progress.step("reading"):
+        params = api.mesh_params(model, orjson.dumps(params_of(args)))
+        path = Path(args.mesh)
+        try:
+            data = path.read_bytes()
+        except OSError as error:
+            raise Problem(422, f"MESH: cannot read {args.mesh!r}: {error.strerror}") from None
+        mesh = api.load_mesh(data, path.name, params, settings)
+    with progress.step(work):
+        if args.command == "flatten":
+            answer = api.flatten_output(mesh, params, settings, output, timings)
+        else:
+            answer = encode(api.report(mesh, params, settings, timings))
+    with progress.step("writing"):
+        if args.out:
+            Path(args.out).write_bytes(answer)
+        else:
+            sys.stdout.buffer.write(answer + b"\n")
+    return answer
+
+
+def parser() -> argparse.ArgumentParser:
+    top = argparse.ArgumentParser(prog="meshflat", description=__doc__.split("\n\n")[0])
+    commands = top.add_subparsers(dest="command", required=True)
+    serve = commands.add_parser("serve", help="run the service (uvicorn)")
+    serve.add_argument("--host", default="127.0.0.1")
+    serve.add_argument("--port", type=int, default=8000)
+    serve.add_argument("--workers", type=int, default=1)
+    for name, text in (
+        ("flatten", "flatten a region: JSON, GLB, SVG or PNG by the extension of --out"),
+        ("validate", "validate a region: params, validation and metrics as JSON"),
+        ("fit", "choose centre, pole and sigma: params, validation, metrics and explain"),
+    ):
+        command = commands.add_parser(name, help=text)
+        command.add_argument("mesh", metavar="MESH", help="OBJ, glTF, GLB, PLY or STL file")
+        command.add_argument("--region-cone", metavar="AXIS:DEG", help="e.g. 0,1,0:60")
+        cap = command.add_mutually_exclusive_group()
+        cap.add_argument("--sigma", type=float, help="the warp parameter (default 0.3)")
+        cap.add_argument("--pole-angle", type=float, metavar="DEG", help="the cap's angle")
+        cap.add_argument("--auto", action="store_true", help="choose centre, pole and sigma")
+        command.add_argument("--center", help="X,Y,Z, bbox_center (default) or centroid")
+        command.add_argument("--pole", metavar="X,Y,Z", help="world direction of local +Y")
+        command.add_argument("--up", metavar="X,Y,Z", help="world direction towards local +Z")
+        command.add_argument("--layout", choices=["theta_phi", "mercator"])
+        command.add_argument("--params", metavar="JSON", help="any of the API's params")
+        command.add_argument("--out", metavar="FILE", help="default: JSON on stdout")
+        command.add_argument("--progress", action="store_true", help="a progress bar always")
+    return top
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    if args.command == "serve":
+        import uvicorn
+
+        uvicorn.run(
+            "service.app:app",
+            host=args.host,
+            port=args.port,
+            workers=args.workers,
+            timeout_graceful_shutdown=30,
+        )
+        return 0
+    try:
+        run(args)
+    except Problem as problem:
+        where = f" ({problem.field})" if problem.field else ""
+        print(f"meshflat: error {problem.status}{where}: {problem.detail}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,35 @@
+"""The demo page at ``/`` and its files under ``/static`` (three.js bundled in; nothing is
+fetched from elsewhere at run time, which the page's Content-Security-Policy enforces)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fastapi import APIRouter
+from starlette.responses import HTMLResponse
+from starlette.staticfiles import StaticFiles
+
+STATIC = Path(__file__).parent / "static"
+
+#: Only this origin: the page, its script, the API; blob: and data: for the map and the
+#: GLB's embedded texture.
+CONTENT_SECURITY_POLICY = (
+    "default-src 'self'; img-src 'self' blob: data:; connect-src 'self' blob: data:; "
+    "style-src 'self'; script-src 'self'; object-src 'none'; base-uri 'none'; "
+    "frame-ancestors 'none'"
+)
+
+router = APIRouter(include_in_schema=False)
+
+
+@router.get("/")
+def page() -> HTMLResponse:
+    """The demo page."""
+    return HTMLResponse(
+        (STATIC / "index.html").read_text(),
+        headers={"Content-Security-Policy": CONTENT_SECURITY_POLICY},
+    )
+
+
+def static_files() -> StaticFiles:
+    return StaticFiles(directory=STATIC)

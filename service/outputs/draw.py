@@ -1,0 +1,225 @@
+"""A :class:`.picture.Picture` drawn as SVG (vector, with a decimated fill on large regions)
+or PNG (Pillow: the raster, lines and text)."""
+
+from __future__ import annotations
+
+import io
+from xml.sax.saxutils import escape
+
+import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+
+from .picture import (
+    BOUNDARY,
+    COLOURS,
+    FILL,
+    OUTLINE,
+    SEAM_COLOUR,
+    SINGULAR_COLOUR,
+    Picture,
+)
+
+#: Boundary edges drawn as vector lines up to this many (beyond: painted into the fill).
+VECTOR_BOUNDARY = 100_000
+#: Cells of the SVG's decimated fill, in canvas pixels.
+FILL_CELL = 2.0
+_FONT = 'font-family="DejaVu Sans, Verdana, sans-serif"'
+
+
+def to_svg(picture: Picture) -> bytes:
+    """The picture as a standalone SVG document."""
+    p = picture
+    left, top, right, bottom = p.plot
+    parts = [
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{p.width}" height="{p.height}" '
+        f'viewBox="0 0 {p.width} {p.height}">',
+        f"<title>{escape(p.caption[0])}</title>",
+        f'<rect width="{p.width}" height="{p.height}" fill="#ffffff"/>',
+        f'<g id="map" clip-path="url(#plot)"><clipPath id="plot"><rect x="{left}" y="{top}" '
+        f'width="{right - left}" height="{bottom - top}"/></clipPath>',
+    ]
+    vector_boundary = len(p.boundary) <= VECTOR_BOUNDARY
+    if p.vector:
+        filled = ~p.wrapping
+        for label in np.unique(p.labels[filled]):
+            corners = p.corners[filled & (p.labels == label)].reshape(-1, 6)
+            stroke = COLOURS[OUTLINE] if label == FILL else COLOURS[int(label)]
+            parts.append(
+                f'<path class="triangles label-{label}" fill="{COLOURS[int(label)]}" '
+                f'stroke="{stroke}" stroke-width="0.5" stroke-linejoin="round" '
+                f'd="{_rows(corners, "M%.1f %.1fL%.1f %.1fL%.1f %.1fZ")}"/>'
+            )
+    else:
+        parts += _decimated_fill(p, include_boundary=not vector_boundary)
+    marks, labels = p.marks()
+    for label in np.unique(labels):
+        parts.append(
+            f'<path class="marks label-{label}" fill="{COLOURS[int(label)]}" '
+            f'd="{_rows(marks[labels == label] - 2.0, "M%.1f %.1fh4v4h-4Z")}"/>'
+        )
+    if vector_boundary and len(p.boundary):
+        parts.append(
+            f'<path class="boundary" fill="none" stroke="{COLOURS[BOUNDARY]}" '
+            f'stroke-width="1.2" d="{_rows(p.boundary.reshape(-1, 4), "M%.1f %.1fL%.1f %.1f")}"/>'
+        )
+    for column in p.seam_columns:
+        parts.append(
+            f'<line class="seam" x1="{column:.1f}" y1="{top}" x2="{column:.1f}" y2="{bottom}" '
+            f'stroke="{SEAM_COLOUR}" stroke-width="2" stroke-dasharray="8 5"/>'
+        )
+    for row, name in p.singular_rows:
+        parts.append(
+            f'<line class="singular {name}" x1="{left}" y1="{row:.1f}" x2="{right}" '
+            f'y2="{row:.1f}" stroke="{SINGULAR_COLOUR}" stroke-width="2" '
+            f'stroke-dasharray="3 4"/>'
+        )
+    parts.append("</g>")
+    parts += _svg_frame(p)
+    parts.append("</svg>")
+    return "\n".join(parts).encode()
+
+
+def _decimated_fill(p: Picture, include_boundary: bool) -> list[str]:
+    """The fill as horizontal runs of equal label on a grid of ``FILL_CELL`` pixels."""
+    image = p.raster(1.0 / FILL_CELL, include_boundary=include_boundary)
+    left, top = p.plot[0], p.plot[1]
+    parts = []
+    for label in np.unique(image[image > 0]):
+        mask = np.zeros((image.shape[0], image.shape[1] + 2), dtype=np.int8)
+        mask[:, 1:-1] = image == label
+        change = np.diff(mask, axis=1)
+        rows, starts = np.nonzero(change == 1)
+        _, stops = np.nonzero(change == -1)  # same rows, in the same order
+        runs = np.stack(
+            [
+                left + starts * FILL_CELL,
+                top + rows * FILL_CELL,
+                (stops - starts) * FILL_CELL,
+                np.full(len(rows), FILL_CELL),
+                -(stops - starts) * FILL_CELL,
+            ],
+            axis=1,
+        )
+        parts.append(
+            f'<path class="fill label-{label}" fill="{COLOURS[int(label)]}" '
+            f'd="{_rows(runs, "M%.1f %.1fh%.1fv%.1fh%.1fZ")}"/>'
+        )
+    return parts
+
+
+def _svg_frame(p: Picture) -> list[str]:
+    """Axes, ticks, legend and caption."""
+    left, top, right, bottom = p.plot
+    text = f'{_FONT} font-size="12" fill="#222222"'
+    parts = [
+        f'<rect x="{left}" y="{top}" width="{right - left}" height="{bottom - top}" '
+        'fill="none" stroke="#444444"/>',
+        '<g class="axes">',
+    ]
+    for column, label in p.x_ticks:
+        parts.append(
+            f'<line x1="{column:.1f}" y1="{bottom}" x2="{column:.1f}" y2="{bottom + 5}" '
+            f'stroke="#444444"/><text x="{column:.1f}" y="{bottom + 18}" text-anchor="middle" '
+            f"{text}>{label}</text>"
+        )
+    for row, label in p.y_ticks:
+        parts.append(
+            f'<line x1="{left - 5}" y1="{row:.1f}" x2="{left}" y2="{row:.1f}" stroke="#444444"/>'
+            f'<text x="{left - 8}" y="{row + 4:.1f}" text-anchor="end" {text}>{label}</text>'
+        )
+    parts.append(
+        f'<text x="{(left + right) / 2:.1f}" y="{bottom + 36}" text-anchor="middle" {text}>'
+        f"{p.x_title}</text>"
+        f'<text x="{left}" y="{top - 10}" text-anchor="start" {text}>{p.y_title}</text>'
+    )
+    parts.append("</g>")
+    x, y = p.plot[2] + 20, p.plot[1]
+    parts.append('<g class="legend">')
+    for i, (label, colour, words) in enumerate(p.legend):
+        row = y + 20 * i
+        if label < 0:  # a line: the seam or the singular points
+            parts.append(
+                f'<line x1="{x}" y1="{row + 6}" x2="{x + 14}" y2="{row + 6}" stroke="{colour}" '
+                'stroke-width="2" stroke-dasharray="4 2"/>'
+            )
+        else:
+            parts.append(
+                f'<rect x="{x}" y="{row}" width="14" height="12" fill="{colour}" '
+                'stroke="#444444" stroke-width="0.5"/>'
+            )
+        parts.append(f'<text x="{x + 20}" y="{row + 11}" {text}>{escape(words)}</text>')
+    parts.append("</g>")
+    for i, line in enumerate(p.caption):
+        parts.append(
+            f'<text class="caption" x="{p.plot[0]}" y="{p.height - 34 + 18 * i}" {text}>'
+            f"{escape(line)}</text>"
+        )
+    return parts
+
+
+def _rows(values: np.ndarray, fmt: str) -> str:
+    """Every row of ``values`` through ``fmt``, joined."""
+    out = io.StringIO()
+    np.savetxt(
+        out, np.asarray(values, dtype=np.float64).reshape(len(values), -1), fmt=fmt, newline=""
+    )
+    return out.getvalue()
+
+
+def to_png(picture: Picture) -> bytes:
+    """The picture as a PNG image of ``width`` x ``height`` pixels."""
+    p = picture
+    left, top, right, bottom = p.plot
+    palette = np.zeros((256, 3), dtype=np.uint8)
+    for label, colour in COLOURS.items():
+        palette[label] = _rgb(colour)
+    canvas = Image.new("RGB", (p.width, p.height), "#ffffff")
+    fill = palette[p.raster(1.0)]
+    canvas.paste(Image.fromarray(fill, "RGB"), (left, top))
+    draw = ImageDraw.Draw(canvas)
+    font = ImageFont.load_default(size=13)
+    for column in p.seam_columns:
+        _dashed(draw, (column, top), (column, bottom), SEAM_COLOUR, 2, 8, 5)
+    for row, _ in p.singular_rows:
+        _dashed(draw, (left, row), (right, row), SINGULAR_COLOUR, 2, 3, 4)
+    draw.rectangle((left, top, right, bottom), outline="#444444")
+    for column, label in p.x_ticks:
+        draw.line((column, bottom, column, bottom + 5), fill="#444444")
+        draw.text((column, bottom + 8), label, fill="#222222", font=font, anchor="mt")
+    for row, label in p.y_ticks:
+        draw.line((left - 5, row, left, row), fill="#444444")
+        draw.text((left - 8, row), label, fill="#222222", font=font, anchor="rm")
+    draw.text(((left + right) / 2, bottom + 28), p.x_title, fill="#222222", font=font, anchor="mt")
+    draw.text((left, top - 8), p.y_title, fill="#222222", font=font, anchor="ls")
+    x, y = right + 20, top
+    for i, (label, colour, words) in enumerate(p.legend):
+        row = y + 20 * i
+        if label < 0:
+            _dashed(draw, (x, row + 6), (x + 14, row + 6), colour, 2, 4, 2)
+        else:
+            draw.rectangle((x, row, x + 14, row + 12), fill=colour, outline="#444444")
+        draw.text((x + 20, row + 6), words, fill="#222222", font=font, anchor="lm")
+    for i, line in enumerate(p.caption):
+        draw.text((left, p.height - 34 + 18 * i), line, fill="#222222", font=font, anchor="ls")
+    out = io.BytesIO()
+    canvas.save(out, format="PNG", optimize=False, compress_level=6)
+    return out.getvalue()
+
+
+def _dashed(draw, start, end, colour, width, dash, gap) -> None:
+    """A dashed straight line (a few dozen dashes at most)."""
+    (x0, y0), (x1, y1) = start, end
+    length = float(np.hypot(x1 - x0, y1 - y0))
+    if length == 0:
+        return
+    for t in np.arange(0.0, length, dash + gap):
+        a, b = t / length, min(t + dash, length) / length
+        draw.line(
+            (x0 + (x1 - x0) * a, y0 + (y1 - y0) * a, x0 + (x1 - x0) * b, y0 + (y1 - y0) * b),
+            fill=colour,
+            width=width,
+        )
+
+
+def _rgb(colour: str) -> tuple[int, int, int]:
+    return tuple(int(colour[i : i + 2], 16) for i in (1, 3, 5))

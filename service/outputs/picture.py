@@ -1,0 +1,281 @@
+"""A picture of a flattened region's map, described once and drawn as SVG or PNG.
+
+The map shows the region's triangles in the returned layout, the triangles the validation
+flags in their own colours with a legend, the region's boundary, the seam and the singular
+points where they fall in view, axes in degrees and a caption. Up to ``VECTOR_TRIANGLES``
+triangles are drawn one by one; beyond that, where triangles are too small to see, the fill
+is decimated (a raster of the triangles, painted by :mod:`transforms.raster`) and flagged
+triangles are marked at their centroids.
+
+A triangle that crosses the seam or holds a singular point wraps around the map: its corners
+lie on both sides of the cut, and the triangle between them in the plane is not where it is
+on the surface. Such triangles are not filled; their corners are marked instead.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from transforms import FlatRegion, Layout
+from transforms.layouts import measured_second
+from transforms.raster import paint_segments, paint_triangles
+
+#: Triangles drawn one by one (with outlines) up to this many.
+VECTOR_TRIANGLES = 20_000
+#: Flagged triangles marked one by one up to this many; the legend says when more were left.
+MARKED_TRIANGLES = 20_000
+
+#: Labels of the raster, in drawing priority (a larger label wins a pixel).
+EMPTY, FILL, OUTLINE = 0, 1, 2
+#: (label, colour, legend text, validation field) of each flag, in priority order.
+FLAGS = (
+    (3, "#f0e442", "degenerate", "degenerate_faces"),
+    (4, "#e69f00", "back-facing", "backfacing_faces"),
+    (5, "#d55e00", "folded", "folded_faces"),
+    (6, "#cc79a7", "crosses the seam", "seam_faces"),
+    (7, "#000000", "contains a singular point", "singular_point_faces"),
+)
+BOUNDARY = 8
+COLOURS = {
+    EMPTY: "#ffffff",
+    FILL: "#cfe3f2",
+    OUTLINE: "#7fa7c9",
+    **{label: colour for label, colour, _, _ in FLAGS},
+    BOUNDARY: "#1f3b57",
+}
+SEAM_COLOUR, SINGULAR_COLOUR = "#cc79a7", "#000000"
+
+
+@dataclass(frozen=True)
+class Picture:
+    """Everything a drawing of the map needs, in pixels of a ``width`` x ``height`` canvas
+    (``(column, row)``, rows growing downwards; the layout's theta grows downwards too).
+
+    Attributes
+    ----------
+    width, height : int
+    plot : (left, top, right, bottom), the plotting box
+    corners : (m, 3, 2) float, the triangles
+    labels : (m,) uint8, FILL or the label of the triangle's most serious flag
+    wrapping : (m,) bool, triangles that cross the seam or hold a singular point (their
+        corners are marked, they are not filled)
+    vector : bool, whether the triangles are few enough to draw one by one
+    boundary : (k, 2, 2) float, the region's boundary edges
+    seam_columns : columns where the seam (phi = +-180 degrees) falls in view
+    singular_rows : (row, name) where a singular point (theta 0 or 180) falls in view
+    x_ticks, y_ticks : (pixel, text) for the axes
+    x_title, y_title : str
+    legend : (label, colour, text) rows
+    caption : lines of text
+    """
+
+    width: int
+    height: int
+    plot: tuple[int, int, int, int]
+    corners: np.ndarray
+    labels: np.ndarray
+    wrapping: np.ndarray
+    vector: bool
+    boundary: np.ndarray
+    seam_columns: tuple[float, ...]
+    singular_rows: tuple[tuple[float, str], ...]
+    x_ticks: tuple[tuple[float, str], ...]
+    y_ticks: tuple[tuple[float, str], ...]
+    x_title: str
+    y_title: str
+    legend: tuple[tuple[int, str, str], ...]
+    caption: tuple[str, ...]
+
+    def raster(self, scale: float = 1.0, include_boundary: bool = True) -> np.ndarray:
+        """(h, w) uint8 labels of the plotting box at ``scale`` pixels per canvas pixel:
+        the triangles (with outlines when drawn one by one), flagged triangles marked, and
+        the boundary on top (unless it is drawn otherwise)."""
+        left, top, right, bottom = self.plot
+        shape = (max(round((bottom - top) * scale), 1), max(round((right - left) * scale), 1))
+        image = np.zeros(shape, dtype=np.uint8)
+        origin = np.array([left, top], dtype=np.float64)
+        corners = (self.corners - origin) * scale
+        filled = ~self.wrapping
+        paint_triangles(image, corners[filled], self.labels[filled])
+        if self.vector:
+            edges = corners[filled][:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2, 2)
+            paint_segments(image, edges, OUTLINE)
+        marks, labels = self.marks(corners)
+        if len(marks):  # 3 x 3 pixels, so that a flag on a tiny triangle stays visible
+            offsets = np.array([[dx, dy] for dx in (-1, 0, 1) for dy in (-1, 0, 1)], float)
+            spots = (marks[:, None, :] + offsets[None]).reshape(-1, 2)
+            spot_labels = np.repeat(labels, len(offsets))
+            for label in np.unique(labels):  # a few flags, not faces
+                mine = spots[spot_labels == label]
+                paint_segments(image, np.stack([mine, mine], axis=1), int(label))
+        if include_boundary:
+            paint_segments(image, (self.boundary - origin) * scale, BOUNDARY)
+        return image
+
+    def marks(self, corners: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Where flagged triangles are marked: (k, 2) points and (k,) labels, at most
+        ``MARKED_TRIANGLES`` triangles: the centroid of a filled one, the corners of a
+        wrapping one. ``corners`` defaults to the canvas's."""
+        corners = self.corners if corners is None else corners
+        flagged = np.flatnonzero(self.labels > FILL)[:MARKED_TRIANGLES]
+        wraps = self.wrapping[flagged]
+        points = np.concatenate(
+            [corners[flagged[~wraps]].mean(axis=1), corners[flagged[wraps]].reshape(-1, 2)]
+        )
+        labels = np.concatenate(
+            [self.labels[flagged[~wraps]], np.repeat(self.labels[flagged[wraps]], 3)]
+        )
+        return points, labels
+
+
+def describe(
+    flat: FlatRegion,
+    params: dict,
+    face_count: int,
+    width: int,
+    height: int,
+) -> Picture:
+    """The picture of a flattened region.
+
+    Parameters
+    ----------
+    flat : FlatRegion, from :func:`transforms.flatten_region`
+    params : dict, the resolved parameters (method, sigma, pole_angle_deg, layout)
+    face_count : int, the region's triangles
+    width, height : int, the canvas in pixels
+    """
+    x = flat.x
+    s = measured_second(flat.theta, flat.layout)  # grows with theta: downwards
+    margin_left, margin_top, margin_right = 70, 48, 270
+    margin_bottom = 96
+    box = (margin_left, margin_top, width - margin_right, height - margin_bottom)
+    x_low, x_high, s_low, s_high = _view(x, s)
+    scale = min((box[2] - box[0]) / (x_high - x_low), (box[3] - box[1]) / (s_high - s_low))
+    # Centre the view in the box; the plot is the part the view fills.
+    used_w, used_h = (x_high - x_low) * scale, (s_high - s_low) * scale
+    left = box[0] + ((box[2] - box[0]) - used_w) / 2
+    top = box[1] + ((box[3] - box[1]) - used_h) / 2
+    plot = (round(left), round(top), round(left + used_w), round(top + used_h))
+
+    def column(value):
+        return plot[0] + (np.asarray(value) - x_low) * scale
+
+    def row(value):
+        return plot[1] + (np.asarray(value) - s_low) * scale
+
+    points = np.stack([column(x), row(s)], axis=1)
+    corners = points[flat.faces]
+    labels = np.full(len(flat.faces), FILL, dtype=np.uint8)
+    validation = flat.validation
+    wrapping = np.zeros(len(flat.faces), dtype=bool)
+    wrapping[validation.seam_faces] = True
+    wrapping[validation.singular_point_faces] = True
+    legend = [(FILL, COLOURS[FILL], f"region: {face_count:,} triangles")]
+    for label, colour, text, field in FLAGS:
+        flagged = getattr(validation, field)
+        labels[flagged] = label
+        if len(flagged):
+            shown = "" if len(flagged) <= MARKED_TRIANGLES else f", {MARKED_TRIANGLES:,} marked"
+            legend.append((label, colour, f"{text}: {len(flagged):,}{shown}"))
+    if len(validation.boundary_edges):
+        legend.append((BOUNDARY, COLOURS[BOUNDARY], "boundary"))
+
+    in_x = lambda value: x_low <= value <= x_high  # noqa: E731
+    in_s = lambda value: s_low <= value <= s_high  # noqa: E731
+    seam = tuple(float(column(v)) for v in (-math.pi, math.pi) if in_x(v))
+    singular = tuple(
+        (float(row(value)), name)
+        for theta, name in ((0.0, "north"), (math.pi, "south"))
+        if math.isfinite(value := _second_of(theta, flat.layout)) and in_s(value)
+    )
+    if seam:
+        legend.append((-1, SEAM_COLOUR, "seam (phi +-180 deg)"))
+    if singular:
+        legend.append((-2, SINGULAR_COLOUR, "singular points (theta 0, 180 deg)"))
+    return Picture(
+        width=width,
+        height=height,
+        plot=plot,
+        corners=corners,
+        labels=labels,
+        wrapping=wrapping,
+        vector=len(flat.faces) <= VECTOR_TRIANGLES,
+        boundary=points[validation.boundary_edges],
+        seam_columns=seam,
+        singular_rows=singular,
+        x_ticks=_ticks(x_low, x_high, column, lambda v: v),
+        y_ticks=_theta_ticks(s_low, s_high, row, flat.layout),
+        x_title="phi (degrees)",
+        y_title="theta (degrees)",
+        legend=tuple(legend),
+        caption=_caption(flat, params, face_count),
+    )
+
+
+def _view(x: np.ndarray, s: np.ndarray) -> tuple[float, float, float, float]:
+    """The layout's box with a margin of 4 % (and a least size, for a single point)."""
+    x_low, x_high, s_low, s_high = float(x.min()), float(x.max()), float(s.min()), float(s.max())
+    pad = 0.04 * max(x_high - x_low, s_high - s_low, 1e-6)
+    return x_low - pad, x_high + pad, s_low - pad, s_high + pad
+
+
+def _second_of(theta: float, layout: Layout) -> float:
+    """The layout's downward coordinate of a polar angle (infinite at Mercator's poles)."""
+    if layout is Layout.THETA_PHI:
+        return theta
+    with np.errstate(divide="ignore"):
+        return float(np.log(np.tan(0.5 * theta)))
+
+
+def _nice_step(span_deg: float, count: int = 6) -> float:
+    raw = span_deg / count
+    power = 10 ** math.floor(math.log10(raw))
+    return next(k * power for k in (1, 2, 2.5, 5, 10) if k * power >= raw)
+
+
+def _ticks(low: float, high: float, to_pixel, of_radians) -> tuple[tuple[float, str], ...]:
+    """Ticks at round degree values of a linear axis in radians."""
+    low_deg, high_deg = math.degrees(low), math.degrees(high)
+    step = _nice_step(high_deg - low_deg)
+    values = np.arange(math.ceil(low_deg / step), math.floor(high_deg / step) + 1) * step
+    return tuple((float(to_pixel(math.radians(v))), f"{v:g}") for v in values)
+
+
+def _theta_ticks(low: float, high: float, to_pixel, layout: Layout):
+    """Ticks at round theta values, placed where the layout puts them."""
+    if layout is Layout.THETA_PHI:
+        return _ticks(low, high, to_pixel, lambda v: v)
+    theta_low = 2.0 * math.atan(math.exp(low))  # s = ln tan(theta / 2)
+    theta_high = 2.0 * math.atan(math.exp(high))
+    step = _nice_step(math.degrees(theta_high - theta_low))
+    first = math.ceil(math.degrees(theta_low) / step)
+    last = math.floor(math.degrees(theta_high) / step)
+    ticks = []
+    for k in range(first, last + 1):  # a handful of ticks
+        theta = math.radians(k * step)
+        if 0 < theta < math.pi:
+            ticks.append((float(to_pixel(_second_of(theta, layout))), f"{k * step:g}"))
+    return tuple(ticks)
+
+
+def _caption(flat: FlatRegion, params: dict, face_count: int) -> tuple[str, ...]:
+    v = flat.validation
+    method = params["method"]
+    if params.get("sigma") is not None:
+        method += f", sigma {params['sigma']:.4g} (cap {params['pole_angle_deg']:.1f} deg)"
+    status = [
+        "seam-free" if v.seam_free else "NOT seam-free",
+        "star-shaped" if v.star_shaped else "NOT star-shaped",
+    ]
+    margins = (
+        f"margins: seam {v.margin_deg_seam:.1f} deg, north {v.margin_deg_north:.1f} deg, "
+        f"south {v.margin_deg_south:.1f} deg"
+    )
+    energy = flat.distortion.isometric.mean
+    return (
+        f"meshflat: {method}; layout {flat.layout.value}; {face_count:,} triangles",
+        f"{', '.join(status)}; {margins}; isometric energy {energy:.4f}",
+    )

@@ -1,0 +1,138 @@
+"""End to end in a real browser: headless Chromium opens the demo page served by a real
+uvicorn, flattens a bundled scan, and the test checks what the page shows. The screenshot is
+kept in ``artifacts/demo.png``."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from service.samples import SAMPLES
+
+from .tools import require
+
+CHROMIUM = os.environ.get("MESHFLAT_CHROMIUM", "/usr/bin/chromium")
+ARTIFACTS = Path(__file__).parent.parent / "artifacts"
+SAMPLE = "fsaverage-head.ply"
+#: What the page's preset for the sample sends (web/demo.js, PRESETS).
+PARAMS = {
+    "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}},
+    "layout": "theta_phi",
+    "center": "bbox_center",
+    "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+    "sigma": 0.3,
+}
+
+
+@pytest.fixture(scope="module")
+def server():
+    """A real uvicorn on a free port of 127.0.0.1, ready (its self-check passed)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "uvicorn",
+            "service.app:app",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
+    url = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                if httpx.get(f"{url}/readyz", timeout=1).status_code == 200:
+                    break
+            except httpx.TransportError:
+                time.sleep(0.2)
+        else:
+            pytest.fail("uvicorn did not become ready within 60 s")
+        yield url
+    finally:
+        process.terminate()
+        process.wait(timeout=10)
+
+
+def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
+    require(
+        shutil.which(CHROMIUM) is not None or Path(CHROMIUM).exists(),
+        "Chromium",
+        "apt-get install chromium (or set MESHFLAT_CHROMIUM)",
+    )
+    from playwright.sync_api import sync_playwright
+
+    # What the API answers for the same request: the page must show the same region.
+    data = SAMPLES[SAMPLE].path.read_bytes()
+    expected = httpx.post(
+        f"{server}/v1/flatten",
+        files={"mesh": (SAMPLE, data)},
+        data={"params": json.dumps(PARAMS)},
+        timeout=60,
+    ).json()
+    vertex_count = len(expected["vertices"]["ids"])
+
+    problems: list[str] = []
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(
+            executable_path=CHROMIUM,
+            args=["--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader"],
+        )
+        try:
+            page = browser.new_page(viewport={"width": 1600, "height": 900})
+            page.on("console", lambda m: m.type == "error" and problems.append(m.text))
+            page.on("pageerror", lambda e: problems.append(str(e)))
+            page.on("requestfailed", lambda r: problems.append(f"{r.url}: {r.failure}"))
+            page.goto(server, wait_until="load")
+            page.wait_for_selector("body[data-state=ready]", timeout=30_000)
+            page.select_option("#sample", SAMPLE)
+            page.click("#go")
+            page.wait_for_selector("body[data-state=shown]", timeout=60_000)
+            page.wait_for_timeout(500)  # a few frames of the 3D view
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "demo.png"), full_page=True)
+
+            # The map: the SVG from /v1/flatten, drawn triangle by triangle, with its legend.
+            assert page.locator("#map svg path.triangles").count() >= 1
+            legend = page.locator("#map svg g.legend").text_content()
+            faces = len(expected["faces"]["ids"])
+            assert f"region: {faces:,} triangles" in legend
+            # The 3D view: the GLB loaded by three.js, with the region's vertex count.
+            assert page.locator("body").get_attribute("data-vertices") == str(vertex_count)
+            assert page.locator("#vertices").inner_text() == f"{vertex_count:,}"
+            assert "seam-free, star-shaped" in page.locator("#summary").inner_text()
+            # The canvas shows something besides the background.
+            drawn = page.evaluate(
+                """() => {
+                    const canvas = document.getElementById('view');
+                    const gl = canvas.getContext('webgl2') || canvas.getContext('webgl');
+                    const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
+                    const pixels = new Uint8Array(w * h * 4);
+                    gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, pixels);
+                    let other = 0;
+                    for (let i = 0; i < pixels.length; i += 4)
+                        if (Math.abs(pixels[i] - 0xf4) > 8 || Math.abs(pixels[i + 2] - 0xf8) > 8)
+                            other++;
+                    return other / (w * h);
+                }"""
+            )
+            assert drawn > 0.02, drawn
+        finally:
+            browser.close()
+    assert not problems, problems

@@ -144,7 +144,9 @@ def run(args: argparse.Namespace) -> bytes:
 
 
 def parser() -> argparse.ArgumentParser:
-    top = argparse.ArgumentParser(prog="meshflat", description=__doc__.split("\n\n")[0])
+    top = argparse.ArgumentParser(
+        prog="meshflat", description="The service's computations from a shell, and the server."
+    )
     commands = top.add_subparsers(dest="command", required=True)
     serve = commands.add_parser("serve", help="run the service (uvicorn)")
     serve.add_argument("--host", default="127.0.0.1")

@@ -3,6 +3,7 @@ fetched from elsewhere at run time, which the page's Content-Security-Policy enf
 
 from __future__ import annotations
 
+from functools import cache
 from pathlib import Path
 
 from fastapi import APIRouter
@@ -25,10 +26,13 @@ router = APIRouter(include_in_schema=False)
 @router.get("/")
 def page() -> HTMLResponse:
     """The demo page."""
-    return HTMLResponse(
-        (STATIC / "index.html").read_text(),
-        headers={"Content-Security-Policy": CONTENT_SECURITY_POLICY},
-    )
+    return HTMLResponse(_page_html(), headers={"Content-Security-Policy": CONTENT_SECURITY_POLICY})
+
+
+@cache
+def _page_html() -> str:
+    # Read once: the page is a file of the package and does not change while serving.
+    return (STATIC / "index.html").read_text()
 
 
 def static_files() -> StaticFiles:

@@ -38,7 +38,7 @@ def paint_triangles(
     """
     height, width = image.shape
     centroid = corners.mean(axis=1)
-    _paint_points(image, centroid, labels)
+    paint_points(image, centroid, labels)
     low = np.floor(corners.min(axis=1) - 0.5).astype(np.int64) + 1  # first centre >= min
     high = np.ceil(corners.max(axis=1) - 0.5).astype(np.int64)  # last centre <= max
     np.clip(low, 0, [width, height], out=low)
@@ -76,11 +76,12 @@ def paint_segments(image: np.ndarray, ends: np.ndarray, label: int, budget: int 
         )
         a, b = ends[rows, 0][segment], ends[rows, 1][segment]
         points = a + (b - a) * t[:, None]
-        _paint_points(image, points, np.full(len(points), label, dtype=image.dtype))
+        paint_points(image, points, np.full(len(points), label, dtype=image.dtype))
 
 
-def _paint_points(image: np.ndarray, points: np.ndarray, labels: np.ndarray) -> None:
-    """The pixels holding ``points`` (k, 2) ``(column, row)`` take ``max(pixel, label)``."""
+def paint_points(image: np.ndarray, points: np.ndarray, labels: np.ndarray) -> None:
+    """The pixels holding ``points`` (k, 2) ``(column, row)`` take ``max(pixel, label)``,
+    with ``labels`` (k,) uint8, one per point; points outside the image are left out."""
     height, width = image.shape
     column = np.floor(points[:, 0]).astype(np.int64)
     row = np.floor(points[:, 1]).astype(np.int64)

@@ -21,7 +21,7 @@ import numpy as np
 
 from transforms import FlatRegion, Layout
 from transforms.layouts import measured_second
-from transforms.raster import paint_segments, paint_triangles
+from transforms.raster import paint_points, paint_segments, paint_triangles
 
 #: Triangles drawn one by one (with outlines) up to this many.
 VECTOR_TRIANGLES = 20_000
@@ -107,10 +107,7 @@ class Picture:
         if len(marks):  # 3 x 3 pixels, so that a flag on a tiny triangle stays visible
             offsets = np.array([[dx, dy] for dx in (-1, 0, 1) for dy in (-1, 0, 1)], float)
             spots = (marks[:, None, :] + offsets[None]).reshape(-1, 2)
-            spot_labels = np.repeat(labels, len(offsets))
-            for label in np.unique(labels):  # a few flags, not faces
-                mine = spots[spot_labels == label]
-                paint_segments(image, np.stack([mine, mine], axis=1), int(label))
+            paint_points(image, spots, np.repeat(labels, len(offsets)))
         if include_boundary:
             paint_segments(image, (self.boundary - origin) * scale, BOUNDARY)
         return image
@@ -206,7 +203,7 @@ def describe(
         boundary=points[validation.boundary_edges],
         seam_columns=seam,
         singular_rows=singular,
-        x_ticks=_ticks(x_low, x_high, column, lambda v: v),
+        x_ticks=_ticks(x_low, x_high, column),
         y_ticks=_theta_ticks(s_low, s_high, row, flat.layout),
         x_title="phi (degrees)",
         y_title="theta (degrees)",
@@ -236,7 +233,7 @@ def _nice_step(span_deg: float, count: int = 6) -> float:
     return next(k * power for k in (1, 2, 2.5, 5, 10) if k * power >= raw)
 
 
-def _ticks(low: float, high: float, to_pixel, of_radians) -> tuple[tuple[float, str], ...]:
+def _ticks(low: float, high: float, to_pixel) -> tuple[tuple[float, str], ...]:
     """Ticks at round degree values of a linear axis in radians."""
     low_deg, high_deg = math.degrees(low), math.degrees(high)
     step = _nice_step(high_deg - low_deg)
@@ -247,7 +244,7 @@ def _ticks(low: float, high: float, to_pixel, of_radians) -> tuple[tuple[float, 
 def _theta_ticks(low: float, high: float, to_pixel, layout: Layout):
     """Ticks at round theta values, placed where the layout puts them."""
     if layout is Layout.THETA_PHI:
-        return _ticks(low, high, to_pixel, lambda v: v)
+        return _ticks(low, high, to_pixel)
     theta_low = 2.0 * math.atan(math.exp(low))  # s = ln tan(theta / 2)
     theta_high = 2.0 * math.atan(math.exp(high))
     step = _nice_step(math.degrees(theta_high - theta_low))

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from functools import cache, partial
 
 import anyio
+import anyio.to_thread
 import numpy as np
 from fastapi import APIRouter, Request
 from pydantic import BaseModel, ValidationError
@@ -28,8 +29,10 @@ from transforms import (
 )
 
 from .encoding import Timings, encode, json_response
+from .jobs import Deadline, JobGate, TimeLimit
 from .meshio import Mesh, MeshFormatError, format_of, read_mesh
 from .multipart import parse_form
+from .observability import metrics_response, observe_mesh
 from .outputs import Output, choose_output
 from .outputs.draw import to_png, to_svg
 from .outputs.glb import layout_uv, region_glb
@@ -159,6 +162,25 @@ def readyz(request: Request) -> Health:
     return Health()
 
 
+@router.get(
+    "/metrics",
+    tags=["health"],
+    summary="Prometheus metrics",
+    response_class=Response,
+    responses={
+        200: {
+            "content": {"text/plain": {"schema": {"type": "string"}}},
+            "description": "The Prometheus text exposition format, version 0.0.4.",
+        }
+    },
+)
+def metrics() -> Response:
+    """Requests by route, method and status (counts and latency histograms), the sizes of the
+    meshes read, jobs in flight and computing, and refusals by reason; with several worker
+    processes, summed over all of them."""
+    return metrics_response()
+
+
 @cache
 def _sample_info(name: str) -> SampleInfo:
     sample = SAMPLES[name]
@@ -178,7 +200,12 @@ def _sample_info(name: str) -> SampleInfo:
     )
 
 
-@router.get("/v1/samples", tags=["samples"], summary="The bundled sample meshes")
+@router.get(
+    "/v1/samples",
+    tags=["samples"],
+    summary="The bundled sample meshes",
+    responses={401: PROBLEMS[401]},
+)
 async def samples() -> list[SampleInfo]:
     """Real scans bundled with the service, with their face counts and credits."""
     return await run_in_threadpool(sample_infos)
@@ -204,6 +231,7 @@ _MEDIA_TYPES = {
     response_class=Response,
     responses={
         200: {"content": {t: {} for t in set(_MEDIA_TYPES.values())}, "description": "The file."},
+        401: PROBLEMS[401],
         404: PROBLEMS[422] | {"description": "No such sample."},
         422: PROBLEMS[422],
     },
@@ -229,25 +257,42 @@ def json_body(model: type) -> dict:
 
 
 async def run_job(request: Request, work) -> Response:
-    """Read the body (its size is bounded by the upload limit), then run
-    ``work(body, content_type, settings)`` off the event loop, at most ``MESHFLAT_MAX_JOBS``
-    at once: a slow upload does not hold a slot that a ready request could use."""
+    """Admit the job (a 503 at once when this process has no room, see :mod:`service.jobs`),
+    read the body (bounded by the upload limit), then run ``work(body, content_type,
+    settings)`` off the event loop in a compute slot, all within the time limit. A slow upload
+    holds an admission but no compute slot."""
     settings = settings_of(request)
+    ticket = job_gate(request.app).admit()
+    deadline = Deadline.after(settings.request_timeout)
     try:
-        body = await request.body()
+        with anyio.fail_after(settings.request_timeout):
+            body = await request.body()
     except ClientDisconnect:
-        # Nobody is left to answer; nothing to log.
-        return Response(status_code=400)
+        ticket.release()
+        return Response(status_code=400)  # nobody is left to answer; nothing to log
+    except TimeoutError:
+        ticket.release()
+        raise TimeLimit(settings.request_timeout, while_reading=True) from None
+    except BaseException:
+        ticket.release()
+        raise
     content_type = request.headers.get("content-type", "")
-    async with _job_slots(request.app, settings.max_jobs):
-        return await run_in_threadpool(work, body, content_type, settings)
+    # From here the ticket is the thread's: it ends when the computation does, even one that
+    # runs on after its client had the 504.
+    job = partial(ticket.run, work, deadline, body, content_type, settings)
+    try:
+        with anyio.fail_after(max(0.0, deadline.remaining())):
+            return await anyio.to_thread.run_sync(job, abandon_on_cancel=True)
+    except TimeoutError:
+        raise TimeLimit(settings.request_timeout, while_reading=False) from None
 
 
-def _job_slots(app, total: int) -> anyio.CapacityLimiter:
-    # Made on first use: a limiter belongs to the event loop that runs the app.
-    if getattr(app.state, "job_slots", None) is None:
-        app.state.job_slots = anyio.CapacityLimiter(total)
-    return app.state.job_slots
+def job_gate(app) -> JobGate:
+    """The process's :class:`JobGate` (one per app: a worker process has one app)."""
+    if getattr(app.state, "job_gate", None) is None:
+        settings = app.state.settings
+        app.state.job_gate = JobGate(settings.max_jobs, settings.max_waiting)
+    return app.state.job_gate
 
 
 def parse_json(model: type[BaseModel], body: bytes, content_type: str, prefix: str = ""):
@@ -530,9 +575,11 @@ def load_mesh(data: bytes, filename: str | None, params: MeshParams, settings: S
     """The mesh in ``data`` (its format from ``params.format`` or the file name), read within
     the settings' limits; a problem naming the cause otherwise."""
     try:
-        return read_mesh(data, format_of(filename, params.format), settings.limits)
+        mesh = read_mesh(data, format_of(filename, params.format), settings.limits)
     except MeshFormatError as error:
         raise from_mesh_error(error) from None
+    observe_mesh(mesh.format, len(mesh.vertices), len(mesh.faces))
+    return mesh
 
 
 def mesh_params(model: type[MeshParams], text: bytes) -> MeshParams:

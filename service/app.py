@@ -8,6 +8,7 @@ from contextlib import asynccontextmanager
 from importlib.metadata import version
 
 from fastapi import FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 from fastapi.openapi.utils import get_openapi
 from pydantic.json_schema import models_json_schema
 from starlette.concurrency import run_in_threadpool
@@ -15,8 +16,10 @@ from starlette.concurrency import run_in_threadpool
 from . import demo, problems
 from .allocator import keep_large_blocks
 from .api import router
+from .auth import PROTECTED_PREFIX, RequireApiKey
 from .bodylimit import BodySizeLimit
 from .examples import add_examples
+from .observability import JsonFormatter, RequestContext, forget_dead_workers
 from .params import (
     FitParams,
     FlattenParams,
@@ -30,11 +33,12 @@ from .selfcheck import run_self_check
 from .settings import Settings
 
 logger = logging.getLogger("meshflat")
-if not logger.handlers:
+if not logger.handlers:  # imported without `meshflat serve`'s logging set-up
     _handler = logging.StreamHandler()
-    _handler.setFormatter(logging.Formatter("%(levelname)s:     %(message)s"))
+    _handler.setFormatter(JsonFormatter())
     logger.addHandler(_handler)
     logger.setLevel(logging.INFO)
+    logger.propagate = False
 
 DESCRIPTION = """
 meshflat flattens a region of a 3D mesh into distorted-pole spherical coordinates: the poles
@@ -62,6 +66,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         the outcome; /readyz answers 200 after it passes."""
         if not keep_large_blocks():
             logger.info("allocator: not glibc, default settings kept")
+        forget_dead_workers()
+        if not settings.api_keys:
+            logger.warning(
+                "no API keys are configured (MESHFLAT_API_KEYS, MESHFLAT_API_KEYS_FILE): "
+                "every /v1 route is open to anyone who can reach the service"
+            )
         check = await run_in_threadpool(run_self_check)
         (logger.info if check.ok else logger.error)(str(check))
         app.state.ready = check.ok
@@ -82,8 +92,20 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(router)
     app.include_router(demo.router)
     app.mount("/static", demo.static_files(), name="static")
+    # Outermost last: every answer, refusals included, gets a request id, a log line and
+    # metrics; CORS headers go on refusals too, so a browser can read them.
     app.add_middleware(BodySizeLimit, limit=settings.max_upload_bytes)
+    app.add_middleware(RequireApiKey, keys=settings.api_keys)
+    app.add_middleware(
+        CORSMiddleware,
+        allow_origins=list(settings.cors_origins),
+        allow_methods=["GET", "POST"],
+        allow_headers=["Authorization", "X-API-Key", "Content-Type", "Accept", "X-Request-ID"],
+        expose_headers=["X-Request-ID", "Retry-After", "Server-Timing", "Content-Disposition"],
+        max_age=600,
+    )
     app.add_middleware(problems.UnexpectedErrors)
+    app.add_middleware(RequestContext, routes=[*router.routes, *demo.router.routes])
     return app
 
 
@@ -113,8 +135,22 @@ def _openapi(app: FastAPI) -> dict:
         document.setdefault("components", {}).setdefault("schemas", {}).update(
             definitions.get("$defs", {})
         )
-        app.openapi_schema = add_examples(document)
+        app.openapi_schema = add_examples(_declare_keys(document))
     return app.openapi_schema
+
+
+def _declare_keys(document: dict) -> dict:
+    """The two ways to send an API key, required by every ``/v1`` operation (they are
+    checked only when the service has keys: service.auth)."""
+    document["components"]["securitySchemes"] = {
+        "bearer": {"type": "http", "scheme": "bearer", "description": "An API key."},
+        "apiKey": {"type": "apiKey", "in": "header", "name": "X-API-Key"},
+    }
+    for path, operations in document["paths"].items():
+        if path.startswith(PROTECTED_PREFIX):
+            for operation in operations.values():
+                operation["security"] = [{"bearer": []}, {"apiKey": []}]
+    return document
 
 
 app = create_app()

@@ -1,6 +1,7 @@
 """``meshflat``: the service's computations from a shell, and the server itself.
 
-    meshflat serve [--host 127.0.0.1] [--port 8000] [--workers 1]
+    meshflat serve [--host H] [--port P] [--workers N]    (defaults: MESHFLAT_HOST, ...)
+    meshflat health [--port P]                            (exit 0 when /healthz answers)
     meshflat flatten MESH --region-cone AXIS:DEG [--sigma S | --pole-angle DEG | --auto]
                           [--center X,Y,Z | bbox_center | centroid] [--pole X,Y,Z --up X,Y,Z]
                           [--layout theta_phi|mercator] [--params JSON] --out FILE
@@ -17,7 +18,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import sys
+import tempfile
+import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -148,10 +153,14 @@ def parser() -> argparse.ArgumentParser:
         prog="meshflat", description="The service's computations from a shell, and the server."
     )
     commands = top.add_subparsers(dest="command", required=True)
-    serve = commands.add_parser("serve", help="run the service (uvicorn)")
-    serve.add_argument("--host", default="127.0.0.1")
-    serve.add_argument("--port", type=int, default=8000)
-    serve.add_argument("--workers", type=int, default=1)
+    serve = commands.add_parser(
+        "serve", help="run the service (uvicorn; settings from MESHFLAT_* variables)"
+    )
+    serve.add_argument("--host", help="default: MESHFLAT_HOST or 127.0.0.1")
+    serve.add_argument("--port", type=int, help="default: MESHFLAT_PORT or 8000")
+    serve.add_argument("--workers", type=int, help="processes; default: MESHFLAT_WORKERS or 1")
+    health = commands.add_parser("health", help="exit 0 when the local service's /healthz answers")
+    health.add_argument("--port", type=int, help="default: MESHFLAT_PORT or 8000")
     for name, text in (
         ("flatten", "flatten a region: JSON, GLB, SVG or PNG by the extension of --out"),
         ("validate", "validate a region: params, validation and metrics as JSON"),
@@ -176,24 +185,79 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
-    if args.command == "serve":
-        import uvicorn
-
-        uvicorn.run(
-            "service.app:app",
-            host=args.host,
-            port=args.port,
-            workers=args.workers,
-            timeout_graceful_shutdown=30,
-        )
-        return 0
     try:
+        if args.command == "serve":
+            serve(args)
+            return 0
+        if args.command == "health":
+            return health(args)
         run(args)
     except Problem as problem:
         where = f" ({problem.field})" if problem.field else ""
         print(f"meshflat: error {problem.status}{where}: {problem.detail}", file=sys.stderr)
         return 2
+    except ValueError as error:  # a setting (Settings.from_env names the variable)
+        if args.command not in ("serve", "health"):
+            raise
+        print(f"meshflat: {error}", file=sys.stderr)
+        return 2
     return 0
+
+
+def serve(args: argparse.Namespace) -> None:
+    """uvicorn with the settings' host, port and workers, JSON logs, and a graceful stop on
+    SIGTERM: no new connections, and requests in progress finish (up to their time limit).
+    Several workers share their metrics through PROMETHEUS_MULTIPROC_DIR (a fresh temporary
+    directory unless one is given)."""
+    import uvicorn
+
+    from .observability import log_config
+
+    settings = Settings.from_env()  # a bad variable stops here, named
+    workers = args.workers or settings.workers
+    with _metrics_directory(workers):
+        uvicorn.run(
+            "service.app:app",
+            host=args.host or settings.host,
+            port=args.port or settings.port,
+            workers=workers,
+            log_config=log_config(),
+            access_log=False,  # the service logs each request itself, with its id
+            timeout_graceful_shutdown=math.ceil(settings.request_timeout) + 5,
+            # A worker busy in a long computation answers the supervisor's ping late; only
+            # one that stays silent this long is taken for hung and replaced.
+            timeout_worker_healthcheck=30,
+        )
+
+
+@contextmanager
+def _metrics_directory(workers: int) -> Iterator[None]:
+    if workers < 2:
+        yield
+        return
+    given = os.environ.get("PROMETHEUS_MULTIPROC_DIR")
+    if given:
+        for stale in Path(given).glob("*.db"):  # a previous run's values
+            stale.unlink()
+        yield
+        return
+    with tempfile.TemporaryDirectory(prefix="meshflat-metrics-") as directory:
+        os.environ["PROMETHEUS_MULTIPROC_DIR"] = directory
+        try:
+            yield
+        finally:
+            del os.environ["PROMETHEUS_MULTIPROC_DIR"]
+
+
+def health(args: argparse.Namespace) -> int:
+    """The container's health check: 0 when ``/healthz`` answers 200 within 5 s."""
+    port = args.port or Settings.from_env().port
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=5) as answer:
+            return 0 if answer.status == 200 else 1
+    except OSError as error:
+        print(f"meshflat: /healthz on port {port}: {error}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

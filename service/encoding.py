@@ -11,6 +11,8 @@ import numpy as np
 import orjson
 from starlette.responses import Response
 
+from .jobs import current_deadline
+
 JSON = "application/json"
 
 
@@ -42,13 +44,20 @@ def _check_finite(value) -> None:
 
 
 class Timings:
-    """Named durations for a ``Server-Timing`` header (RFC-style ``name;dur=ms``)."""
+    """Named durations for a ``Server-Timing`` header (RFC-style ``name;dur=ms``).
+
+    Each stage starts only before the job's deadline (:mod:`service.jobs`): a job past its
+    time limit stops at its next stage instead of running on unseen.
+    """
 
     def __init__(self) -> None:
         self.durations: dict[str, float] = {}
 
     @contextmanager
     def measure(self, name: str):
+        deadline = current_deadline.get()
+        if deadline is not None:
+            deadline.check()
         start = time.perf_counter()
         try:
             yield

@@ -21,6 +21,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from transforms import TransformInputError
 
 from .meshio import MeshFormatError
+from .observability import REJECTIONS
 
 PROBLEM_JSON = "application/problem+json"
 logger = logging.getLogger("meshflat")
@@ -59,6 +60,7 @@ class Problem(Exception):
 
 
 def problem_response(problem: Problem) -> Response:
+    REJECTIONS.labels(problem.kind).inc()
     body = {
         "type": f"urn:meshflat:problem:{problem.kind}",
         "title": HTTPStatus(problem.status).phrase,

@@ -179,10 +179,17 @@ PROBLEMS = {
     for status, text in (
         (400, "Malformed request (for example a broken multipart body)."),
         (413, "Body, file or mesh beyond a limit; the detail names the limit."),
+        (401, "No valid API key (when the service has keys): the detail says which."),
+        (408, "The body did not arrive within the time limit (MESHFLAT_REQUEST_TIMEOUT)."),
         (415, "Wrong content type."),
         (
             422,
             "Invalid parameters or an unreadable mesh; the detail names the field, face or vertex.",
         ),
+        (503, "Busy: too many jobs in flight; Retry-After gives the seconds to wait."),
+        (504, "The job did not finish within the time limit (MESHFLAT_REQUEST_TIMEOUT)."),
     )
+}
+PROBLEMS[503]["headers"] = {
+    "Retry-After": {"description": "Seconds to wait.", "schema": {"type": "integer"}}
 }

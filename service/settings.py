@@ -1,17 +1,22 @@
-"""Settings from environment variables (``MESHFLAT_*``), read once when the app is built."""
+"""Settings from environment variables (``MESHFLAT_*``), read once when the app is built.
+
+Every setting of the service and of ``meshflat serve`` is an environment variable: a
+container is configured without a file or a command-line flag.
+"""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
+from pathlib import Path
 
 from .meshio import Limits
 
 
 @dataclass(frozen=True)
 class Settings:
-    """Limits and tuning of the service.
+    """Limits, access and tuning of the service.
 
     Attributes
     ----------
@@ -20,7 +25,15 @@ class Settings:
     max_vertices, max_faces : MESHFLAT_MAX_VERTICES, MESHFLAT_MAX_FACES, per mesh
     max_points : MESHFLAT_MAX_POINTS, per /v1/points or /v1/locate request
     threads : MESHFLAT_THREADS, threads one request's computation may use
-    max_jobs : MESHFLAT_MAX_JOBS, requests computed at once; more wait for a slot
+    max_jobs : MESHFLAT_MAX_JOBS, jobs computed at once per process
+    max_waiting : MESHFLAT_MAX_WAITING, jobs admitted beyond those (uploading or waiting for
+        a slot); a job beyond ``max_jobs + max_waiting`` is refused at once with a 503
+    request_timeout : MESHFLAT_REQUEST_TIMEOUT, seconds a job may take from its first byte to
+        its answer (a 408 while the body is still arriving, a 504 after)
+    api_keys : MESHFLAT_API_KEYS, comma-separated keys; with any, every ``/v1`` route needs one
+    api_keys_file : MESHFLAT_API_KEYS_FILE, a file of keys, one per line (a mounted secret)
+    cors_origins : MESHFLAT_CORS_ORIGINS, comma-separated origins a browser may call from
+    host, port, workers : MESHFLAT_HOST, MESHFLAT_PORT, MESHFLAT_WORKERS, for ``meshflat serve``
     """
 
     max_upload_bytes: int = 256 * 2**20
@@ -29,6 +42,14 @@ class Settings:
     max_points: int = 5_000_000
     threads: int = 1
     max_jobs: int = 2
+    max_waiting: int = 6
+    request_timeout: float = 60.0
+    api_keys: tuple[str, ...] = ()
+    api_keys_file: str = ""
+    cors_origins: tuple[str, ...] = ()
+    host: str = "127.0.0.1"
+    port: int = 8000
+    workers: int = 1
 
     @classmethod
     def from_env(cls, environ: Mapping[str, str] | None = None) -> Settings:
@@ -37,18 +58,27 @@ class Settings:
         Raises
         ------
         ValueError
-            A variable that is not a positive integer (the service refuses to start).
+            A number that is not positive, or a key file that cannot be read (the service
+            refuses to start, naming the variable).
         """
         environ = os.environ if environ is None else environ
         values = {}
         for field in fields(cls):
             name = f"MESHFLAT_{field.name.upper()}"
             if name in environ:
-                text = environ[name].strip()
-                if not text.isdigit() or int(text) < 1:
-                    raise ValueError(f"{name} must be a positive integer, got {text!r}")
-                values[field.name] = int(text)
-        return cls(**values)
+                values[field.name] = _parse(name, environ[name].strip(), field.default)
+        settings = cls(**values)
+        if settings.api_keys_file:
+            try:
+                text = Path(settings.api_keys_file).read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError) as error:
+                raise ValueError(
+                    f"MESHFLAT_API_KEYS_FILE: cannot read {settings.api_keys_file!r} "
+                    f"({type(error).__name__})"
+                ) from None
+            keys = tuple(line.strip() for line in text.splitlines() if line.strip())
+            settings = cls(**{**values, "api_keys": settings.api_keys + keys})
+        return settings
 
     @property
     def limits(self) -> Limits:
@@ -57,3 +87,20 @@ class Settings:
             max_faces=self.max_faces,
             max_bytes=self.max_upload_bytes,
         )
+
+
+def _parse(name: str, text: str, default: object) -> object:
+    """``text`` as the type of the field's ``default``."""
+    if isinstance(default, tuple):
+        return tuple(item.strip() for item in text.split(",") if item.strip())
+    if isinstance(default, str):
+        return text
+    kind = type(default)
+    try:
+        value = kind(text)
+    except ValueError:
+        value = None
+    if value is None or not value > 0 or value == float("inf"):
+        noun = "an integer" if kind is int else "a number"
+        raise ValueError(f"{name} must be {noun} above 0, got {text!r}")
+    return value

@@ -1,6 +1,6 @@
 """End to end in a real browser: headless Chromium opens the demo page served by a real
-uvicorn, flattens a bundled scan, and the test checks what the page shows. The screenshot is
-kept in ``artifacts/demo.png``."""
+uvicorn that requires an API key, enters the key, flattens a bundled scan, and the test checks
+what the page shows. The screenshot is kept in ``artifacts/demo.png``."""
 
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ from .tools import require
 CHROMIUM = os.environ.get("MESHFLAT_CHROMIUM", "/usr/bin/chromium")
 ARTIFACTS = Path(__file__).parent.parent / "artifacts"
 SAMPLE = "fsaverage-head.ply"
+KEY = "browser-test-key"
 #: What the page's preset for the sample sends (web/demo.js, PRESETS).
 PARAMS = {
     "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}},
@@ -51,7 +52,8 @@ def server():
             str(port),
         ],
         stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        env=os.environ | {"MESHFLAT_API_KEYS": KEY},
     )
     url = f"http://127.0.0.1:{port}"
     try:
@@ -84,6 +86,7 @@ def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
         f"{server}/v1/flatten",
         files={"mesh": (SAMPLE, data)},
         data={"params": json.dumps(PARAMS)},
+        headers={"X-API-Key": KEY},
         timeout=60,
     ).json()
     vertex_count = len(expected["vertices"]["ids"])
@@ -96,11 +99,19 @@ def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
         )
         try:
             page = browser.new_page(viewport={"width": 1600, "height": 900})
-            page.on("console", lambda m: m.type == "error" and problems.append(m.text))
+            # The one console error expected: the samples asked for before the key is given.
+            page.on(
+                "console",
+                lambda m: m.type == "error" and "401" not in m.text and problems.append(m.text),
+            )
             page.on("pageerror", lambda e: problems.append(str(e)))
             page.on("requestfailed", lambda r: problems.append(f"{r.url}: {r.failure}"))
             page.goto(server, wait_until="load")
             page.wait_for_selector("body[data-state=ready]", timeout=30_000)
+            assert "enter the API key" in page.locator("#status").inner_text()
+            page.fill("#apikey", KEY)
+            page.locator("#apikey").blur()  # a change event, as when the user moves on
+            page.wait_for_selector(f"#sample option[value='{SAMPLE}']", state="attached")
             page.select_option("#sample", SAMPLE)
             page.click("#go")
             page.wait_for_selector("body[data-state=shown]", timeout=60_000)

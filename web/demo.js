@@ -15,6 +15,13 @@ const PRESETS = {
 
 const $ = (id) => document.getElementById(id);
 const vector = (id) => $(id).value.split(',').map(Number);
+// The API key, when the service requires one (MESHFLAT_API_KEYS); kept in the page only.
+const keyHeaders = () => ($('apikey').value.trim() ? { 'X-API-Key': $('apikey').value.trim() } : {});
+
+async function problemOf(response) {
+  const problem = await response.json().catch(() => ({ detail: response.statusText }));
+  return new Error(`${response.status}: ${problem.detail}`);
+}
 
 function setStatus(text, isError = false) {
   $('status').textContent = text;
@@ -22,8 +29,14 @@ function setStatus(text, isError = false) {
 }
 
 async function loadSamples() {
-  const response = await fetch('/v1/samples');
+  const response = await fetch('/v1/samples', { headers: keyHeaders() });
+  if (!response.ok) {
+    setStatus(`${(await problemOf(response)).message}${response.status === 401 ? ' (enter the API key)' : ''}`, true);
+    return;
+  }
   const samples = await response.json();
+  setStatus('');
+  if ($('sample').options.length > 0) return; // listed already (the key was changed)
   for (const sample of samples) {
     const option = document.createElement('option');
     option.value = sample.name;
@@ -64,7 +77,8 @@ async function meshFile() {
   const upload = $('file').files[0];
   if (upload) return { blob: upload, name: upload.name };
   const name = $('sample').value;
-  const response = await fetch(`/v1/samples/${encodeURIComponent(name)}`);
+  const response = await fetch(`/v1/samples/${encodeURIComponent(name)}`, { headers: keyHeaders() });
+  if (!response.ok) throw await problemOf(response);
   return { blob: await response.blob(), name };
 }
 
@@ -72,11 +86,9 @@ async function flattenAs(mesh, accept) {
   const form = new FormData();
   form.append('mesh', mesh.blob, mesh.name);
   form.append('params', JSON.stringify(params()));
-  const response = await fetch('/v1/flatten', { method: 'POST', body: form, headers: { Accept: accept } });
-  if (!response.ok) {
-    const problem = await response.json();
-    throw new Error(`${response.status}: ${problem.detail}`);
-  }
+  const headers = { Accept: accept, ...keyHeaders() };
+  const response = await fetch('/v1/flatten', { method: 'POST', body: form, headers });
+  if (!response.ok) throw await problemOf(response);
   return response;
 }
 
@@ -173,6 +185,7 @@ async function flatten(event) {
 }
 
 $('sample').addEventListener('change', applyPreset);
+$('apikey').addEventListener('change', loadSamples);
 $('auto').addEventListener('change', () => {
   for (const id of ['center', 'pole', 'sigma']) $(id).disabled = $('auto').checked;
 });

@@ -1,0 +1,172 @@
+"""``meshflat serve`` as deployed: a real uvicorn with two worker processes on 127.0.0.1,
+configured by environment variables only."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from service.samples import SAMPLES
+
+from .test_operations import families, sample
+
+KEY = "serve-test-key"
+REGION = {"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}}
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Server:
+    """``meshflat serve`` in a child process; its stderr (the JSON log) kept in a file."""
+
+    def __init__(self, **env: str) -> None:
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.log = tempfile.TemporaryFile(mode="w+")
+        self.tmp = tempfile.TemporaryDirectory()
+        environ = {k: v for k, v in os.environ.items() if not k.startswith("MESHFLAT_")}
+        environ.pop("PROMETHEUS_MULTIPROC_DIR", None)
+        environ |= {"MESHFLAT_PORT": str(self.port), "TMPDIR": self.tmp.name, **env}
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "service.cli", "serve"],
+            env=environ,
+            stdout=self.log,
+            stderr=self.log,
+        )
+
+    def wait_ready(self, seconds: float = 60) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            assert self.process.poll() is None, self.lines()
+            try:
+                if httpx.get(f"{self.url}/readyz", timeout=1).status_code == 200:
+                    return
+            except httpx.TransportError:
+                pass
+            time.sleep(0.1)
+        raise AssertionError("not ready in time")
+
+    def lines(self) -> list[dict]:
+        self.log.seek(0)
+        return [json.loads(line) for line in self.log if line.startswith("{")]
+
+    def stop(self) -> int:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+        code = self.process.wait(60)
+        self.tmp.cleanup()
+        return code
+
+
+@pytest.fixture
+def two_workers():
+    server = Server(MESHFLAT_WORKERS="2", MESHFLAT_API_KEYS=KEY)
+    try:
+        server.wait_ready()
+        yield server
+    finally:
+        if server.process.poll() is None:
+            server.process.kill()
+            server.process.wait()
+
+
+def test_two_workers_share_their_metrics_and_stop_gracefully_on_sigterm(two_workers):
+    server, headers = two_workers, {"X-API-Key": KEY}
+    data = SAMPLES["fsaverage-head.ply"].path.read_bytes()
+    with httpx.Client(base_url=server.url, timeout=60) as c:
+        for _ in range(6):  # spread over both workers by the kernel
+            assert c.get("/v1/samples", headers=headers).status_code == 200
+        assert c.get("/v1/samples").status_code == 401
+        # Whichever worker answers /metrics, the counts are the sum over both.
+        for _ in range(4):
+            parsed = families(c.get("/metrics").text)
+            ok = sample(parsed, "meshflat_requests_total", route="/v1/samples", status="200")
+            assert ok == 6
+            assert sample(parsed, "meshflat_rejections_total", reason="unauthorized") == 1
+        pids = {line.get("message") for line in server.lines()}
+        assert sum(m.startswith("Started server process") for m in pids) == 2
+
+        # SIGTERM while a fit computes: the fit is answered, then the server exits 0.
+        answer: dict = {}
+
+        def fit():
+            answer["response"] = c.post(
+                "/v1/fit",
+                files={"mesh": ("head.ply", data)},
+                data={"params": json.dumps(REGION)},
+                headers=headers | {"X-Request-ID": "fit-during-stop"},
+            )
+
+        fitting = threading.Thread(target=fit)
+        fitting.start()
+        deadline = time.monotonic() + 10
+        while sample(families(c.get("/metrics").text), "meshflat_jobs_computing") < 1:
+            assert time.monotonic() < deadline, "the fit was not seen computing"
+            time.sleep(0.01)
+        server.process.send_signal(signal.SIGTERM)
+        fitting.join(60)
+    assert answer["response"].status_code == 200, answer["response"].text
+    assert server.process.wait(60) == 0
+    lines = server.lines()
+    sigterm = next(e["time"] for e in lines if e["message"].startswith("Received SIGTERM"))
+    fit_line = next(e for e in lines if e.get("request_id") == "fit-during-stop")
+    assert fit_line["status"] == 200 and fit_line["time"] > sigterm
+    # The workers' metric files lived in a temporary directory, removed at the end.
+    assert not any(Path(server.tmp.name).glob("meshflat-metrics-*"))
+    server.stop()
+
+
+def test_one_worker_without_keys_warns_and_a_bad_setting_stops_the_start():
+    server = Server()
+    try:
+        server.wait_ready()
+        assert httpx.get(f"{server.url}/v1/samples").status_code == 200
+    finally:
+        # One worker is uvicorn's server itself: after its graceful shutdown it re-raises the
+        # SIGTERM, so the status tells the signal (143 in a shell); the supervisor of several
+        # workers exits 0.
+        assert server.stop() in (0, -signal.SIGTERM)
+    assert any(e["message"] == "Application shutdown complete." for e in server.lines())
+    warnings = [e for e in server.lines() if e["level"] == "warning"]
+    assert any("no API keys are configured" in e["message"] for e in warnings)
+
+    bad = subprocess.run(
+        [sys.executable, "-m", "service.cli", "serve"],
+        env=os.environ | {"MESHFLAT_MAX_JOBS": "zero"},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert bad.returncode == 2
+    assert "MESHFLAT_MAX_JOBS must be an integer above 0, got 'zero'" in bad.stderr
+
+
+def test_health_command_is_the_containers_health_check(two_workers):
+    command = [sys.executable, "-m", "service.cli", "health"]
+    up = subprocess.run(
+        command, env=os.environ | {"MESHFLAT_PORT": str(two_workers.port)}, timeout=30
+    )
+    assert up.returncode == 0
+    down = subprocess.run(
+        command,
+        env=os.environ | {"MESHFLAT_PORT": str(free_port())},
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert down.returncode == 1 and "/healthz" in down.stderr

@@ -25,7 +25,10 @@ BASE=$(sed -n 's/^ARG PYTHON_IMAGE=//p' Dockerfile)
 podman=(podman --storage-driver vfs)
 run_options=(--runtime runc --ulimit nofile=1024:1024 --ulimit nproc=1000:1000)
 work=$(mktemp -d)
-trap '"${podman[@]}" rm -f "$NAME" >/dev/null 2>&1 || true; rm -rf "$work"' EXIT
+# The image is removed at the end (vfs storage keeps full copies); the base stays, as a cache.
+trap '"${podman[@]}" rm -f "$NAME" >/dev/null 2>&1 || true
+      [ -n "${SMOKE_KEEP_IMAGE:-}" ] || "${podman[@]}" rmi -f "$IMAGE" >/dev/null 2>&1 || true
+      rm -rf "$work"' EXIT
 
 step() { printf '\n== %s\n' "$*"; }
 fail() { printf 'FAILED: %s\n' "$*" >&2; "${podman[@]}" logs "$NAME" 2>&1 | tail -20 >&2 || true; exit 1; }

@@ -1,0 +1,146 @@
+"""Faults against a real ``meshflat serve`` with two workers on 127.0.0.1: a client that
+disconnects mid-upload, a job past its time limit, a worker killed mid-request. Each leaves
+the service healthy: it answers, and counts no job in flight once the work is gone."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+import trimesh
+from trimesh.remesh import subdivide
+
+from service.samples import SAMPLES
+
+from .conftest import load_sample
+from .test_operations import families, sample
+from .test_serve import REGION, Server
+
+
+def subdivided_head() -> bytes:
+    """fsaverage-head.ply subdivided once (16,248 faces): its fit takes about a second."""
+    vertices, faces = subdivide(*load_sample("fsaverage-head.ply"))
+    return trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply")
+
+
+HEAD = subdivided_head()
+
+
+@pytest.fixture
+def server(request):
+    server = Server(MESHFLAT_WORKERS="2", **getattr(request, "param", {}))
+    try:
+        server.wait_ready()
+        yield server
+    finally:
+        if server.process.poll() is None:
+            server.process.kill()
+            server.process.wait()
+
+
+def in_flight(client: httpx.Client) -> float:
+    return sample(families(client.get("/metrics").text), "meshflat_jobs_in_flight")
+
+
+def until(condition, seconds: float = 20) -> None:
+    deadline = time.monotonic() + seconds
+    while not condition():
+        assert time.monotonic() < deadline, "not within the time allowed"
+        time.sleep(0.05)
+
+
+def healthy(client: httpx.Client) -> None:
+    """Answers, flattens a sample, and has no job left in flight."""
+    assert client.get("/healthz").status_code == 200
+    data = SAMPLES["fsaverage-head.ply"].path.read_bytes()
+    response = client.post(
+        "/v1/flatten",
+        files={"mesh": ("head.ply", data)},
+        data={"params": json.dumps(REGION)},
+    )
+    assert response.status_code == 200, response.text
+    until(lambda: in_flight(client) == 0)
+
+
+def fit_of_head(client: httpx.Client) -> httpx.Response:
+    return client.post(
+        "/v1/fit",
+        files={"mesh": ("head.ply", HEAD)},
+        data={"params": json.dumps(REGION)},
+    )
+
+
+def test_a_client_that_disconnects_mid_upload(server):
+    with httpx.Client(base_url=server.url, timeout=60) as client:
+        for _ in range(4):  # to both workers, most likely
+            with socket.create_connection(("127.0.0.1", server.port)) as raw:
+                raw.sendall(
+                    b"POST /v1/flatten HTTP/1.1\r\nHost: x\r\n"
+                    b"Content-Type: multipart/form-data; boundary=b\r\n"
+                    b"Content-Length: 1000000\r\n\r\n--b\r\n" + b"v 0 0 0\n" * 1000
+                )
+                until(lambda: in_flight(client) >= 1)
+        healthy(client)
+    statuses = [e["status"] for e in server.lines() if e.get("route") == "/v1/flatten"]
+    assert 500 not in statuses
+
+
+@pytest.mark.parametrize("server", [{"MESHFLAT_REQUEST_TIMEOUT": "0.3"}], indirect=True)
+def test_a_job_past_its_time_limit(server):
+    with httpx.Client(base_url=server.url, timeout=60) as client:
+        started = time.monotonic()
+        response = fit_of_head(client)
+        assert response.status_code == 504, response.text
+        assert "0.3 s (MESHFLAT_REQUEST_TIMEOUT)" in response.json()["detail"]
+        assert time.monotonic() - started < 5
+        until(lambda: in_flight(client) == 0)  # the computation stopped, its slot freed
+        assert client.get("/healthz").status_code == 200
+
+
+def worker_pids(supervisor: int) -> list[int]:
+    children = Path(f"/proc/{supervisor}/task/{supervisor}/children").read_text().split()
+    # The supervisor's children: the two workers (and multiprocessing's resource tracker,
+    # which serves no requests and uses no CPU).
+    return [int(pid) for pid in children]
+
+
+def cpu_ticks(pid: int) -> int:
+    fields = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()
+    return int(fields[11]) + int(fields[12])  # utime + stime
+
+
+def test_a_worker_killed_mid_request(server):
+    with httpx.Client(base_url=server.url, timeout=60) as client:
+        outcome: dict = {}
+
+        def fit():
+            try:
+                outcome["status"] = fit_of_head(client).status_code
+            except httpx.TransportError as error:
+                outcome["error"] = type(error).__name__
+
+        fitting = threading.Thread(target=fit)
+        before = {pid: cpu_ticks(pid) for pid in worker_pids(server.process.pid)}
+        fitting.start()
+        until(lambda: in_flight(client) >= 1)
+        time.sleep(0.4)  # uploaded and computing: its worker has used the CPU since
+        busy = max(before, key=lambda pid: cpu_ticks(pid) - before[pid])
+        os.kill(busy, signal.SIGKILL)
+        fitting.join(60)
+        # The request on the killed worker is lost (the connection drops, no answer), ...
+        assert "error" in outcome, outcome
+        # ... the other worker keeps serving, the supervisor replaces the dead one, and the
+        # dead worker's jobs in flight are no longer counted.
+        until(lambda: busy not in worker_pids(server.process.pid))
+        until(lambda: len(worker_pids(server.process.pid)) >= 2)
+        healthy(client)
+        for _ in range(6):
+            assert client.get("/v1/samples").status_code == 200
+    assert any("died" in e["message"] for e in server.lines())

@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-service openapi clean
+.PHONY: serve test bench bench-fit bench-service soak openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -40,6 +40,10 @@ bench-fit: $(VENV)/.installed-bench
 # Needs curl (the end-to-end client) besides the bench extra.
 bench-service: $(VENV)/.installed-bench
 	$(BIN)/python -m benchmarks.service_bench $(BENCH_ARGS)
+
+# Load and soak through a real two-worker server (the test extra suffices); CI runs --short.
+soak: $(VENV)/.installed-test
+	$(BIN)/python -m benchmarks.soak $(BENCH_ARGS)
 
 openapi: $(VENV)/.installed-run
 	$(BIN)/python -m service.openapi

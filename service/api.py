@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
-import json
+import gc
 from dataclasses import dataclass
 from functools import cache, partial
+from typing import Annotated
 
 import anyio
 import anyio.to_thread
 import numpy as np
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Path, Request
 from pydantic import BaseModel, ValidationError
 from starlette.concurrency import run_in_threadpool
 from starlette.requests import ClientDisconnect
@@ -28,6 +29,7 @@ from transforms import (
     world_to_angles,
 )
 
+from .allocator import release_free_memory
 from .encoding import Timings, encode, json_response
 from .jobs import Deadline, JobGate, TimeLimit
 from .meshio import Mesh, MeshFormatError, format_of, read_mesh
@@ -79,12 +81,12 @@ def multipart_body(model: type[BaseModel]) -> dict:
         "description": "The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the "
         "format comes from the file name's extension or params.format.",
     }
+    # An object part sent as JSON (the encoding below): clients and generators that read the
+    # document build it from the schema itself.
     params = {
-        "type": "string",
-        "contentMediaType": "application/json",
-        "contentSchema": {"$ref": f"#/components/schemas/{name}"},
+        "$ref": f"#/components/schemas/{name}",
         "description": f"JSON, as the {name} schema; default {{}}.",
-        "example": json.dumps(example),
+        "example": example,
     }
     form = {
         "schema": {
@@ -236,7 +238,12 @@ _MEDIA_TYPES = {
         422: PROBLEMS[422],
     },
 )
-def sample_file(name: str) -> Response:
+def sample_file(
+    name: Annotated[
+        str,
+        Path(description="A bundled sample's name.", json_schema_extra={"enum": list(SAMPLES)}),
+    ],
+) -> Response:
     """The file itself, as bundled."""
     if name not in SAMPLES:
         raise Problem(404, f"no sample named {name!r}; see /v1/samples", "not-found", "name")
@@ -291,8 +298,15 @@ def job_gate(app) -> JobGate:
     """The process's :class:`JobGate` (one per app: a worker process has one app)."""
     if getattr(app.state, "job_gate", None) is None:
         settings = app.state.settings
-        app.state.job_gate = JobGate(settings.max_jobs, settings.max_waiting)
+        app.state.job_gate = JobGate(settings.max_jobs, settings.max_waiting, on_idle=_shrink)
     return app.state.job_gate
+
+
+def _shrink() -> None:
+    """An idle worker gives its free heap back (see service.allocator), after freeing what
+    only reference cycles kept (arrays held by a traceback's frames, say)."""
+    gc.collect()
+    release_free_memory()
 
 
 def parse_json(model: type[BaseModel], body: bytes, content_type: str, prefix: str = ""):

@@ -105,7 +105,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         max_age=600,
     )
     app.add_middleware(problems.UnexpectedErrors)
-    app.add_middleware(RequestContext, routes=[*router.routes, *demo.router.routes])
+    # Routes for the metrics' labels: FastAPI's own (documents, /static) and the routers'.
+    own = [route for route in app.router.routes if hasattr(route, "path")]
+    app.add_middleware(RequestContext, routes=[*own, *router.routes, *demo.router.routes])
     return app
 
 

@@ -39,16 +39,19 @@ class KeyCheck:
         return matched
 
 
-def presented_key(headers: list[tuple[bytes, bytes]]) -> bytes | None:
-    """The key a request carries (``X-API-Key``, or a Bearer ``Authorization``), if any."""
+def presented_keys(headers: list[tuple[bytes, bytes]]) -> list[bytes]:
+    """The keys a request carries: ``X-API-Key`` and a Bearer ``Authorization``. The two
+    are alternatives (as in the OpenAPI document); a request with both passes if either
+    key is valid."""
+    keys = []
     for name, value in headers:
-        if name == b"x-api-key":
-            return value.strip()
-        if name == b"authorization":
+        if name == b"x-api-key" and value.strip():
+            keys.append(value.strip())
+        elif name == b"authorization":
             scheme, _, credentials = value.strip().partition(b" ")
             if scheme.lower() == b"bearer" and credentials.strip():
-                return credentials.strip()
-    return None
+                keys.append(credentials.strip())
+    return keys
 
 
 class RequireApiKey:
@@ -67,9 +70,9 @@ class RequireApiKey:
         ):
             await self.app(scope, receive, send)
             return
-        key = presented_key(scope["headers"])
-        if key is None or not self.check.accepts(key):
-            why = "no API key was sent" if key is None else "the API key is not valid"
+        keys = presented_keys(scope["headers"])
+        if not any([self.check.accepts(key) for key in keys]):  # a list: every key checked
+            why = "the API key is not valid" if keys else "no API key was sent"
             refusal = Problem(
                 401,
                 f"{why}: send it as 'Authorization: Bearer <key>' or 'X-API-Key: <key>'",

@@ -81,13 +81,22 @@ class JobGate:
     ----------
     max_jobs : jobs computing at once
     max_waiting : jobs admitted beyond those
+    on_idle : called (in a timer thread) once no job has been in flight for ``idle_seconds``
     """
 
-    def __init__(self, max_jobs: int, max_waiting: int) -> None:
+    def __init__(
+        self,
+        max_jobs: int,
+        max_waiting: int,
+        on_idle: Callable[[], object] | None = None,
+        idle_seconds: float = 1.0,
+    ) -> None:
         self.max_jobs, self.limit = max_jobs, max_jobs + max_waiting
         self._lock = threading.Lock()
         self._slots = threading.BoundedSemaphore(max_jobs)
         self._admitted = 0
+        self._changes = 0  # admissions and departures, to tell a quiet second from a busy one
+        self._on_idle, self._idle_seconds = on_idle, idle_seconds
         self._seconds = 1.0  # running mean of a job's compute time, for Retry-After
 
     @property
@@ -101,6 +110,7 @@ class JobGate:
             if self._admitted >= self.limit:
                 raise Busy(self.limit, self._retry_after())
             self._admitted += 1
+            self._changes += 1
         JOBS_IN_FLIGHT.inc()
         return Ticket(self)
 
@@ -112,7 +122,19 @@ class JobGate:
     def _leave(self) -> None:
         with self._lock:
             self._admitted -= 1
+            self._changes += 1
+            idle, changes = self._admitted == 0, self._changes
         JOBS_IN_FLIGHT.dec()
+        if idle and self._on_idle is not None:
+            timer = threading.Timer(self._idle_seconds, self._if_still_idle, args=(changes,))
+            timer.daemon = True
+            timer.start()
+
+    def _if_still_idle(self, changes: int) -> None:
+        with self._lock:
+            if self._changes != changes:  # a job came (and maybe went) since
+                return
+        self._on_idle()
 
     def _record(self, seconds: float) -> None:
         with self._lock:

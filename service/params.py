@@ -16,7 +16,10 @@ from .problems import Problem, from_transform_error
 
 Number = Annotated[float, Field(allow_inf_nan=False)]
 PositiveNumber = Annotated[float, Field(allow_inf_nan=False, gt=0)]
-Vector3 = Annotated[list[Number], Field(min_length=3, max_length=3)]
+#: A coordinate or a direction's component: within +-1e15, so that sums of squares (lengths,
+#: dot products) stay finite in double precision; far beyond any scan's units.
+Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-1e15, le=1e15)]
+Vector3 = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
 Matrix3 = Annotated[list[Vector3], Field(min_length=3, max_length=3)]
 
 #: The paper's example.
@@ -145,32 +148,48 @@ class Cone(_Strict):
     half_angle_deg: Number = Field(gt=0, le=180, description="Half-angle in degrees.")
 
 
-class FacesRegion(_Strict):
+class Region(_Strict):
+    """Which faces: exactly one of ``faces``, ``vertices``, ``groups`` or ``cone``."""
+
+    model_config = ConfigDict(json_schema_extra=lambda schema: _one_property(schema))
+
+    # Absent fields stay None (the defaults are not validated); null is not accepted.
     faces: Annotated[list[int], Field(min_length=1)] = Field(
-        description="Triangle ids of the file, no repeats."
+        None, description="Triangle ids of the file, no repeats."
     )
-
-
-class VerticesRegion(_Strict):
     vertices: Annotated[list[int], Field(min_length=1)] = Field(
-        description="Vertex ids: the faces whose three vertices are all listed."
+        None, description="Vertex ids: the faces whose three vertices are all listed."
     )
-
-
-class GroupsRegion(_Strict):
     groups: Annotated[list[str], Field(min_length=1)] = Field(
-        description="OBJ g/o/usemtl names, glTF mesh or node names."
+        None, description="OBJ g/o/usemtl names, glTF mesh or node names."
     )
-
-
-class ConeRegion(_Strict):
     cone: Cone = Field(
+        None,
         description="Faces whose centroid, seen from the centre, lies within half_angle_deg of "
-        "axis."
+        "axis.",
     )
 
+    @model_validator(mode="after")
+    def _exactly_one(self) -> Region:
+        given = [
+            name
+            for name in ("faces", "vertices", "groups", "cone")
+            if name in self.model_fields_set
+        ]
+        if len(given) != 1:
+            raise ValueError(
+                "give exactly one of faces, vertices, groups or cone"
+                + (f", not {' and '.join(given)}" if given else "")
+            )
+        return self
 
-Region = FacesRegion | VerticesRegion | GroupsRegion | ConeRegion
+
+def _one_property(schema: dict) -> None:
+    """Region's JSON schema: exactly one property, none of them null (the None defaults only
+    mark what was not given)."""
+    schema.update(minProperties=1, maxProperties=1)
+    for field in schema["properties"].values():
+        field.pop("default", None)
 
 
 #: A scalp-like region: the faces within 60 degrees of +Y, the cap around -Y (the neck).
@@ -338,15 +357,15 @@ def region_faces(mesh: Mesh, params: MeshParams) -> tuple[np.ndarray, np.ndarray
     """
     n_faces, n_vertices = len(mesh.faces), len(mesh.vertices)
     region = params.region
-    if isinstance(region, ConeRegion):
+    if region is not None and region.cone is not None:
         center = _center(mesh, np.arange(n_faces), params.center)
         faces = _cone(mesh, center, region.cone)
     else:
         if region is None:
             faces = np.arange(n_faces)
-        elif isinstance(region, FacesRegion):
+        elif region.faces is not None:
             faces = np.sort(_ids(region.faces, n_faces, "params.region.faces", "face"))
-        elif isinstance(region, VerticesRegion):
+        elif region.vertices is not None:
             listed = np.zeros(n_vertices, dtype=bool)
             listed[_ids(region.vertices, n_vertices, "params.region.vertices", "vertex")] = True
             faces = np.flatnonzero(listed[mesh.faces].all(axis=1))

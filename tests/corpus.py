@@ -372,6 +372,13 @@ def cases() -> list[Case]:
             mesh=("a.obj", OBJ_SQUARE),
             params={"sigma": 0.3, "pole_angle_deg": 30},
         ),
+        Case(
+            "a cone axis beyond the coordinate bound",
+            422,
+            ("params.region.cone.axis.0", "1000000000000000"),
+            mesh=("a.obj", OBJ_SQUARE),
+            params={"region": {"cone": {"axis": [-4.4e253, 0.2, 1.4e33], "half_angle_deg": 90}}},
+        ),
         Case("params not JSON", 422, ("params",), mesh=("a.obj", OBJ_SQUARE), params="{sigma"),
         Case("params a JSON list", 422, ("params",), mesh=("a.obj", OBJ_SQUARE), params="[1]"),
         Case(

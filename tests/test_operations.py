@@ -382,3 +382,19 @@ async def test_metrics_count_requests_sizes_and_refusals():
     assert after["meshflat_jobs_in_flight"].type == "gauge"
     assert sample(after, "meshflat_jobs_in_flight") == 0
     assert after["meshflat_request_duration_seconds"].type == "histogram"
+
+
+def test_an_idle_worker_releases_memory_once_no_job_came_for_a_while():
+    calls: list[float] = []
+    gate = JobGate(max_jobs=1, max_waiting=1, on_idle=lambda: calls.append(1), idle_seconds=0.1)
+    gate.admit().release()
+    time.sleep(0.05)
+    gate.admit().release()  # came within the quiet time: the first timer does nothing
+    time.sleep(0.3)
+    assert calls == [1]
+    held = gate.admit()
+    time.sleep(0.3)
+    assert calls == [1]  # never while a job is in flight
+    held.release()
+    time.sleep(0.3)
+    assert calls == [1, 1]

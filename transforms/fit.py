@@ -58,6 +58,9 @@ _GOLDEN_STEPS = 14
 _TIE = 1e-9
 #: Below this sine of the angle between the up hint and the chosen pole, the hint is ignored.
 _PARALLEL = 1e-6
+#: The refinement's cost where a candidate cannot be measured: finite, so that Nelder-Mead's
+#: convergence test (differences of costs) never meets inf - inf, and above any real cost.
+_INFEASIBLE = 1e100
 #: Sigmas whose energy the explanation reports.
 REPORTED_SIGMAS = (0.3, 1.0)
 
@@ -510,11 +513,12 @@ class _Problem:
                 penalty += max(0.0, -self.within_reach(c.center, slack=True)) / unit
             units, zero = unit_rows(region - c.center)
             if zero.any():
-                return math.inf
+                return _INFEASIBLE
             if margin is not None:
                 rho = PoleCap.from_sigma(c.sigma).rho if c.sigma is not None else math.pi / 2
                 penalty += max(0.0, rho + margin - cap_radius(units, c.rotation[1]))
-            return self.energy(c) + 100.0 * penalty
+            value = self.energy(c) + 100.0 * penalty
+            return value if math.isfinite(value) else _INFEASIBLE
 
         x0 = [0.0] * (3 * move_center + 2 * turn_pole)
         steps = [0.5] * (3 * move_center) + [0.1] * (2 * turn_pole)

@@ -1,0 +1,273 @@
+"""Load and soak test of ``meshflat serve`` with two workers on 127.0.0.1 (``make soak``).
+
+A bundled scan is made into a mesh of about 100,000 faces (lee-perry-smith.glb subdivided
+once, then its top faces once more) and posted to ``/v1/flatten`` in a mix of requests (the
+scalp or the whole head; JSON, GLB, SVG or PNG answers):
+
+1. below capacity: ``--concurrency`` clients (8) for ``--duration`` seconds (60);
+2. beyond capacity: ``--overload`` clients (48) for ``--overload-duration`` seconds (30),
+   sending again as soon as they are answered (a 503 included).
+
+Each client is a thread with its own connection. Reported per phase: requests, throughput,
+latency p50/p95/p99, statuses, transport errors; and the resident memory of the server's
+processes (the supervisor and its workers, from /proc) 2 s after a warm-up with the first
+phase's load and 2 s after each phase, and every 5 s under load.
+
+Targets (the exit status is 1 when one is missed): no status but 200 below capacity; only 200
+and 503 beyond it, every 503 with ``Retry-After``; no transport error; memory growth from the
+warm-up to the end under 10 %. ``--short`` runs 10 s + 5 s (CI); ``--write-docs`` records the
+table in docs/benchmarks.md. The load goes only to 127.0.0.1 and stops at its deadlines.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import io
+import json
+import os
+import platform
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import httpx
+import numpy as np
+import trimesh
+from trimesh.remesh import subdivide
+
+from benchmarks.docs import record
+from service.samples import SAMPLES
+
+FRAME = {"center": [0, 1.2, -0.3], "rotation": {"pole": [0, -1, 0], "up": [0, 0, 1]}}
+SCALP = {"region": {"cone": {"axis": [0, 1, 0], "half_angle_deg": 60}}}
+#: The request mix, cycled by each client from its own starting point.
+MIX = [
+    FRAME | SCALP,
+    FRAME | SCALP | {"output": "glb"},
+    FRAME,
+    FRAME | SCALP | {"output": "png"},
+    FRAME | SCALP,
+    FRAME | {"output": "glb"},
+    FRAME | SCALP | {"output": "svg"},
+    FRAME | SCALP,
+]
+
+
+def soak_mesh(faces_wanted: int = 100_000) -> tuple[bytes, int]:
+    """The GLB of a bundled scan with about ``faces_wanted`` faces, and its face count."""
+    data = SAMPLES["lee-perry-smith.glb"].path.read_bytes()
+    mesh = trimesh.load(io.BytesIO(data), file_type="glb", process=False, force="mesh")
+    vertices, faces = subdivide(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    top = np.argsort(-vertices[faces].mean(axis=1)[:, 1])  # the scalp: denser, as scans are
+    extra = max(0, (faces_wanted - len(faces) + 2) // 3)
+    vertices, faces = subdivide(vertices, faces, face_index=top[:extra])
+    glb = trimesh.Trimesh(vertices, faces, process=False).export(file_type="glb")
+    return glb, len(faces)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def rss_mib(supervisor: int) -> float:
+    """Resident memory of the supervisor and its children, MiB."""
+    children = Path(f"/proc/{supervisor}/task/{supervisor}/children").read_text().split()
+    total = 0
+    for pid in [supervisor, *map(int, children)]:
+        try:
+            status = Path(f"/proc/{pid}/status").read_text()
+        except FileNotFoundError:
+            continue
+        total += int(
+            next(line for line in status.splitlines() if line.startswith("VmRSS:")).split()[1]
+        )
+    return total / 1024
+
+
+@dataclass
+class Phase:
+    name: str
+    clients: int
+    seconds: float
+    answers: list[tuple[float, int]] = field(default_factory=list)  # (seconds, status)
+    statuses: Counter = field(default_factory=Counter)
+    without_retry_after: int = 0
+    transport_errors: Counter = field(default_factory=Counter)
+    elapsed: float = 0.0
+    rss: list[float] = field(default_factory=list)  # MiB, every 5 s
+
+    def row(self) -> str:
+        done = sum(self.statuses.values())
+        ok = sorted(seconds for seconds, status in self.answers if status == 200)
+        q = statistics.quantiles(ok, n=100) if len(ok) >= 2 else [float("nan")] * 99
+        statuses = ", ".join(f"{s}: {n:,}" for s, n in sorted(self.statuses.items()))
+        errors = sum(self.transport_errors.values())
+        return (
+            f"| {self.name} | {self.clients} | {self.elapsed:.0f} s | {done:,} | "
+            f"{self.statuses[200] / self.elapsed:.1f} | {q[49] * 1e3:.0f} | {q[94] * 1e3:.0f} | "
+            f"{q[98] * 1e3:.0f} | {statuses} | {self.without_retry_after} | {errors} |"
+        )
+
+    def __post_init__(self) -> None:
+        self._lock = threading.Lock()
+
+    def add(self, seconds: float, status: int, retry_after: bool) -> None:
+        with self._lock:
+            self.answers.append((seconds, status))
+            self.statuses[status] += 1
+            if status == 503 and not retry_after:
+                self.without_retry_after += 1
+
+    def error(self, kind: str) -> None:
+        with self._lock:
+            self.transport_errors[kind] += 1
+
+
+def run_phase(url: str, mesh: bytes, phase: Phase, server: int) -> None:
+    deadline = time.monotonic() + phase.seconds
+
+    def client(start: int) -> None:
+        with httpx.Client(base_url=url, timeout=120) as http:
+            turn = start
+            while time.monotonic() < deadline:
+                params = MIX[turn % len(MIX)]
+                turn += 1
+                began = time.perf_counter()
+                try:
+                    response = http.post(
+                        "/v1/flatten",
+                        files={"mesh": ("head.glb", mesh)},
+                        data={"params": json.dumps(params)},
+                    )
+                except httpx.TransportError as error:
+                    phase.error(type(error).__name__)
+                    continue
+                phase.add(
+                    time.perf_counter() - began,
+                    response.status_code,
+                    "retry-after" in response.headers,
+                )
+
+    def sample() -> None:
+        while time.monotonic() < deadline:
+            time.sleep(min(5.0, max(0.0, deadline - time.monotonic())))
+            phase.rss.append(rss_mib(server))
+
+    threads = [threading.Thread(target=client, args=(i,)) for i in range(phase.clients)]
+    threads.append(threading.Thread(target=sample))
+    started = time.monotonic()
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    phase.elapsed = time.monotonic() - started
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--duration", type=float, default=60)
+    parser.add_argument("--overload-duration", type=float, default=30)
+    parser.add_argument("--concurrency", type=int, default=8)
+    parser.add_argument("--overload", type=int, default=48)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--short", action="store_true", help="10 s + 5 s (CI)")
+    parser.add_argument("--write-docs", action="store_true")
+    args = parser.parse_args(argv)
+    if args.short:
+        args.duration, args.overload_duration = 10, 5
+
+    mesh, faces = soak_mesh()
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {k: v for k, v in os.environ.items() if not k.startswith("MESHFLAT_")}
+        env |= {"MESHFLAT_PORT": str(port), "MESHFLAT_WORKERS": str(args.workers), "TMPDIR": tmp}
+        server = subprocess.Popen(
+            [sys.executable, "-m", "service.cli", "serve"],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        try:
+            deadline = time.monotonic() + 60
+            while True:
+                try:
+                    if httpx.get(f"{url}/readyz", timeout=1).status_code == 200:
+                        break
+                except httpx.TransportError:
+                    pass
+                if time.monotonic() > deadline or server.poll() is not None:
+                    print("the server did not start", file=sys.stderr)
+                    return 1
+                time.sleep(0.2)
+            # The warm-up is the first phase's load: the heap (kept, not trimmed: see
+            # service/allocator.py) reaches its working size before the first reading.
+            warm = Phase("warm-up", args.concurrency, 5 if args.short else 15)
+            run_phase(url, mesh, warm, server.pid)
+            # Each reading after 2 s without requests (an idle worker returns its free heap
+            # after 1 s); the readings under load are in the phases' series.
+            time.sleep(2)
+            rss = [rss_mib(server.pid)]
+            below = Phase("below capacity", args.concurrency, args.duration)
+            run_phase(url, mesh, below, server.pid)
+            time.sleep(2)
+            rss.append(rss_mib(server.pid))
+            beyond = Phase("beyond capacity", args.overload, args.overload_duration)
+            run_phase(url, mesh, beyond, server.pid)
+            time.sleep(2)
+            rss.append(rss_mib(server.pid))
+        finally:
+            server.send_signal(signal.SIGTERM)
+            server.wait(90)
+
+    growth = rss[-1] / rss[0] - 1
+    checks = {
+        "below capacity: only 200": set(below.statuses) == {200},
+        "beyond capacity: only 200 and 503": set(beyond.statuses) <= {200, 503},
+        "beyond capacity: some 503": beyond.statuses[503] > 0,
+        "every 503 has Retry-After": below.without_retry_after + beyond.without_retry_after == 0,
+        "no transport error": not (below.transport_errors or beyond.transport_errors),
+        "memory growth under 10 %": growth < 0.10,
+    }
+    report = "\n".join(
+        [
+            f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, {platform.machine()}, "
+            f"{os.cpu_count()} CPUs (the clients run on the same machine); `meshflat serve` "
+            f"with {args.workers} workers, default limits (MESHFLAT_MAX_JOBS 2 + "
+            f"MESHFLAT_MAX_WAITING 6 per worker); mesh: {faces:,} faces, {len(mesh):,}-byte "
+            "GLB; mix: scalp or whole head, JSON, GLB, SVG or PNG.",
+            "",
+            "| phase | clients | time | requests | 200/s | p50 (ms) | p95 (ms) | p99 (ms) "
+            "| statuses | 503 without Retry-After | transport errors |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|",
+            below.row(),
+            beyond.row(),
+            "",
+            f"Server memory (RSS of the supervisor and workers, 2 s after the load stops): "
+            f"{rss[0]:.0f} MiB after the warm-up, {rss[1]:.0f} MiB after the first phase, "
+            f"{rss[2]:.0f} MiB at the end ({growth:+.1%}). Under load, every 5 s: below capacity "
+            f"{', '.join(f'{m:.0f}' for m in below.rss)}; beyond "
+            f"{', '.join(f'{m:.0f}' for m in beyond.rss)} MiB. Latencies are of the 200 answers.",
+            "",
+            *(f"* {name}: {'met' if ok else 'MISSED'}" for name, ok in checks.items()),
+        ]
+    )
+    print(report)
+    if args.write_docs:
+        record("soak", "Load and soak (make soak)", report)
+    return 0 if all(checks.values()) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -21,7 +21,7 @@ from service.samples import SAMPLES
 
 from .conftest import load_sample
 from .test_operations import families, sample
-from .test_serve import REGION, Server
+from .test_serve import REGION, running
 
 
 def subdivided_head() -> bytes:
@@ -35,14 +35,8 @@ HEAD = subdivided_head()
 
 @pytest.fixture
 def server(request):
-    server = Server(MESHFLAT_WORKERS="2", **getattr(request, "param", {}))
-    try:
-        server.wait_ready()
+    with running(MESHFLAT_WORKERS="2", **getattr(request, "param", {})) as server:
         yield server
-    finally:
-        if server.process.poll() is None:
-            server.process.kill()
-            server.process.wait()
 
 
 def in_flight(client: httpx.Client) -> float:

@@ -12,6 +12,8 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
@@ -73,9 +75,10 @@ class Server:
         return code
 
 
-@pytest.fixture
-def two_workers():
-    server = Server(MESHFLAT_WORKERS="2", MESHFLAT_API_KEYS=KEY)
+@contextmanager
+def running(**env: str) -> Iterator[Server]:
+    """A ready server with ``env``; killed at the end if it still runs."""
+    server = Server(**env)
     try:
         server.wait_ready()
         yield server
@@ -83,6 +86,12 @@ def two_workers():
         if server.process.poll() is None:
             server.process.kill()
             server.process.wait()
+
+
+@pytest.fixture
+def two_workers():
+    with running(MESHFLAT_WORKERS="2", MESHFLAT_API_KEYS=KEY) as server:
+        yield server
 
 
 def test_two_workers_share_their_metrics_and_stop_gracefully_on_sigterm(two_workers):

@@ -25,7 +25,6 @@ import json
 import os
 import platform
 import shutil
-import socket
 import statistics
 import subprocess
 import sys
@@ -39,6 +38,7 @@ import numpy as np
 import trimesh
 
 from benchmarks.docs import record
+from benchmarks.server import free_port, wait_ready
 from benchmarks.transforms_bench import machine, subdivided
 from service.allocator import keep_large_blocks
 from service.api import flatten_answer
@@ -59,12 +59,6 @@ def mesh_files(subdivisions: int) -> dict[str, bytes]:
         "head.glb": mesh.export(file_type="glb"),
         "head.obj": obj.getvalue().encode(),
     }
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def peak_rss_mib(pid: int) -> float:
@@ -117,19 +111,6 @@ def _curl_seconds(url: str, body: bytes, content_type: str) -> tuple[float, int]
     return float(seconds), int(size)
 
 
-def _wait_ready(client: httpx.Client) -> None:
-    deadline = time.monotonic() + 60
-    while True:
-        try:
-            if client.get("/readyz").status_code == 200:
-                return
-        except httpx.TransportError:
-            pass
-        if time.monotonic() > deadline:
-            raise SystemExit("the server did not become ready within 60 s")
-        time.sleep(0.2)
-
-
 def _ms(values: list[float]) -> str:
     return f"{statistics.median(values) * 1e3:.0f}"
 
@@ -155,7 +136,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         base = f"http://127.0.0.1:{port}"
         with httpx.Client(base_url=base, timeout=120) as client:
-            _wait_ready(client)
+            wait_ready(client)
             for name, data in files.items():
                 body = multipart_body(PARAMS, name, data)
                 content_type = MULTIPART

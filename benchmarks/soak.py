@@ -28,7 +28,6 @@ import json
 import os
 import platform
 import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -45,6 +44,7 @@ import trimesh
 from trimesh.remesh import subdivide
 
 from benchmarks.docs import record
+from benchmarks.server import free_port, wait_ready
 from service.samples import SAMPLES
 
 FRAME = {"center": [0, 1.2, -0.3], "rotation": {"pole": [0, -1, 0], "up": [0, 0, 1]}}
@@ -72,12 +72,6 @@ def soak_mesh(faces_wanted: int = 100_000) -> tuple[bytes, int]:
     vertices, faces = subdivide(vertices, faces, face_index=top[:extra])
     glb = trimesh.Trimesh(vertices, faces, process=False).export(file_type="glb")
     return glb, len(faces)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def rss_mib(supervisor: int) -> float:
@@ -200,17 +194,8 @@ def main(argv: list[str] | None = None) -> int:
             stderr=subprocess.DEVNULL,
         )
         try:
-            deadline = time.monotonic() + 60
-            while True:
-                try:
-                    if httpx.get(f"{url}/readyz", timeout=1).status_code == 200:
-                        break
-                except httpx.TransportError:
-                    pass
-                if time.monotonic() > deadline or server.poll() is not None:
-                    print("the server did not start", file=sys.stderr)
-                    return 1
-                time.sleep(0.2)
+            with httpx.Client(base_url=url, timeout=5) as client:
+                wait_ready(client)
             # The warm-up is the first phase's load: the heap (kept, not trimmed: see
             # service/allocator.py) reaches its working size before the first reading.
             warm = Phase("warm-up", args.concurrency, 5 if args.short else 15)

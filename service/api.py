@@ -146,8 +146,9 @@ def settings_of(request: Request) -> Settings:
 
 
 @router.get("/healthz", tags=["health"], summary="Liveness")
-def healthz() -> Health:
-    """Answers while the process serves requests."""
+async def healthz() -> Health:
+    """Answers while the process serves requests (on the event loop: never queued behind the
+    jobs' threads)."""
     return Health()
 
 
@@ -157,7 +158,7 @@ def healthz() -> Health:
     summary="Readiness",
     responses={503: PROBLEMS[422] | {"description": "The start-up self-check has not passed."}},
 )
-def readyz(request: Request) -> Health:
+async def readyz(request: Request) -> Health:
     """Answers 200 once the start-up self-check (a bundled scan flattened) has passed."""
     if not getattr(request.app.state, "ready", False):
         raise Problem(503, "the start-up self-check has not passed yet", "not-ready")
@@ -176,7 +177,7 @@ def readyz(request: Request) -> Health:
         }
     },
 )
-def metrics() -> Response:
+async def metrics() -> Response:
     """Requests by route, method and status (counts and latency histograms), the sizes of the
     meshes read, jobs in flight and computing, and refusals by reason; with several worker
     processes, summed over all of them."""
@@ -272,26 +273,25 @@ async def run_job(request: Request, work) -> Response:
     ticket = job_gate(request.app).admit()
     deadline = Deadline.after(settings.request_timeout)
     try:
-        with anyio.fail_after(settings.request_timeout):
-            body = await request.body()
-    except ClientDisconnect:
+        try:
+            with anyio.fail_after(settings.request_timeout):
+                body = await request.body()
+        except ClientDisconnect:
+            # Nobody is left to answer; 499 (as nginx says) marks it in the log and metrics.
+            return Response(status_code=499)
+        except TimeoutError:
+            raise TimeLimit(settings.request_timeout, while_reading=True) from None
+        content_type = request.headers.get("content-type", "")
+        job = partial(ticket.run, work, deadline, body, content_type, settings)
+        try:
+            with anyio.fail_after(max(0.0, deadline.remaining())):
+                return await anyio.to_thread.run_sync(job, abandon_on_cancel=True)
+        except TimeoutError:
+            raise TimeLimit(settings.request_timeout, while_reading=False) from None
+    finally:
+        # A computation that started ends the admission itself, even one that runs on after
+        # its client had the 504; this ends it for one that never started.
         ticket.release()
-        return Response(status_code=400)  # nobody is left to answer; nothing to log
-    except TimeoutError:
-        ticket.release()
-        raise TimeLimit(settings.request_timeout, while_reading=True) from None
-    except BaseException:
-        ticket.release()
-        raise
-    content_type = request.headers.get("content-type", "")
-    # From here the ticket is the thread's: it ends when the computation does, even one that
-    # runs on after its client had the 504.
-    job = partial(ticket.run, work, deadline, body, content_type, settings)
-    try:
-        with anyio.fail_after(max(0.0, deadline.remaining())):
-            return await anyio.to_thread.run_sync(job, abandon_on_cancel=True)
-    except TimeoutError:
-        raise TimeLimit(settings.request_timeout, while_reading=False) from None
 
 
 def job_gate(app) -> JobGate:

@@ -16,7 +16,7 @@ from starlette.concurrency import run_in_threadpool
 from . import demo, problems
 from .allocator import keep_large_blocks
 from .api import router
-from .auth import PROTECTED_PREFIX, RequireApiKey
+from .auth import PROTECTED_PREFIX, KeyCheck, RequireApiKey
 from .bodylimit import BodySizeLimit
 from .examples import add_examples
 from .observability import JsonFormatter, RequestContext, forget_dead_workers
@@ -92,10 +92,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(router)
     app.include_router(demo.router)
     app.mount("/static", demo.static_files(), name="static")
-    # Outermost last: every answer, refusals included, gets a request id, a log line and
-    # metrics; CORS headers go on refusals too, so a browser can read them.
+    # Outermost last: every answer, refusals and 500s included, gets a request id, a log line,
+    # metrics and the CORS headers (so that a browser can read it).
     app.add_middleware(BodySizeLimit, limit=settings.max_upload_bytes)
-    app.add_middleware(RequireApiKey, keys=settings.api_keys)
+    app.add_middleware(RequireApiKey, check=KeyCheck(settings.api_keys))
+    app.add_middleware(problems.UnexpectedErrors)
     app.add_middleware(
         CORSMiddleware,
         allow_origins=list(settings.cors_origins),
@@ -104,7 +105,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         expose_headers=["X-Request-ID", "Retry-After", "Server-Timing", "Content-Disposition"],
         max_age=600,
     )
-    app.add_middleware(problems.UnexpectedErrors)
     # Routes for the metrics' labels: FastAPI's own (documents, /static) and the routers'.
     own = [route for route in app.router.routes if hasattr(route, "path")]
     app.add_middleware(RequestContext, routes=[*own, *router.routes, *demo.router.routes])

@@ -57,9 +57,8 @@ def presented_keys(headers: list[tuple[bytes, bytes]]) -> list[bytes]:
 class RequireApiKey:
     """ASGI middleware: a 401 problem for a ``/v1`` request without a configured key."""
 
-    def __init__(self, app: ASGIApp, keys: tuple[str, ...]) -> None:
-        self.app = app
-        self.check = KeyCheck(keys)
+    def __init__(self, app: ASGIApp, check: KeyCheck) -> None:
+        self.app, self.check = app, check
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if (

@@ -22,7 +22,6 @@ import math
 import os
 import sys
 import tempfile
-import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -250,14 +249,10 @@ def _metrics_directory(workers: int) -> Iterator[None]:
 
 
 def health(args: argparse.Namespace) -> int:
-    """The container's health check: 0 when ``/healthz`` answers 200 within 5 s."""
-    port = args.port or Settings.from_env().port
-    try:
-        with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=5) as answer:
-            return 0 if answer.status == 200 else 1
-    except OSError as error:
-        print(f"meshflat: /healthz on port {port}: {error}", file=sys.stderr)
-        return 1
+    """The container's health check (service.health)."""
+    from .health import check
+
+    return check(args.port)
 
 
 if __name__ == "__main__":

@@ -81,7 +81,8 @@ class JobGate:
     ----------
     max_jobs : jobs computing at once
     max_waiting : jobs admitted beyond those
-    on_idle : called (in a timer thread) once no job has been in flight for ``idle_seconds``
+    on_idle : called (in the gate's watcher thread) once no job has been in flight for
+        ``idle_seconds`` since the last one left; once per quiet spell
     """
 
     def __init__(
@@ -92,11 +93,13 @@ class JobGate:
         idle_seconds: float = 1.0,
     ) -> None:
         self.max_jobs, self.limit = max_jobs, max_jobs + max_waiting
-        self._lock = threading.Lock()
+        self._lock = threading.Condition()
         self._slots = threading.BoundedSemaphore(max_jobs)
         self._admitted = 0
-        self._changes = 0  # admissions and departures, to tell a quiet second from a busy one
+        self._last_departure = 0.0
+        self._idle_due = False  # a job has left since on_idle last ran
         self._on_idle, self._idle_seconds = on_idle, idle_seconds
+        self._watcher: threading.Thread | None = None
         self._seconds = 1.0  # running mean of a job's compute time, for Retry-After
 
     @property
@@ -110,7 +113,6 @@ class JobGate:
             if self._admitted >= self.limit:
                 raise Busy(self.limit, self._retry_after())
             self._admitted += 1
-            self._changes += 1
         JOBS_IN_FLIGHT.inc()
         return Ticket(self)
 
@@ -122,19 +124,28 @@ class JobGate:
     def _leave(self) -> None:
         with self._lock:
             self._admitted -= 1
-            self._changes += 1
-            idle, changes = self._admitted == 0, self._changes
+            self._last_departure, self._idle_due = time.monotonic(), True
+            if self._on_idle is not None and self._watcher is None:
+                self._watcher = threading.Thread(target=self._watch, daemon=True)
+                self._watcher.start()
+            self._lock.notify()
         JOBS_IN_FLIGHT.dec()
-        if idle and self._on_idle is not None:
-            timer = threading.Timer(self._idle_seconds, self._if_still_idle, args=(changes,))
-            timer.daemon = True
-            timer.start()
 
-    def _if_still_idle(self, changes: int) -> None:
-        with self._lock:
-            if self._changes != changes:  # a job came (and maybe went) since
-                return
-        self._on_idle()
+    def _watch(self) -> None:
+        """One thread per gate, for its life: waits for a quiet spell, then calls on_idle."""
+        while True:
+            with self._lock:
+                while True:
+                    if self._admitted or not self._idle_due:
+                        self._lock.wait()
+                        continue
+                    quiet_for = self._last_departure + self._idle_seconds - time.monotonic()
+                    if quiet_for > 0:
+                        self._lock.wait(quiet_for)
+                        continue
+                    self._idle_due = False
+                    break
+            self._on_idle()
 
     def _record(self, seconds: float) -> None:
         with self._lock:
@@ -142,16 +153,18 @@ class JobGate:
 
 
 class Ticket:
-    """One admitted job: :meth:`run` computes it in a slot; the admission ends once, when
-    the computation ends or (if it never starts) when :meth:`release` is called."""
+    """One admitted job. Its admission ends exactly once: when :meth:`run` ends, or, for a job
+    whose computation never started (its client left, or its time ran out first), when
+    :meth:`release` is called; a :meth:`run` after that does nothing."""
 
     def __init__(self, gate: JobGate) -> None:
-        self._gate, self._released = gate, False
+        self._gate, self._released, self._started = gate, False, False
         self._lock = threading.Lock()
 
     def release(self) -> None:
+        """End the admission unless :meth:`run` has started (then it ends it itself)."""
         with self._lock:
-            if self._released:
+            if self._released or self._started:
                 return
             self._released = True
         self._gate._leave()
@@ -159,6 +172,11 @@ class Ticket:
     def run(self, work: Callable[..., T], deadline: Deadline, *args) -> T:
         """``work(*args)`` in a compute slot (blocking: call it from a worker thread), unless
         the deadline passes first."""
+        with self._lock:
+            if self._released:  # abandoned before this thread got to it
+                raise TimeLimit(deadline.seconds, while_reading=False)
+            self._started = True
+        token = None
         try:
             # Wait for a slot no longer than the deadline; a job whose client has already had
             # its 504 does not start at all.
@@ -168,12 +186,16 @@ class Ticket:
             try:
                 deadline.check()
                 started = time.monotonic()
-                current_deadline.set(deadline)  # this thread's context: seen by Timings
+                token = current_deadline.set(deadline)  # seen by Timings in this thread
                 result = work(*args)
                 self._gate._record(time.monotonic() - started)
                 return result
             finally:
+                if token is not None:
+                    current_deadline.reset(token)
                 JOBS_COMPUTING.dec()
                 self._gate._slots.release()
         finally:
-            self.release()
+            with self._lock:
+                self._released = True
+            self._gate._leave()

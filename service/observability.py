@@ -13,6 +13,7 @@ request body, a file name or an exception message (which could quote a mesh).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -79,6 +80,8 @@ REJECTIONS = Counter(
 
 #: The id of the request being handled (the log filter and the problem answers read it).
 request_id: ContextVar[str] = ContextVar("request_id", default="-")
+#: Methods counted by name; any other token a client sends is "other" (a bounded label set).
+_METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "DELETE", "PATCH", "OPTIONS"})
 _PLAIN_ID = re.compile(rb"[A-Za-z0-9._:\-]{1,128}")
 
 
@@ -112,7 +115,9 @@ def forget_dead_workers() -> None:
         try:
             os.kill(pid, 0)
         except ProcessLookupError:
-            prometheus_multiprocess.mark_process_dead(pid, str(directory))
+            # Two restarted workers may clean up the same files at once.
+            with contextlib.suppress(FileNotFoundError):
+                prometheus_multiprocess.mark_process_dead(pid, str(directory))
         except PermissionError:
             pass  # alive, someone else's
 
@@ -150,13 +155,14 @@ class RequestContext:
         finally:
             seconds = time.perf_counter() - started
             route = self._route_of(scope)
-            labels = (route, scope["method"], str(status))
+            method = scope["method"] if scope["method"] in _METHODS else "other"
+            labels = (route, method, str(status))
             REQUESTS.labels(*labels).inc()
             LATENCY.labels(*labels).observe(seconds)
             logger.info(
                 "request",
                 extra={
-                    "method": scope["method"],
+                    "method": method,
                     "route": route,
                     "status": status,
                     "duration_ms": round(seconds * 1e3, 1),

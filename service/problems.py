@@ -147,9 +147,9 @@ class UnexpectedErrors:
         try:
             await self.app(scope, receive, watched)
         except Exception as exc:
-            logger.error(
-                "unexpected %s on %s %s", type(exc).__name__, scope["method"], scope["path"]
-            )
+            # The route's template, not the path, which a client writes (a sample's name).
+            route = getattr(scope.get("route"), "path", "an unmatched path")
+            logger.error("unexpected %s on %s %s", type(exc).__name__, scope["method"], route)
             if not started:
                 problem = Problem(
                     500, "the service failed unexpectedly; the error is logged", "internal-error"

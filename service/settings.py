@@ -6,9 +6,10 @@ container is configured without a file or a command-line flag.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from .meshio import Limits
@@ -44,7 +45,7 @@ class Settings:
     max_jobs: int = 2
     max_waiting: int = 6
     request_timeout: float = 60.0
-    api_keys: tuple[str, ...] = ()
+    api_keys: tuple[str, ...] = field(default=(), repr=False)
     api_keys_file: str = ""
     cors_origins: tuple[str, ...] = ()
     host: str = "127.0.0.1"
@@ -63,10 +64,10 @@ class Settings:
         """
         environ = os.environ if environ is None else environ
         values = {}
-        for field in fields(cls):
-            name = f"MESHFLAT_{field.name.upper()}"
+        for item in fields(cls):
+            name = f"MESHFLAT_{item.name.upper()}"
             if name in environ:
-                values[field.name] = _parse(name, environ[name].strip(), field.default)
+                values[item.name] = _parse(name, environ[name].strip(), item.default)
         settings = cls(**values)
         if settings.api_keys_file:
             try:
@@ -100,7 +101,16 @@ def _parse(name: str, text: str, default: object) -> object:
         value = kind(text)
     except ValueError:
         value = None
-    if value is None or not value > 0 or value == float("inf"):
+    zero_allowed = name in _MAY_BE_ZERO
+    valid = (
+        value is not None and math.isfinite(value) and (value > 0 or (zero_allowed and value == 0))
+    )
+    if not valid:
         noun = "an integer" if kind is int else "a number"
-        raise ValueError(f"{name} must be {noun} above 0, got {text!r}")
+        bound = "0 or more" if zero_allowed else "above 0"
+        raise ValueError(f"{name} must be {noun} {bound}, got {text!r}")
     return value
+
+
+#: Settings for which 0 makes sense (no queue: a job beyond MESHFLAT_MAX_JOBS is refused).
+_MAY_BE_ZERO = frozenset({"MESHFLAT_MAX_WAITING"})

@@ -7,10 +7,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import socket
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import httpx
@@ -18,6 +14,7 @@ import pytest
 
 from service.samples import SAMPLES
 
+from .test_serve import running
 from .tools import require
 
 CHROMIUM = os.environ.get("MESHFLAT_CHROMIUM", "/usr/bin/chromium")
@@ -36,40 +33,9 @@ PARAMS = {
 
 @pytest.fixture(scope="module")
 def server():
-    """A real uvicorn on a free port of 127.0.0.1, ready (its self-check passed)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "uvicorn",
-            "service.app:app",
-            "--host",
-            "127.0.0.1",
-            "--port",
-            str(port),
-        ],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        env=os.environ | {"MESHFLAT_API_KEYS": KEY},
-    )
-    url = f"http://127.0.0.1:{port}"
-    try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            try:
-                if httpx.get(f"{url}/readyz", timeout=1).status_code == 200:
-                    break
-            except httpx.TransportError:
-                time.sleep(0.2)
-        else:
-            pytest.fail("uvicorn did not become ready within 60 s")
-        yield url
-    finally:
-        process.terminate()
-        process.wait(timeout=10)
+    """``meshflat serve`` on a free port of 127.0.0.1, requiring a key, ready."""
+    with running(MESHFLAT_API_KEYS=KEY) as server:
+        yield server.url
 
 
 def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):

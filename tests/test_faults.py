@@ -43,6 +43,10 @@ def in_flight(client: httpx.Client) -> float:
     return sample(families(client.get("/metrics").text), "meshflat_jobs_in_flight")
 
 
+def computing(client: httpx.Client) -> float:
+    return sample(families(client.get("/metrics").text), "meshflat_jobs_computing")
+
+
 def until(condition, seconds: float = 20) -> None:
     deadline = time.monotonic() + seconds
     while not condition():
@@ -121,10 +125,11 @@ def test_a_worker_killed_mid_request(server):
                 outcome["error"] = type(error).__name__
 
         fitting = threading.Thread(target=fit)
-        before = {pid: cpu_ticks(pid) for pid in worker_pids(server.process.pid)}
         fitting.start()
-        until(lambda: in_flight(client) >= 1)
-        time.sleep(0.4)  # uploaded and computing: its worker has used the CPU since
+        until(lambda: computing(client) >= 1)
+        # The fit takes about a second: its worker is the one using the CPU now.
+        before = {pid: cpu_ticks(pid) for pid in worker_pids(server.process.pid)}
+        time.sleep(0.3)
         busy = max(before, key=lambda pid: cpu_ticks(pid) - before[pid])
         os.kill(busy, signal.SIGKILL)
         fitting.join(60)

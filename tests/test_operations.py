@@ -65,7 +65,8 @@ def test_settings_from_the_environment(tmp_path):
     ("name", "value", "message"),
     [
         ("MESHFLAT_MAX_JOBS", "0", "MESHFLAT_MAX_JOBS must be an integer above 0"),
-        ("MESHFLAT_MAX_WAITING", "1.5", "MESHFLAT_MAX_WAITING must be an integer above 0"),
+        ("MESHFLAT_MAX_WAITING", "1.5", "MESHFLAT_MAX_WAITING must be an integer 0 or more"),
+        ("MESHFLAT_MAX_WAITING", "-1", "MESHFLAT_MAX_WAITING must be an integer 0 or more"),
         ("MESHFLAT_REQUEST_TIMEOUT", "nan", "MESHFLAT_REQUEST_TIMEOUT must be a number above 0"),
         ("MESHFLAT_REQUEST_TIMEOUT", "inf", "MESHFLAT_REQUEST_TIMEOUT must be a number above 0"),
         ("MESHFLAT_API_KEYS_FILE", "/no/such/file", "MESHFLAT_API_KEYS_FILE: cannot read"),
@@ -117,9 +118,10 @@ async def test_without_keys_the_routes_are_open_and_the_log_says_so(caplog):
     assert any("no API keys are configured" in r.getMessage() for r in caplog.records)
 
 
-def test_keys_are_kept_as_digests_and_every_one_is_compared():
+def test_the_key_check_holds_digests_and_accepts_any_configured_key():
     check = KeyCheck(("first", KEY))
     assert KEY not in repr(vars(check)) and "first" not in repr(vars(check))
+    assert KEY not in repr(Settings(api_keys=(KEY,)))
     assert check.accepts(KEY.encode()) and check.accepts(b"first")
     assert not check.accepts(KEY[:-1].encode()) and not check.accepts(b"")
     assert not KeyCheck(())
@@ -172,6 +174,7 @@ async def test_jobs_beyond_the_bound_are_refused_at_once_with_retry_after():
         yield b"}"
 
     async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://m") as c:
+        before = families((await c.get("/metrics")).text)
         statuses: list[int] = []
 
         async def slow_post():
@@ -196,8 +199,11 @@ async def test_jobs_beyond_the_bound_are_refused_at_once_with_retry_after():
         assert 1 <= int(refused.headers["retry-after"]) <= 60
         assert waited < 1.0  # refused, not queued
         assert statuses == [200, 200]
-        assert sample(metrics, "meshflat_jobs_in_flight") == 2
-        assert sample(metrics, "meshflat_rejections_total", reason="busy") >= 1
+        # Gauges are per process: compare with the reading before (other tests' apps count).
+        in_flight = "meshflat_jobs_in_flight"
+        assert sample(metrics, in_flight) - sample(before, in_flight) == 2
+        busy = sample(metrics, "meshflat_rejections_total", reason="busy")
+        assert busy - sample(before, "meshflat_rejections_total", reason="busy") == 1
         assert (await c.post("/v1/points", json=POINTS)).status_code == 200
         assert api.job_gate(app).in_flight == 0
 
@@ -248,6 +254,25 @@ async def test_a_job_past_its_time_limit_is_a_504_and_stops_at_its_next_stage(mo
         assert api.job_gate(app).in_flight == 0
 
 
+async def test_a_job_cancelled_before_its_thread_starts_leaves_no_admission_behind():
+    """All worker threads busy: the job's time runs out while it waits for one, so its
+    computation never starts; the admission must end all the same."""
+    app = create_app(Settings(request_timeout=0.2))
+    limiter = anyio.to_thread.current_default_thread_limiter()
+    holders = [object() for _ in range(int(limiter.total_tokens))]
+    for holder in holders:
+        await limiter.acquire_on_behalf_of(holder)
+    try:
+        async with httpx.AsyncClient(
+            transport=httpx.ASGITransport(app=app), base_url="http://m"
+        ) as c:
+            problem(await c.post("/v1/points", json=POINTS), 504)
+            assert api.job_gate(app).in_flight == 0
+    finally:
+        for holder in holders:
+            limiter.release_on_behalf_of(holder)
+
+
 def test_timings_refuse_a_stage_after_the_deadline():
     token = current_deadline.set(Deadline.after(-1.0))
     try:
@@ -266,9 +291,15 @@ def test_a_job_waiting_for_a_slot_past_its_deadline_does_not_start():
     with pytest.raises(Problem) as busy:
         gate.admit()
     assert busy.value.status == 503
-    hold = threading.Event()
-    worker = threading.Thread(target=first.run, args=(hold.wait, Deadline.after(5), 5))
+    computing, hold = threading.Event(), threading.Event()
+
+    def occupy() -> None:
+        computing.set()
+        hold.wait(5)
+
+    worker = threading.Thread(target=first.run, args=(occupy, Deadline.after(5)))
     worker.start()
+    assert computing.wait(5)  # the first job has the only slot
     ran = []
     with pytest.raises(TimeLimit):
         second.run(lambda: ran.append(1), Deadline.after(0.1))
@@ -380,7 +411,7 @@ async def test_metrics_count_requests_sizes_and_refusals():
     assert grew("meshflat_rejections_total", reason="unauthorized") == 1
     assert grew("meshflat_rejections_total", reason="body-too-large") == 1
     assert after["meshflat_jobs_in_flight"].type == "gauge"
-    assert sample(after, "meshflat_jobs_in_flight") == 0
+    assert grew("meshflat_jobs_in_flight") == 0
     assert after["meshflat_request_duration_seconds"].type == "histogram"
 
 

@@ -3,6 +3,7 @@ configured by environment variables only."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -44,11 +45,13 @@ class Server:
         environ = {k: v for k, v in os.environ.items() if not k.startswith("MESHFLAT_")}
         environ.pop("PROMETHEUS_MULTIPROC_DIR", None)
         environ |= {"MESHFLAT_PORT": str(self.port), "TMPDIR": self.tmp.name, **env}
+        # Its own process group: the workers go with the supervisor when a test kills both.
         self.process = subprocess.Popen(
             [sys.executable, "-m", "service.cli", "serve"],
             env=environ,
             stdout=self.log,
             stderr=self.log,
+            start_new_session=True,
         )
 
     def wait_ready(self, seconds: float = 60) -> None:
@@ -83,9 +86,9 @@ def running(**env: str) -> Iterator[Server]:
         server.wait_ready()
         yield server
     finally:
-        if server.process.poll() is None:
-            server.process.kill()
-            server.process.wait()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(server.process.pid, signal.SIGKILL)
+        server.process.wait()
 
 
 @pytest.fixture

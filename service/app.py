@@ -19,7 +19,7 @@ from .api import router
 from .auth import PROTECTED_PREFIX, KeyCheck, RequireApiKey
 from .bodylimit import BodySizeLimit
 from .examples import add_examples
-from .observability import JsonFormatter, RequestContext, forget_dead_workers
+from .observability import JsonFormatter, RequestContext
 from .params import (
     FitParams,
     FlattenParams,
@@ -66,7 +66,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         the outcome; /readyz answers 200 after it passes."""
         if not keep_large_blocks():
             logger.info("allocator: not glibc, default settings kept")
-        forget_dead_workers()
         if not settings.api_keys:
             logger.warning(
                 "no API keys are configured (MESHFLAT_API_KEYS, MESHFLAT_API_KEYS_FILE): "

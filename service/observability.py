@@ -94,6 +94,7 @@ def metrics_response() -> Response:
     """The Prometheus text exposition of this process, or of all workers' processes."""
     if multiprocess_dir() is None:
         return Response(generate_latest(REGISTRY), media_type=CONTENT_TYPE_LATEST)
+    forget_dead_workers()  # whenever a worker died, and whichever worker is asked
     registry = CollectorRegistry()
     prometheus_multiprocess.MultiProcessCollector(registry)
     return Response(generate_latest(registry), media_type=CONTENT_TYPE_LATEST)

@@ -103,10 +103,18 @@ def test_a_job_past_its_time_limit(server):
 
 
 def worker_pids(supervisor: int) -> list[int]:
+    """The supervisor's worker processes (not multiprocessing's resource tracker, also its
+    child)."""
     children = Path(f"/proc/{supervisor}/task/{supervisor}/children").read_text().split()
-    # The supervisor's children: the two workers (and multiprocessing's resource tracker,
-    # which serves no requests and uses no CPU).
-    return [int(pid) for pid in children]
+    workers = []
+    for pid in map(int, children):
+        try:
+            command = Path(f"/proc/{pid}/cmdline").read_bytes()
+        except FileNotFoundError:
+            continue
+        if b"spawn_main" in command:
+            workers.append(pid)
+    return workers
 
 
 def cpu_ticks(pid: int) -> int:

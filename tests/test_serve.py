@@ -45,6 +45,7 @@ class Server:
         environ = {k: v for k, v in os.environ.items() if not k.startswith("MESHFLAT_")}
         environ.pop("PROMETHEUS_MULTIPROC_DIR", None)
         environ |= {"MESHFLAT_PORT": str(self.port), "TMPDIR": self.tmp.name, **env}
+        self.workers = int(environ.get("MESHFLAT_WORKERS", "1"))
         # Its own process group: the workers go with the supervisor when a test kills both.
         self.process = subprocess.Popen(
             [sys.executable, "-m", "service.cli", "serve"],
@@ -55,14 +56,17 @@ class Server:
         )
 
     def wait_ready(self, seconds: float = 60) -> None:
+        """Until every worker has started (its log says so) and /readyz answers 200."""
         deadline = time.monotonic() + seconds
         while time.monotonic() < deadline:
             assert self.process.poll() is None, self.lines()
+            started = [e for e in self.lines() if e["message"] == "Application startup complete."]
             try:
-                if httpx.get(f"{self.url}/readyz", timeout=1).status_code == 200:
-                    return
+                ready = httpx.get(f"{self.url}/readyz", timeout=1).status_code == 200
             except httpx.TransportError:
-                pass
+                ready = False
+            if ready and len(started) == self.workers:
+                return
             time.sleep(0.1)
         raise AssertionError("not ready in time")
 

@@ -43,8 +43,9 @@ class Case:
 
 
 def glb(document: dict, binary: bytes = b"", *, total=None, json_length=None, bin_length=None):
-    """A GLB container; the lengths may be made to lie."""
-    text = json.dumps(document).encode()
+    """A GLB container of ``document`` and ``binary`` (no BIN chunk when it is empty), each
+    chunk padded to 4 bytes as the spec lays it out; the lengths may be made to lie."""
+    text = json.dumps(document, allow_nan=False).encode()
     text += b" " * (-len(text) % 4)
     binary += b"\0" * (-len(binary) % 4)
     chunks = struct.pack("<I4s", len(text) if json_length is None else json_length, b"JSON")

@@ -39,12 +39,17 @@ def server(request):
         yield server
 
 
+def gauge(client: httpx.Client, name: str) -> float:
+    """A gauge of the server, as /metrics says now (summed over its workers)."""
+    return sample(families(client.get("/metrics").text), name)
+
+
 def in_flight(client: httpx.Client) -> float:
-    return sample(families(client.get("/metrics").text), "meshflat_jobs_in_flight")
+    return gauge(client, "meshflat_jobs_in_flight")
 
 
 def computing(client: httpx.Client) -> float:
-    return sample(families(client.get("/metrics").text), "meshflat_jobs_computing")
+    return gauge(client, "meshflat_jobs_computing")
 
 
 def until(condition, seconds: float = 20) -> None:

@@ -29,6 +29,8 @@ from service.meshio.gltf import read_glb, read_gltf
 from service.meshio.mesh import Limits, Mesh, MeshFormatError
 from transforms import MAX_ABS_COORDINATE
 
+from .corpus import glb
+
 #: Small enough that a mutated count or a repeated node reaches a limit, not the memory.
 LIMITS = Limits(max_vertices=64, max_faces=64, max_bytes=4096)
 
@@ -102,20 +104,6 @@ EXPECTED_VERTICES = np.stack([-2 * SQUARE[:, 1], 2 * SQUARE[:, 0], 2 * SQUARE[:,
 EXPECTED_VERTICES += np.array([1.0, 2.0, 8.0], dtype=np.float32)
 EXPECTED_FACES = INDICES.reshape(-1, 3)
 
-# The GLB layout, as the spec lays it out: 12-byte header, then chunks of (length, type,
-# data) with the data padded to 4 bytes (JSON with spaces, BIN with zeros).
-_MAGIC, _JSON, _BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
-
-
-def glb(document: object, binary: bytes = BINARY) -> bytes:
-    """A GLB container of ``document`` and ``binary``, each chunk padded to 4 bytes."""
-    text = json.dumps(document, allow_nan=False).encode()
-    text += b" " * (-len(text) % 4)
-    binary += b"\0" * (-len(binary) % 4)
-    chunks = struct.pack("<II", len(text), _JSON) + text
-    chunks += struct.pack("<II", len(binary), _BIN) + binary
-    return struct.pack("<III", _MAGIC, 2, 12 + len(chunks)) + chunks
-
 
 def glb_fields(data: bytes) -> dict[str, int]:
     """Byte offset of each u32 field of the header and chunk headers of an undamaged GLB
@@ -172,7 +160,7 @@ def read_or_refuse(reader, data: bytes, fmt: str) -> None:
     ("reader", "data", "fmt"),
     [
         (read_gltf, json.dumps(GLTF_DOCUMENT).encode(), "gltf"),
-        (read_glb, glb(GLB_DOCUMENT), "glb"),
+        (read_glb, glb(GLB_DOCUMENT, BINARY), "glb"),
     ],
 )
 def test_the_unmutated_document_reads_to_the_expected_mesh(reader, data, fmt):
@@ -415,5 +403,5 @@ def test_mutated_glb_is_read_or_refused(changes, damages):
     damaged (or not): a sound mesh or a refusal."""
     note(f"changes={changes!r}, damages={damages!r}")
     document = mutate(GLB_DOCUMENT, changes)
-    data = glb(document)
+    data = glb(document, BINARY)
     read_or_refuse(read_glb, damage(data, damages), "glb")

@@ -17,6 +17,8 @@ from hypothesis import strategies as st
 from service.meshio import Limits, MeshFormatError, read_mesh
 from service.samples import SAMPLES
 
+from .corpus import glb as container
+
 LIMITS = Limits()
 
 
@@ -224,13 +226,8 @@ def gltf(nodes, meshes, accessors, binary: bytes, scenes=None) -> dict:
 
 
 def glb(document: dict, binary: bytes) -> bytes:
-    document = dict(document, buffers=[{"byteLength": len(binary)}])
-    text = json.dumps(document).encode()
-    text += b" " * (-len(text) % 4)
-    binary += b"\0" * (-len(binary) % 4)
-    chunks = struct.pack("<II", len(text), 0x4E4F534A) + text
-    chunks += struct.pack("<II", len(binary), 0x004E4942) + binary
-    return struct.pack("<III", 0x46546C67, 2, 12 + len(chunks)) + chunks
+    """``document`` with its buffer in the GLB's BIN chunk."""
+    return container(dict(document, buffers=[{"byteLength": len(binary)}]), binary)
 
 
 SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype="<f4")

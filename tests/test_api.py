@@ -451,7 +451,7 @@ async def test_jobs_wait_for_a_slot(monkeypatch):
         with lock:
             running += 1
             most = max(most, running)
-        time.sleep(0.05)
+        time.sleep(0.3)  # long enough for the others to arrive, on a loaded machine too
         with lock:
             running -= 1
         return real(*args)

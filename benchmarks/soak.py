@@ -15,7 +15,8 @@ phase's load and 2 s after each phase, and every 5 s under load.
 
 Targets (the exit status is 1 when one is missed): no status but 200 below capacity; only 200
 and 503 beyond it, every 503 with ``Retry-After``; no transport error; memory growth from the
-warm-up to the end under 10 %. ``--short`` runs 10 s + 5 s (CI); ``--write-docs`` records the
+warm-up to the end under 10 % (judged in the full run only). ``--short`` runs 10 s + 5 s
+(CI); ``--write-docs`` records the
 table in docs/benchmarks.md. The load goes only to 127.0.0.1 and stops at its deadlines.
 """
 
@@ -223,8 +224,11 @@ def main(argv: list[str] | None = None) -> int:
         "beyond capacity: some 503": beyond.statuses[503] > 0,
         "every 503 has Retry-After": below.without_retry_after + beyond.without_retry_after == 0,
         "no transport error": not (below.transport_errors or beyond.transport_errors),
-        "memory growth under 10 %": growth < 0.10,
     }
+    # 15 s cannot tell drift from the heap's composition at the moment it is trimmed (short
+    # runs read +0 % to +9 %): the full run judges memory; --short reports it.
+    if not args.short:
+        checks["memory growth under 10 %"] = growth < 0.10
     report = "\n".join(
         [
             f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, {platform.machine()}, "

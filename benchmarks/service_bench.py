@@ -41,9 +41,10 @@ from benchmarks.docs import record
 from benchmarks.server import free_port, wait_ready
 from benchmarks.transforms_bench import machine, subdivided
 from service.allocator import keep_large_blocks
-from service.api import flatten_answer
+from service.capabilities import MESH_COMMANDS
 from service.examples import MULTIPART, multipart_body
 from service.meshio import format_of, read_mesh
+from service.routes import answer_mesh
 from service.settings import Settings
 
 PARAMS = {"rotation": {"pole": [0, -1, 0], "up": [0, 0, 1]}}
@@ -79,7 +80,8 @@ def _hold_body(body: bytes, content_type: str) -> None:
 def _time_held_body() -> tuple[float, int]:
     """In the worker process: one in-process run; its seconds and the answer's length."""
     start = time.perf_counter()
-    answer = flatten_answer(_held["body"], _held["content_type"], _held["settings"])
+    flatten = MESH_COMMANDS["flatten"]
+    answer = answer_mesh(flatten, _held["body"], _held["content_type"], _held["settings"])
     return time.perf_counter() - start, len(answer.body)
 
 
@@ -115,6 +117,37 @@ def _ms(values: list[float]) -> str:
     return f"{statistics.median(values) * 1e3:.0f}"
 
 
+def _measure(worker, client: httpx.Client, base: str, name: str, data: bytes, runs: int):
+    """One file: the answer's times in the worker, through curl and through httpx (taken in
+    turn, after a warm-up run), and its readers' times against trimesh."""
+    body = multipart_body(PARAMS, name, data)
+    content_type = MULTIPART
+    worker.submit(_hold_body, body, content_type).result()
+    local, curl, python = [], [], []
+    for _ in range(runs + 1):  # the first run warms up
+        seconds, local_bytes = worker.submit(_time_held_body).result()
+        local.append(seconds)
+        seconds, curl_bytes = _curl_seconds(f"{base}/v1/flatten", body, content_type)
+        curl.append(seconds)
+        start = time.perf_counter()
+        response = client.post("/v1/flatten", content=body, headers={"content-type": content_type})
+        python.append(time.perf_counter() - start)
+        assert response.status_code == 200, response.text[:300]
+        assert local_bytes == curl_bytes == len(response.content)
+    answer = json.loads(response.content)
+    row = dict(
+        name=name,
+        upload=len(data),
+        answer=len(response.content),
+        faces=len(answer["faces"]["ids"]),
+        local=local[1:],
+        curl=curl[1:],
+        python=python[1:],
+        timing=response.headers.get("server-timing", ""),
+    )
+    return row, worker.submit(_time_readers, name, data, runs).result()
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--subdivisions", type=int, default=3, help="4^k times the faces")
@@ -138,36 +171,8 @@ def main(argv: list[str] | None = None) -> int:
         with httpx.Client(base_url=base, timeout=120) as client:
             wait_ready(client)
             for name, data in files.items():
-                body = multipart_body(PARAMS, name, data)
-                content_type = MULTIPART
-                worker.submit(_hold_body, body, content_type).result()
-                local, curl, python = [], [], []
-                for _ in range(args.runs + 1):  # the first run warms up
-                    seconds, local_bytes = worker.submit(_time_held_body).result()
-                    local.append(seconds)
-                    seconds, curl_bytes = _curl_seconds(f"{base}/v1/flatten", body, content_type)
-                    curl.append(seconds)
-                    start = time.perf_counter()
-                    response = client.post(
-                        "/v1/flatten", content=body, headers={"content-type": content_type}
-                    )
-                    python.append(time.perf_counter() - start)
-                    assert response.status_code == 200, response.text[:300]
-                    assert local_bytes == curl_bytes == len(response.content)
-                answer = json.loads(response.content)
-                rows.append(
-                    dict(
-                        name=name,
-                        upload=len(data),
-                        answer=len(response.content),
-                        faces=len(answer["faces"]["ids"]),
-                        local=local[1:],
-                        curl=curl[1:],
-                        python=python[1:],
-                        timing=response.headers.get("server-timing", ""),
-                    )
-                )
-                reading = worker.submit(_time_readers, name, data, args.runs).result()
+                row, reading = _measure(worker, client, base, name, data, args.runs)
+                rows.append(row)
                 readers.append((name, *reading))
             rss = peak_rss_mib(server.pid)
     finally:

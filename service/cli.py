@@ -7,11 +7,13 @@
                           [--layout theta_phi|mercator] [--params JSON] --out FILE
     meshflat validate MESH ... [--out FILE.json]
     meshflat fit MESH ... [--out FILE.json]
+    meshflat locate MESH ... --params '{"theta": [...], "phi": [...]}'
 
-``flatten`` writes JSON, GLB, SVG or PNG by the extension of ``--out``. The parameters are the
-API's (``--params`` takes any of them as JSON, the options override it), checked by the same
-models, and the answers are the API's bytes; errors are the API's messages, on stderr, with
-exit status 2 (1 for anything unexpected).
+One command per mesh route of :mod:`service.capabilities`, running the same operation: the
+parameters are the API's (``--params`` takes any of them as JSON, the options override it),
+checked by the same models, and the answers are the API's bytes (``flatten`` writes JSON,
+GLB, SVG or PNG by the extension of ``--out``); errors are the API's messages, on stderr,
+with exit status 2 (1 for anything unexpected).
 """
 
 from __future__ import annotations
@@ -28,11 +30,12 @@ from pathlib import Path
 
 import orjson
 
-from .outputs import Output
-from .problems import Problem
-from .settings import Settings
+from transforms import Layout
 
-_OUTPUTS = {".json": Output.JSON, ".glb": Output.GLB, ".svg": Output.SVG, ".png": Output.PNG}
+from .capabilities import MESH_COMMANDS
+from .outputs import Output
+from .problems import MESH_FORM, Problem, core_errors_as_problems
+from .settings import Settings
 
 
 class Progress:
@@ -79,24 +82,11 @@ def params_of(args: argparse.Namespace) -> dict:
     if not isinstance(params, dict):
         raise Problem(422, "--params: must be a JSON object", field="--params")
     if args.region_cone:
-        axis, _, degrees = args.region_cone.rpartition(":")
-        try:
-            half_angle = float(degrees)
-        except ValueError:
-            raise Problem(
-                422,
-                f"--region-cone: expected AXIS:DEG such as 0,1,0:60, got {args.region_cone!r}",
-                field="--region-cone",
-            ) from None
-        params["region"] = {
-            "cone": {"axis": _vector(axis, "--region-cone"), "half_angle_deg": half_angle}
-        }
+        params["region"] = {"cone": _cone(args.region_cone)}
     if args.auto:
         params.update(center="auto", rotation="auto", sigma="auto")
-    if args.sigma is not None:
-        params["sigma"] = args.sigma
-    if args.pole_angle is not None:
-        params["pole_angle_deg"] = args.pole_angle
+    options = {"sigma": args.sigma, "pole_angle_deg": args.pole_angle, "layout": args.layout}
+    params.update({name: value for name, value in options.items() if value is not None})
     if args.center:
         known = ("bbox_center", "centroid", "auto")
         params["center"] = args.center if args.center in known else _vector(args.center, "--center")
@@ -104,41 +94,55 @@ def params_of(args: argparse.Namespace) -> dict:
         if not (args.pole and args.up):
             raise Problem(422, "--pole, --up: give both", field="--pole")
         params["rotation"] = {"pole": _vector(args.pole, "--pole"), "up": _vector(args.up, "--up")}
-    if args.layout:
-        params["layout"] = args.layout
     return params
 
 
-def run(args: argparse.Namespace) -> bytes:
-    """The answer's bytes for a ``flatten``, ``validate`` or ``fit`` command."""
-    from . import api  # the service's own code paths (imported here: serve does not need them)
-    from .encoding import Timings, encode
-    from .params import FitParams, FlattenParams, MeshParams
+def _cone(text: str) -> dict:
+    axis, _, degrees = text.rpartition(":")
+    try:
+        half_angle = float(degrees)
+    except ValueError:
+        raise Problem(
+            422,
+            f"--region-cone: expected AXIS:DEG such as 0,1,0:60, got {text!r}",
+            field="--region-cone",
+        ) from None
+    return {"axis": _vector(axis, "--region-cone"), "half_angle_deg": half_angle}
 
+
+def _output(capability, out: str | None) -> Output:
+    """The form ``--out``'s extension asks for, among the capability's (JSON without one)."""
+    if not out:
+        return Output.JSON
+    by_suffix = {f".{output.value}": output for output in capability.outputs}
+    suffix = Path(out).suffix.lower()
+    if suffix not in by_suffix:
+        known = ", ".join(by_suffix)
+        raise Problem(422, f"--out: {out!r}: use {known}", field="--out")
+    return by_suffix[suffix]
+
+
+def run(args: argparse.Namespace) -> bytes:
+    """The answer's bytes for a mesh command (the route's capability and operation)."""
+    from .encoding import Timings
+    from .inputs import load_mesh, mesh_params
+
+    capability = MESH_COMMANDS[args.command]
     settings = Settings.from_env()
-    output = Output.JSON
-    if args.command == "flatten":
-        suffix = Path(args.out).suffix.lower() if args.out else ".json"
-        if suffix not in _OUTPUTS:
-            raise Problem(422, f"--out: {args.out!r}: use .json, .glb, .svg or .png", field="--out")
-        output = _OUTPUTS[suffix]
-    model = {"flatten": FlattenParams, "validate": MeshParams, "fit": FitParams}[args.command]
+    output = _output(capability, args.out)
     work = "fitting" if args.command == "fit" or args.auto else "flattening"
     progress = Progress(["reading", work, "writing"], args.progress or sys.stderr.isatty())
-    timings = Timings()
-    with progress.step("reading"):
-        params = api.mesh_params(model, orjson.dumps(params_of(args)))
-        path = Path(args.mesh)
-        try:
-            data = path.read_bytes()
-        except OSError as error:
-            raise Problem(422, f"MESH: cannot read {args.mesh!r}: {error.strerror}") from None
-        mesh = api.load_mesh(data, path.name, params, settings)
-    with progress.step(work):
-        if args.command == "flatten":
-            answer = api.flatten_output(mesh, params, settings, output, timings)
-        else:
-            answer = encode(api.report(mesh, params, settings, timings))
+    with core_errors_as_problems(MESH_FORM):
+        with progress.step("reading"):
+            params = mesh_params(capability.params, orjson.dumps(params_of(args)))
+            path = Path(args.mesh)
+            try:
+                data = path.read_bytes()
+            except OSError as error:
+                raise Problem(422, f"MESH: cannot read {args.mesh!r}: {error.strerror}") from None
+            mesh = load_mesh(data, path.name, params, settings)
+        with progress.step(work):
+            answer = capability.answer(mesh, params, settings, output, Timings())
     with progress.step("writing"):
         if args.out:
             Path(args.out).write_bytes(answer)
@@ -160,12 +164,11 @@ def parser() -> argparse.ArgumentParser:
     serve.add_argument("--workers", type=int, help="processes; default: MESHFLAT_WORKERS or 1")
     health = commands.add_parser("health", help="exit 0 when the local service's /healthz answers")
     health.add_argument("--port", type=int, help="default: MESHFLAT_PORT or 8000")
-    for name, text in (
-        ("flatten", "flatten a region: JSON, GLB, SVG or PNG by the extension of --out"),
-        ("validate", "validate a region: params, validation and metrics as JSON"),
-        ("fit", "choose centre, pole and sigma: params, validation, metrics and explain"),
-    ):
-        command = commands.add_parser(name, help=text)
+    for name, capability in MESH_COMMANDS.items():
+        forms = ", ".join(output.value.upper() for output in capability.outputs)
+        command = commands.add_parser(
+            name, help=f"{capability.summary[0].lower()}{capability.summary[1:]} ({forms})"
+        )
         command.add_argument("mesh", metavar="MESH", help="OBJ, glTF, GLB, PLY or STL file")
         command.add_argument("--region-cone", metavar="AXIS:DEG", help="e.g. 0,1,0:60")
         cap = command.add_mutually_exclusive_group()
@@ -175,7 +178,7 @@ def parser() -> argparse.ArgumentParser:
         command.add_argument("--center", help="X,Y,Z, bbox_center (default) or centroid")
         command.add_argument("--pole", metavar="X,Y,Z", help="world direction of local +Y")
         command.add_argument("--up", metavar="X,Y,Z", help="world direction towards local +Z")
-        command.add_argument("--layout", choices=["theta_phi", "mercator"])
+        command.add_argument("--layout", choices=[layout.value for layout in Layout])
         command.add_argument("--params", metavar="JSON", help="any of the API's params")
         command.add_argument("--out", metavar="FILE", help="default: JSON on stdout")
         command.add_argument("--progress", action="store_true", help="a progress bar always")

@@ -9,6 +9,7 @@ from contextlib import contextmanager
 
 import numpy as np
 import orjson
+from pydantic import BaseModel
 from starlette.responses import Response
 
 from .jobs import current_deadline
@@ -16,16 +17,31 @@ from .jobs import current_deadline
 JSON = "application/json"
 
 
-def encode(payload: dict) -> bytes:
-    """``payload`` as JSON bytes; numpy arrays become lists.
+def encode(answer: BaseModel) -> bytes:
+    """An answer (a response model of :mod:`service.schemas`) as JSON bytes: the fields it
+    was built with, in the model's order; numpy arrays become lists.
 
     Raises
     ------
     ValueError
         A NaN or Inf anywhere: an answer never carries one (it would be a bug).
     """
+    payload = plain(answer)
     _check_finite(payload)
     return orjson.dumps(payload, option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+def plain(value):
+    """``value`` with every model turned into a dict of the fields it was given (numpy
+    arrays and enums are left to orjson)."""
+    if isinstance(value, BaseModel):
+        given = value.model_fields_set
+        return {
+            name: plain(getattr(value, name)) for name in type(value).model_fields if name in given
+        }
+    if isinstance(value, list) and value and isinstance(value[0], (BaseModel, type(None))):
+        return [plain(item) for item in value]
+    return value
 
 
 def _check_finite(value) -> None:
@@ -74,7 +90,7 @@ class Timings:
         )
 
 
-def json_response(payload: dict, timings: Timings) -> Response:
+def json_response(answer: BaseModel, timings: Timings) -> Response:
     """Encode (timed) and wrap with the Server-Timing header."""
-    body = timings.timed("encode", lambda: encode(payload))
+    body = timings.timed("encode", lambda: encode(answer))
     return Response(body, media_type=JSON, headers={"Server-Timing": timings.header()})

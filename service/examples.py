@@ -11,18 +11,27 @@ import json
 
 import orjson
 import trimesh
-from pydantic import ValidationError
 
-from .api import answer_inverse, answer_points, flatten_answer, sample_infos, validate_answer
-from .meshio import MeshFormatError, read_mesh
-from .params import MESH_PARAMS_EXAMPLE, InverseRequest, PointsRequest
-from .problems import Problem, from_mesh_error, problem_response, validation_problem
+from .capabilities import JSON_CAPABILITIES, MESH_CAPABILITIES
+from .encoding import JSON, Timings
+from .inputs import load_mesh, mesh_params, parse_json
+from .meshio import read_mesh
+from .operations import sample_infos
+from .outputs import Output
+from .params import MESH_PARAMS_EXAMPLE
+from .problems import (
+    JSON_BODY,
+    MESH_FORM,
+    PROBLEM_JSON,
+    Problem,
+    core_errors_as_problems,
+    problem_response,
+)
 from .schemas import Health
 from .settings import Settings
 
 BOUNDARY = "example-boundary"
 MULTIPART = f"multipart/form-data; boundary={BOUNDARY}"
-JSON = "application/json"
 
 
 def icosahedron_obj() -> bytes:
@@ -47,10 +56,6 @@ def multipart_body(params: dict, filename: str, data: bytes) -> bytes:
     )
 
 
-def _dumped(example: dict, **changes) -> bytes:
-    return json.dumps(dict(example, **changes)).encode()
-
-
 def _rounded(value):
     if isinstance(value, float):
         return round(value, 6) + 0.0  # + 0.0: no "-0.0"
@@ -65,61 +70,81 @@ def _json(body: bytes) -> dict:
     return _rounded(orjson.loads(body))
 
 
-def _problem(call) -> dict:
+def _problem(call, places) -> dict:
+    """The problem answer ``call`` fails with (as the routes would answer it)."""
     try:
-        call()
+        with core_errors_as_problems(places):
+            call()
     except Problem as problem:
         return _json(problem_response(problem).body)
-    except MeshFormatError as error:
-        return _json(problem_response(from_mesh_error(error)).body)
-    except ValidationError as error:
-        return _json(problem_response(validation_problem(error.errors())).body)
     raise AssertionError("the example call did not fail")
 
 
+def request_example(model) -> dict:
+    """The first example of a request model's schema."""
+    return model.model_config["json_schema_extra"]["examples"][0]
+
+
+def mesh_answer(capability, params: dict, mesh: bytes, settings: Settings) -> bytes:
+    """A mesh route's JSON answer to ``params`` on the OBJ ``mesh``."""
+    parsed = mesh_params(capability.params, json.dumps(params).encode())
+    loaded = load_mesh(mesh, "icosahedron.obj", parsed, settings)
+    return capability.answer(loaded, parsed, settings, Output.JSON, Timings())
+
+
+def json_answer(capability, body: dict, settings: Settings) -> bytes:
+    """A JSON route's answer to ``body``."""
+    request = parse_json(capability.request, json.dumps(body).encode(), JSON)
+    return capability.answer(request, settings, Timings())
+
+
 def examples() -> dict[tuple[str, str], dict | list]:
-    """(path, status) -> example answer body."""
+    """(path, status) -> example answer body: for every capability, its answer to its
+    request example, and problems for a bad region, a mesh beyond a limit and bad points."""
     settings = Settings()
     mesh = icosahedron_obj()
-    body = multipart_body(MESH_PARAMS_EXAMPLE, "icosahedron.obj", mesh)
-    points = PointsRequest.model_config["json_schema_extra"]["examples"][0]
-    inverse = InverseRequest.model_config["json_schema_extra"]["examples"][0]
-    bad_region = dict(MESH_PARAMS_EXAMPLE, region={"faces": [3, 20]})
-    tiny = Settings(max_faces=10).limits
-    mesh_problems = {
-        "422": _problem(
-            lambda: flatten_answer(
-                multipart_body(bad_region, "icosahedron.obj", mesh), MULTIPART, settings
-            )
-        ),
-        "413": _problem(lambda: read_mesh(mesh, "obj", tiny)),
-    }
-    point_problem = _problem(lambda: answer_points(_dumped(points, sigma=-1.0), JSON, settings))
-    return {
+    found: dict[tuple[str, str], dict | list] = {
         ("/healthz", "200"): Health().model_dump(),
         ("/readyz", "200"): Health().model_dump(),
         ("/v1/samples", "200"): [info.model_dump() for info in sample_infos()],
-        ("/v1/points", "200"): _json(answer_points(_dumped(points), JSON, settings).body),
-        ("/v1/points", "422"): point_problem,
-        ("/v1/points/inverse", "200"): _json(answer_inverse(_dumped(inverse), JSON, settings).body),
-        ("/v1/points/inverse", "422"): _problem(
-            lambda: answer_inverse(_dumped(inverse, pole_angle_deg=30.0), JSON, settings)
-        ),
-        ("/v1/flatten", "200"): _json(flatten_answer(body, MULTIPART, settings).body),
-        ("/v1/validate", "200"): _json(validate_answer(body, MULTIPART, settings).body),
-        **{("/v1/flatten", status): problem for status, problem in mesh_problems.items()},
-        **{("/v1/validate", status): problem for status, problem in mesh_problems.items()},
     }
+    for capability in JSON_CAPABILITIES:
+        example = request_example(capability.request)
+        found[capability.path, "200"] = _json(json_answer(capability, example, settings))
+    for capability in MESH_CAPABILITIES:
+        example = request_example(capability.params)
+        found[capability.path, "200"] = _json(mesh_answer(capability, example, mesh, settings))
+    points, inverse = JSON_CAPABILITIES
+    bad_points = dict(request_example(points.request), sigma=-1.0)
+    found[points.path, "422"] = _problem(
+        lambda: json_answer(points, bad_points, settings), JSON_BODY
+    )
+    bad_inverse = dict(request_example(inverse.request), pole_angle_deg=30.0)
+    found[inverse.path, "422"] = _problem(
+        lambda: json_answer(inverse, bad_inverse, settings), JSON_BODY
+    )
+    bad_region = dict(MESH_PARAMS_EXAMPLE, region={"faces": [3, 20]})
+    tiny = Settings(max_faces=10).limits
+    flatten, validate = MESH_CAPABILITIES[:2]
+    for capability in (flatten, validate):
+        found[capability.path, "422"] = _problem(
+            lambda c=capability: mesh_answer(c, bad_region, mesh, settings), MESH_FORM
+        )
+        found[capability.path, "413"] = _problem(lambda: read_mesh(mesh, "obj", tiny), MESH_FORM)
+    return found
 
 
 def add_examples(document: dict) -> dict:
-    """Put the request examples and :func:`examples` into an OpenAPI document; returns it."""
-    for path, model in (("/v1/points", PointsRequest), ("/v1/points/inverse", InverseRequest)):
-        media = document["paths"][path]["post"]["requestBody"]["content"]["application/json"]
-        media["example"] = model.model_config["json_schema_extra"]["examples"][0]
+    """Put the request examples and :func:`examples` into an OpenAPI document, each answer
+    only under its own media type (JSON answers under application/json, problems under
+    application/problem+json); returns the document."""
+    for capability in JSON_CAPABILITIES:
+        operation = document["paths"][capability.path]["post"]
+        media = operation["requestBody"]["content"]["application/json"]
+        media["example"] = request_example(capability.request)
     for (path, status), example in examples().items():
         (operation,) = document["paths"][path].values()  # one method per path
-        response = operation["responses"][status]
-        for media in response.setdefault("content", {}).values():
-            media["example"] = example
+        content = operation["responses"][status].setdefault("content", {})
+        media_type = PROBLEM_JSON if status.startswith(("4", "5")) else JSON
+        content.setdefault(media_type, {})["example"] = example
     return document

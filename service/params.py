@@ -1,18 +1,32 @@
-"""Request parameters: the pydantic models at the edge, and their resolution into the core's
-objects (a Frame, a Chart, the region's face ids)."""
+"""Request parameters: the pydantic models at the edge, nothing else (their resolution into
+the core's objects is :mod:`service.operations`).
+
+The vocabularies come from where they are defined: methods and layouts from the core
+(:class:`transforms.Method`, :class:`transforms.Layout`), answer forms from
+:class:`service.outputs.Output`, file formats from the reader registry
+(:data:`service.meshio.FORMATS`).
+"""
 
 from __future__ import annotations
 
 import math
+from enum import StrEnum
 from typing import Annotated, Literal
 
-import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
-from transforms import Chart, Frame, PoleCap, TransformInputError
+from transforms import Layout, Method
 
-from .meshio import Mesh
-from .problems import Problem, from_transform_error
+from .meshio import FORMATS
+from .outputs import Output
+
+
+def choice(vocabulary: type[StrEnum]):
+    """A field type that takes one of ``vocabulary``'s values and holds its member; in the
+    schema, the plain ``enum`` of the values (no separate component)."""
+    values = tuple(member.value for member in vocabulary)
+    return Annotated[Literal[values], AfterValidator(vocabulary)]
+
 
 Number = Annotated[float, Field(allow_inf_nan=False)]
 PositiveNumber = Annotated[float, Field(allow_inf_nan=False, gt=0)]
@@ -41,8 +55,8 @@ class PoleUp(_Strict):
 class ChartParams(_Strict):
     """How directions become angles: method, cap and frame rotation."""
 
-    method: Literal["distorted", "standard", "separable"] = Field(
-        "distorted",
+    method: choice(Method) = Field(
+        Method.DISTORTED,
         description="distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the "
         "paper's alternative.",
     )
@@ -242,8 +256,8 @@ class MeshParams(ChartParams):
         + AUTO_DESCRIPTION
         + " Default: identity.",
     )
-    layout: Literal["theta_phi", "mercator"] = Field(
-        "theta_phi",
+    layout: choice(Layout) = Field(
+        Layout.THETA_PHI,
         description="The 2D layout: theta_phi, the paper's (phi, theta); or mercator, x = phi, "
         "y = ln tan((pi - theta) / 2), conformal apart from the radial projection. The "
         "metrics (and for auto, the energy) are measured on it; /v1/flatten then also answers "
@@ -264,7 +278,7 @@ class MeshParams(ChartParams):
         "the singular points.",
     )
     region: Region | None = Field(None, description="Which faces; null: the whole mesh.")
-    format: Literal["obj", "gltf", "glb", "ply", "stl"] | None = Field(
+    format: Literal[FORMATS] | None = Field(
         None, description="The file's format; default: from the file name's extension."
     )
 
@@ -311,173 +325,6 @@ class FitParams(MeshParams):
         return True
 
 
-# -- resolution ------------------------------------------------------------------------
-
-
-def chart_of(params: ChartParams) -> Chart:
-    """The chart the parameters name (sigma 0.3 when neither sigma nor a pole angle is set)."""
-    if params.method == "standard":
-        return Chart.standard()
-    if params.pole_angle_deg is not None and params.sigma is None:
-        cap = PoleCap.from_rho_deg(params.pole_angle_deg)
-    else:
-        cap = PoleCap.from_sigma(DEFAULT_SIGMA if params.sigma is None else params.sigma)
-    return Chart.from_method(params.method, cap)
-
-
-def frame_of(params: ChartParams, center: np.ndarray) -> Frame:
-    """The frame at ``center`` with the parameters' rotation (identity when none)."""
-    if params.rotation is None:
-        return Frame.identity(center)
-    if isinstance(params.rotation, PoleUp):
-        return Frame.from_pole_up(params.rotation.pole, params.rotation.up, center)
-    return Frame.from_matrix(params.rotation, center)
-
-
-def resolved(chart: Chart, frame: Frame) -> dict:
-    """The ``params`` block of an answer: everything as it was used, so that it can be sent
-    back as it is (``standard`` has no cap: its sigma and pole angle are null)."""
-    standard = chart.method.value == "standard"
-    return {
-        "method": chart.method.value,
-        "sigma": None if standard else chart.cap.sigma,
-        "pole_angle_deg": None if standard else chart.cap.rho_deg,
-        "center": frame.center.tolist(),
-        "rotation": frame.rotation.tolist(),
-    }
-
-
-def region_faces(mesh: Mesh, params: MeshParams) -> tuple[np.ndarray, np.ndarray]:
-    """The region's face ids (ascending) and the centre, as the parameters ask.
-
-    Raises
-    ------
-    Problem
-        Ids out of range or repeated, unknown groups, a zero cone axis, or an empty region.
-    """
-    n_faces, n_vertices = len(mesh.faces), len(mesh.vertices)
-    region = params.region
-    if region is not None and region.cone is not None:
-        center = _center(mesh, np.arange(n_faces), params.center)
-        faces = _cone(mesh, center, region.cone)
-    else:
-        if region is None:
-            faces = np.arange(n_faces)
-        elif region.faces is not None:
-            faces = np.sort(_ids(region.faces, n_faces, "params.region.faces", "face"))
-        elif region.vertices is not None:
-            listed = np.zeros(n_vertices, dtype=bool)
-            listed[_ids(region.vertices, n_vertices, "params.region.vertices", "vertex")] = True
-            faces = np.flatnonzero(listed[mesh.faces].all(axis=1))
-        else:
-            faces = _groups(mesh, region.groups)
-        center = _center(mesh, faces, params.center) if len(faces) else None
-    if len(faces) == 0:
-        raise Problem(422, "params.region selects no faces", "empty-region", "params.region")
-    return faces, center
-
-
-def _ids(values: list[int], limit: int, field: str, noun: str) -> np.ndarray:
-    try:
-        ids = np.asarray(values, dtype=np.int64)
-    except OverflowError:
-        # Only an id beyond 64 bits gets here; find it for the message.
-        huge = next(value for value in values if not -(2**63) <= value < 2**63)
-        raise _outside(field, noun, huge, limit, []) from None
-    bad = np.flatnonzero((ids < 0) | (ids >= limit))
-    if bad.size:
-        raise _outside(field, noun, int(ids[bad[0]]), limit, ids[bad[:5]].tolist())
-    unique, counts = np.unique(ids, return_counts=True)
-    if (counts > 1).any():
-        repeated = unique[counts > 1]
-        raise Problem(
-            422,
-            f"{field}: {noun} id {int(repeated[0])} is listed more than once "
-            f"({len(repeated)} ids repeat)",
-            "invalid-input",
-            field,
-            repeated[:5].tolist(),
-        )
-    return ids
-
-
-def _outside(field: str, noun: str, value: int, limit: int, indices: list[int]) -> Problem:
-    plural = {"vertex": "vertices", "face": "faces"}[noun]
-    return Problem(
-        422,
-        f"{field}: {noun} id {value} is outside [0, {limit:,}) (the mesh has {limit:,} "
-        f"{noun if limit == 1 else plural})",
-        "invalid-input",
-        field,
-        indices,
-    )
-
-
-def _groups(mesh: Mesh, names: list[str]) -> np.ndarray:
-    missing = [name for name in names if name not in mesh.groups]
-    if missing:
-        known = ", ".join(repr(name) for name in sorted(mesh.groups)[:20]) or "none"
-        raise Problem(
-            422,
-            f"params.region.groups: no group named {missing[0]!r}; the file's groups: {known}",
-            "invalid-input",
-            "params.region.groups",
-        )
-    return mesh.group_faces(names)
-
-
-def _center(mesh: Mesh, faces: np.ndarray, center) -> np.ndarray:
-    """A world point, or the area-weighted centroid or bounding-box centre of ``faces``."""
-    if not isinstance(center, str):
-        return np.asarray(center, dtype=np.float64)
-    if center in ("bbox_center", "auto"):  # auto: a cone is selected around this one
-        used = np.zeros(len(mesh.vertices), dtype=bool)
-        used[mesh.faces[faces].ravel()] = True
-        points = mesh.vertices[used]
-        # Column by column: a reduction down the rows of an (n, 3) array is ten times slower.
-        low = np.array([points[:, k].min() for k in range(3)])
-        high = np.array([points[:, k].max() for k in range(3)])
-        return (low + high) / 2.0
-    corners = mesh.vertices[mesh.faces[faces]]  # (m, 3 corners, 3)
-    areas = 0.5 * np.linalg.norm(
-        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-    )
-    if not areas.sum() > 0:
-        raise Problem(
-            422,
-            "params.center: 'centroid' needs faces with area",
-            "invalid-input",
-            "params.center",
-        )
-    return (corners.mean(axis=1) * areas[:, None]).sum(axis=0) / areas.sum()
-
-
-def _cone(mesh: Mesh, center: np.ndarray, cone: Cone) -> np.ndarray:
-    axis = np.asarray(cone.axis, dtype=np.float64)
-    length = float(np.linalg.norm(axis))
-    if not length > 0:
-        raise Problem(
-            422,
-            "params.region.cone.axis: must be a non-zero direction",
-            "invalid-input",
-            "params.region.cone.axis",
-        )
-    centroids = mesh.vertices[mesh.faces].mean(axis=1) - center
-    distance = np.linalg.norm(centroids, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cosine = centroids @ (axis / length) / distance
-    inside = cosine >= math.cos(math.radians(cone.half_angle_deg)) - 1e-15
-    return np.flatnonzero(inside & (distance > 0))
-
-
-def checked(call, prefix: str = "params."):
-    """Run ``call``; a core input error about a parameter becomes a 422 naming it."""
-    try:
-        return call()
-    except TransformInputError as error:
-        raise from_transform_error(error, prefix) from None
-
-
 class LocateParams(MeshParams):
     """The JSON of the ``params`` field of /v1/locate: a region and its frame as for
     /v1/flatten (``"auto"`` allowed), and the query directions."""
@@ -510,7 +357,7 @@ class FlattenParams(MeshParams):
     """The JSON of the ``params`` field of /v1/flatten: as for /v1/validate, and the form of
     the answer."""
 
-    output: Literal["json", "glb", "svg", "png"] | None = Field(
+    output: choice(Output) | None = Field(
         None,
         description="The answer's form, for clients that cannot set Accept: json "
         "(application/json), glb (model/gltf-binary: the region with TEXCOORD_0 from the "

@@ -8,19 +8,22 @@ first two for programs.
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from http import HTTPStatus
 
 import orjson
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.responses import Response
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from transforms import TransformInputError
+from transforms import EmptyRegionError, TransformInputError
 
-from .meshio import MeshFormatError
+from .meshio import MeshFormatError, MeshTooLargeError
 from .observability import REJECTIONS
 
 PROBLEM_JSON = "application/problem+json"
@@ -59,6 +62,35 @@ class Problem(Exception):
         self.headers = headers
 
 
+#: The problems every route may answer, for the OpenAPI document.
+PROBLEMS = {
+    status: {
+        # Problems are only ever application/problem+json (the schema is added to the
+        # document's components by service.app).
+        "content": {
+            "application/problem+json": {"schema": {"$ref": "#/components/schemas/ProblemDetails"}}
+        },
+        "description": text,
+    }
+    for status, text in (
+        (400, "Malformed request (for example a broken multipart body)."),
+        (413, "Body, file or mesh beyond a limit; the detail names the limit."),
+        (401, "No valid API key (when the service has keys): the detail says which."),
+        (408, "The body did not arrive within the time limit (MESHFLAT_REQUEST_TIMEOUT)."),
+        (415, "Wrong content type."),
+        (
+            422,
+            "Invalid parameters or an unreadable mesh; the detail names the field, face or vertex.",
+        ),
+        (503, "Busy: too many jobs in flight; Retry-After gives the seconds to wait."),
+        (504, "The job did not finish within the time limit (MESHFLAT_REQUEST_TIMEOUT)."),
+    )
+}
+PROBLEMS[503]["headers"] = {
+    "Retry-After": {"description": "Seconds to wait.", "schema": {"type": "integer"}}
+}
+
+
 def problem_response(problem: Problem) -> Response:
     REJECTIONS.labels(problem.kind).inc()
     body = {
@@ -79,25 +111,67 @@ def problem_response(problem: Problem) -> Response:
     )
 
 
-def from_transform_error(error: TransformInputError, prefix: str = "") -> Problem:
-    """A core input error as a 422 problem; ``prefix`` places its field (``params.``)."""
-    return Problem(
-        422, f"{prefix}{error}", "invalid-input", f"{prefix}{error.field}", list(error.indices)
-    )
+@dataclass(frozen=True)
+class ErrorPlaces:
+    """Where the fields a core error names lie in a request: under ``prefix``, except those
+    ``renamed`` (the core's arrays that hold the uploaded mesh are the ``mesh`` part)."""
+
+    prefix: str = ""
+    renamed: Mapping[str, str] = field(default_factory=dict)
+
+    def of(self, name: str) -> str:
+        return self.renamed.get(name) or f"{self.prefix}{name}"
 
 
-def from_mesh_error(error: MeshFormatError) -> Problem:
-    kind = "mesh-too-large" if error.status == 413 else "unreadable-mesh"
-    return Problem(error.status, f"mesh: {error}", kind, "mesh")
+#: A JSON body: the fields are the body's own.
+JSON_BODY = ErrorPlaces()
+#: A multipart mesh request: parameters in the ``params`` part, the mesh's data in ``mesh``.
+MESH_FORM = ErrorPlaces(
+    "params.", {name: "mesh" for name in ("vertices", "faces", "points", "directions")}
+)
+
+#: The kind of problem by core error type (the first that matches); others: invalid-input.
+_KINDS = ((EmptyRegionError, "empty-region"),)
+
+
+def problem_of(error: Exception, places: ErrorPlaces = JSON_BODY) -> Problem:
+    """The problem that a core input error, a mesh reader's error or a parameter model's
+    validation error is, its field placed by ``places``; the one translation of them.
+
+    Raises
+    ------
+    TypeError
+        ``error`` is none of those (a bug: let it become a 500).
+    """
+    if isinstance(error, MeshFormatError):
+        if isinstance(error, MeshTooLargeError):
+            return Problem(413, f"mesh: {error}", "mesh-too-large", "mesh")
+        return Problem(422, f"mesh: {error}", "unreadable-mesh", "mesh")
+    if isinstance(error, ValidationError):
+        return validation_problem(error.errors(), places.prefix)
+    if isinstance(error, TransformInputError):
+        where = places.of(error.field)
+        kind = next((k for t, k in _KINDS if isinstance(error, t)), "invalid-input")
+        return Problem(422, f"{where}: {error.message}", kind, where, list(error.indices))
+    raise TypeError(f"no problem for {type(error).__name__}")
+
+
+@contextmanager
+def core_errors_as_problems(places: ErrorPlaces) -> Iterator[None]:
+    """Raise what :func:`problem_of` makes of any core, reader or validation error."""
+    try:
+        yield
+    except (TransformInputError, MeshFormatError, ValidationError) as error:
+        raise problem_of(error, places) from None
 
 
 def validation_problem(errors: list[dict], prefix: str = "") -> Problem:
     """A 422 naming up to five invalid fields (pydantic's errors); ``prefix`` places them
-    (``params`` for the multipart JSON field)."""
+    (``params.`` for the multipart JSON field)."""
     messages, first_field = [], None
     for item in errors[:5]:
         parts = [str(part) for part in item.get("loc", ()) if part != "body"]
-        location = ".".join(([prefix] if prefix else []) + parts)
+        location = (prefix + ".".join(parts)).rstrip(".")
         message = str(item.get("msg", "invalid")).removeprefix("Value error, ")
         first_field = first_field or location or None
         messages.append(f"{location}: {message}" if location else message)

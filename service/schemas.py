@@ -1,27 +1,99 @@
-"""Response schemas: what the answers hold, for the OpenAPI document (answers are encoded
-straight from numpy arrays by :mod:`.encoding`, not through these models)."""
+"""Response models: the one definition of each answer, for the OpenAPI document and for the
+answers themselves.
+
+Each answer is built through its model from a use-case's result (``Model.of(result)``, the
+presenters) and encoded by :func:`service.encoding.encode`. Building skips pydantic's
+validation, so that a million-vertex answer keeps its numpy arrays (encoded in C, with no
+Python loop over floats); :meth:`Answer.build` still refuses a field the model does not
+have or a missing one, and a test validates every route's answer against the document.
+"""
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
+import numpy as np
 from pydantic import BaseModel, Field
 
+from transforms import Layout, Method
 
-class ResolvedParams(BaseModel):
-    method: Literal["distorted", "standard", "separable"]
+from .params import choice
+
+if TYPE_CHECKING:
+    from .operations import Angles, Located, MeshRegion
+
+
+class Answer(BaseModel):
+    """A response model whose instances are built from arrays without validation."""
+
+    @classmethod
+    def build(cls, **values):
+        """An instance holding ``values`` as they are (numpy arrays included); only the
+        fields given are encoded.
+
+        Raises
+        ------
+        TypeError
+            A name that is not a field, or a required field missing: a bug, never the
+            client's fault.
+        """
+        cls._check_names(values.keys())
+        return cls.model_construct(**values)
+
+    @classmethod
+    def rows(cls, present, **columns) -> list:
+        """Many answers of this model at once, from equally long columns of field values:
+        one dict a row (None where ``present`` is false). For long lists (a million hits),
+        where an instance a row would cost ten times more; the names are checked once.
+        """
+        cls._check_names(columns.keys())
+        names = list(columns)
+        return [
+            dict(zip(names, values, strict=True)) if keep else None
+            for keep, *values in zip(present, *columns.values(), strict=True)
+        ]
+
+    @classmethod
+    def _check_names(cls, names) -> None:
+        fields = cls.model_fields
+        unknown = names - fields.keys()
+        missing = {name for name, f in fields.items() if f.is_required()} - names
+        if unknown or missing:
+            raise TypeError(f"{cls.__name__}: unknown {sorted(unknown)}, missing {sorted(missing)}")
+
+
+class ResolvedParams(Answer):
+    method: choice(Method)
     sigma: float | None = Field(description="The warp parameter used; null for standard.")
     pole_angle_deg: float | None = Field(
         description="The cap's angle rho = 2 atan(sigma), degrees; null for standard."
     )
     center: list[float] = Field(description="The centre used, world coordinates.")
     rotation: list[list[float]] = Field(description="The world-to-local rotation used (rows).")
-    layout: Literal["theta_phi", "mercator"] | None = Field(
-        None, description="The 2D layout of a mesh answer."
-    )
+    layout: choice(Layout) | None = Field(None, description="The 2D layout of a mesh answer.")
+
+    @classmethod
+    def of(cls, chart, frame, layout: Layout | None = None) -> ResolvedParams:
+        """Everything as it was used, so that it can be sent back as it is (``standard``
+        has no cap: its sigma and pole angle are null); ``layout`` for mesh answers."""
+        standard = chart.method is Method.STANDARD
+        values = {
+            "method": chart.method,
+            "sigma": None if standard else chart.cap.sigma,
+            "pole_angle_deg": None if standard else chart.cap.rho_deg,
+            "center": frame.center.tolist(),
+            "rotation": frame.rotation.tolist(),
+        }
+        if layout is not None:
+            values["layout"] = layout
+        return cls.build(**values)
+
+    @classmethod
+    def of_region(cls, region: MeshRegion) -> ResolvedParams:
+        return cls.of(region.chart, region.frame, region.flat.layout)
 
 
-class FlatVertices(BaseModel):
+class FlatVertices(Answer):
     ids: list[int] = Field(description="The file's vertex ids used by the region, ascending.")
     theta: list[float] = Field(description="Polar angle from local +Z, radians, per id.")
     phi: list[float] = Field(description="Azimuth from +X towards +Y, radians, per id.")
@@ -32,18 +104,18 @@ class FlatVertices(BaseModel):
     )
 
 
-class FlatFaces(BaseModel):
+class FlatFaces(Answer):
     ids: list[int] = Field(description="The region's triangle ids, in file order.")
     vertices: list[list[int]] = Field(description="Each triangle's three vertex ids.")
 
 
-class Margins(BaseModel):
+class Margins(Answer):
     seam: float = Field(description="Degrees from the region to the seam (0: it meets it).")
     north: float = Field(description="Degrees to the singular point mapped to theta = 0.")
     south: float = Field(description="Degrees to the singular point mapped to theta = pi.")
 
 
-class Validation(BaseModel):
+class Validation(Answer):
     seam_free: bool = Field(
         description="No triangle contains a singular point or crosses the seam."
     )
@@ -59,41 +131,101 @@ class Validation(BaseModel):
         description="Which way the file's winding faces, as the region shows it."
     )
 
+    @classmethod
+    def of(cls, region: MeshRegion) -> Validation:
+        """The validation with file face ids."""
+        v, faces = region.flat.validation, region.faces
+        return cls.build(
+            seam_free=v.seam_free,
+            star_shaped=v.star_shaped,
+            singular_point_faces=faces[v.singular_point_faces],
+            seam_faces=faces[v.seam_faces],
+            folded_faces=faces[v.folded_faces],
+            backfacing_faces=faces[v.backfacing_faces],
+            degenerate_faces=faces[v.degenerate_faces],
+            margin_deg=Margins.build(
+                seam=v.margin_deg_seam, north=v.margin_deg_north, south=v.margin_deg_south
+            ),
+            boundary_loops=v.boundary_loops,
+            winding="outward" if v.winding == 1 else "inward",
+        )
 
-class Summary(BaseModel):
+
+class Summary(Answer):
     mean: float
     p95: float
     max: float
 
 
-class Metrics(BaseModel):
+class Metrics(Answer):
     conformal: Summary = Field(description="s1 / s2 (1: angles kept), area-weighted.")
     area: Summary = Field(description="|log(s1 s2)| (0: areas kept), area-weighted.")
     isometric: Summary = Field(
         description="(s1^2 + s2^2 + s1^-2 + s2^-2) / 4 (1: an isometry), area-weighted."
     )
 
+    @classmethod
+    def of(cls, region: MeshRegion) -> Metrics:
+        d = region.flat.distortion
+        return cls.build(
+            **{
+                name: Summary.build(mean=s.mean, p95=s.p95, max=s.max)
+                for name, s in (
+                    ("conformal", d.conformal),
+                    ("area", d.area),
+                    ("isometric", d.isometric),
+                )
+            }
+        )
 
-class FlattenResponse(BaseModel):
+
+class FlattenResponse(Answer):
     params: ResolvedParams
     vertices: FlatVertices
     faces: FlatFaces
     validation: Validation
     metrics: Metrics
 
+    @classmethod
+    def of(cls, region: MeshRegion) -> FlattenResponse:
+        flat = region.flat
+        vertices = {"ids": flat.vertex_ids, "theta": flat.theta, "phi": flat.phi, "r": flat.r}
+        if flat.layout is not Layout.THETA_PHI:
+            vertices |= {"x": flat.x, "y": flat.y}
+        return cls.build(
+            params=ResolvedParams.of_region(region),
+            vertices=FlatVertices.build(**vertices),
+            faces=FlatFaces.build(ids=region.faces, vertices=region.mesh.faces[region.faces]),
+            validation=Validation.of(region),
+            metrics=Metrics.of(region),
+        )
 
-class ValidateResponse(BaseModel):
+
+class ValidateResponse(Answer):
     params: ResolvedParams
     validation: Validation
     metrics: Metrics
 
+    @classmethod
+    def of(cls, region: MeshRegion) -> ValidateResponse:
+        return cls.build(**cls.report(region))
 
-class SigmaEnergy(BaseModel):
+    @staticmethod
+    def report(region: MeshRegion) -> dict:
+        """The fields of a report on a region: params, validation and metrics."""
+        return {
+            "params": ResolvedParams.of_region(region),
+            "validation": Validation.of(region),
+            "metrics": Metrics.of(region),
+        }
+
+
+class SigmaEnergy(Answer):
     sigma: float
     energy: float = Field(description="Isometric energy with the chosen centre and rotation.")
 
 
-class Explain(BaseModel):
+class Explain(Answer):
     energy_start: float = Field(
         description="Area-weighted isometric energy of the starting choice (the kernel's "
         "deepest point, the empty cap's pole, the best sigma for it)."
@@ -120,15 +252,35 @@ class Explain(BaseModel):
     backfacing_faces: list[int] = Field(description="Triangles seen from behind, if any.")
     notes: list[str] = Field(description="What the fit could not do, in words.")
 
+    @classmethod
+    def of(cls, region: MeshRegion) -> Explain:
+        e = region.fit.explanation
+        return cls.build(
+            energy_start=e.energy_start,
+            energy_end=e.energy_end,
+            kernel_inscribed_radius=e.kernel_inscribed_radius,
+            kernel_empty=e.kernel_empty,
+            center_depth=e.center_depth,
+            empty_cap_deg=e.empty_cap_deg,
+            margin_deg=e.margin_deg,
+            energy_at_sigma=[
+                SigmaEnergy.build(sigma=sigma, energy=energy)
+                for sigma, energy in e.energy_at_sigma.items()
+            ],
+            backfacing_faces=region.faces[e.backfacing_faces],
+            notes=list(e.notes),
+        )
 
-class FitResponse(BaseModel):
-    params: ResolvedParams
-    validation: Validation
-    metrics: Metrics
+
+class FitResponse(ValidateResponse):
     explain: Explain
 
+    @classmethod
+    def of(cls, region: MeshRegion) -> FitResponse:
+        return cls.build(**cls.report(region), explain=Explain.of(region))
 
-class Hit(BaseModel):
+
+class Hit(Answer):
     face: int = Field(description="The region triangle's id in the file.")
     barycentric: list[float] = Field(
         description="Weights of the triangle's three vertices (file order) at the hit."
@@ -136,26 +288,43 @@ class Hit(BaseModel):
     point: list[float] = Field(description="The hit point, world coordinates.")
 
 
-class LocateResponse(BaseModel):
+class LocateResponse(Answer):
     params: ResolvedParams
     hits: list[Hit | None] = Field(description="Per query; null where the ray misses.")
 
+    @classmethod
+    def of(cls, located: Located) -> LocateResponse:
+        hits, found = located.hits, located.found
+        world = located.frame.to_world(np.where(found[:, None], hits.points, 0.0))
+        ids = np.where(found, located.faces[np.maximum(hits.faces, 0)], -1).tolist()
+        weights = np.where(found[:, None], hits.barycentric, 0.0).tolist()
+        answers = Hit.rows(found.tolist(), face=ids, barycentric=weights, point=world.tolist())
+        return cls.build(params=ResolvedParams.of(located.chart, located.frame), hits=answers)
 
-class PointsResponse(BaseModel):
+
+class PointsResponse(Answer):
     theta: list[float] = Field(description="Polar angles, radians, in [0, pi].")
     phi: list[float] = Field(description="Azimuths, radians, in (-pi, pi].")
     r: list[float] = Field(description="Distances from the centre.")
 
+    @classmethod
+    def of(cls, angles: Angles) -> PointsResponse:
+        return cls.build(theta=angles.theta, phi=angles.phi, r=angles.r)
 
-class InverseResponse(BaseModel):
+
+class InverseResponse(Answer):
     points: list[list[float]] = Field(description="World points [[x, y, z], ...].")
 
+    @classmethod
+    def of(cls, points: np.ndarray) -> InverseResponse:
+        return cls.build(points=points)
 
-class Health(BaseModel):
+
+class Health(Answer):
     status: str = "ok"
 
 
-class SampleInfo(BaseModel):
+class SampleInfo(Answer):
     name: str
     format: str
     vertices: int
@@ -165,31 +334,3 @@ class SampleInfo(BaseModel):
     credit: str
     licence: str
     url: str = Field(description="Where to download it.")
-
-
-PROBLEMS = {
-    status: {
-        # Problems are only ever application/problem+json (the schema is added to the
-        # document's components by service.app).
-        "content": {
-            "application/problem+json": {"schema": {"$ref": "#/components/schemas/ProblemDetails"}}
-        },
-        "description": text,
-    }
-    for status, text in (
-        (400, "Malformed request (for example a broken multipart body)."),
-        (413, "Body, file or mesh beyond a limit; the detail names the limit."),
-        (401, "No valid API key (when the service has keys): the detail says which."),
-        (408, "The body did not arrive within the time limit (MESHFLAT_REQUEST_TIMEOUT)."),
-        (415, "Wrong content type."),
-        (
-            422,
-            "Invalid parameters or an unreadable mesh; the detail names the field, face or vertex.",
-        ),
-        (503, "Busy: too many jobs in flight; Retry-After gives the seconds to wait."),
-        (504, "The job did not finish within the time limit (MESHFLAT_REQUEST_TIMEOUT)."),
-    )
-}
-PROBLEMS[503]["headers"] = {
-    "Retry-After": {"description": "Seconds to wait.", "schema": {"type": "integer"}}
-}

@@ -8,10 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from transforms import flatten_region
-
+from . import operations
 from .meshio import format_of, read_mesh
-from .params import MeshParams, chart_of, frame_of, region_faces
+from .params import MeshParams
 from .samples import SAMPLES
 from .settings import Settings
 
@@ -52,16 +51,16 @@ def run_self_check() -> SelfCheck:
     """Flatten the scalp of ``SAMPLE`` with the default method (distorted, sigma 0.3), read
     and resolved the way a request would be."""
     data = SAMPLES[SAMPLE].path.read_bytes()
-    mesh = read_mesh(data, format_of(SAMPLE, None), Settings().limits)
+    settings = Settings()
+    mesh = read_mesh(data, format_of(SAMPLE, None), settings.limits)
     params = MeshParams.model_validate(SCALP_PARAMS)
     start = time.perf_counter()
-    faces, center = region_faces(mesh, params)
-    frame, chart = frame_of(params, center), chart_of(params)
-    flat = flatten_region(mesh.vertices, mesh.faces[faces], frame, chart)
+    region = operations.flatten(mesh, params, settings)
+    flat = region.flat
     v = flat.validation
     return SelfCheck(
         sample=SAMPLE,
-        faces=len(faces),
+        faces=len(region.faces),
         seam_free=v.seam_free,
         margin_deg=min(v.margin_deg_seam, v.margin_deg_north, v.margin_deg_south),
         isometric_mean=flat.distortion.isometric.mean,

@@ -37,9 +37,10 @@ class Settings:
     host, port, workers : MESHFLAT_HOST, MESHFLAT_PORT, MESHFLAT_WORKERS, for ``meshflat serve``
     """
 
-    max_upload_bytes: int = 256 * 2**20
-    max_vertices: int = 5_000_000
-    max_faces: int = 5_000_000
+    # The reader's limits and these are one set of numbers: the defaults come from Limits.
+    max_upload_bytes: int = Limits.max_bytes
+    max_vertices: int = Limits.max_vertices
+    max_faces: int = Limits.max_faces
     max_points: int = 5_000_000
     threads: int = 1
     max_jobs: int = 2

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import math
 import os
 from fractions import Fraction
 from functools import cache
@@ -138,3 +139,23 @@ def exact_sign(a, b, c) -> int:
         + a[2] * (b[0] * c[1] - b[1] * c[0])
     )
     return (det > 0) - (det < 0)
+
+
+#: The scalps of the samples: faces whose centroid lies within an angle of the top axis, seen
+#: from a point inside the head (None: the box centre; Lee Perry-Smith's box holds the
+#: shoulders, and from there the cone would take in the ears).
+SCALPS = {
+    "fsaverage-head.ply": (None, 2, 70.86),
+    "lee-perry-smith.obj": ((0.0, 1.5, 0.0), 1, 70.0),
+}
+
+
+def scalp(name: str = "fsaverage-head.ply"):
+    """The sample and its scalp (:data:`SCALPS`)."""
+    vertices, faces = load_sample(name)
+    centre, top, half_angle_deg = SCALPS[name]
+    if centre is None:
+        centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    directions = vertices[faces].mean(axis=1) - np.asarray(centre)
+    cosine = directions[:, top] / np.linalg.norm(directions, axis=1)
+    return vertices, faces[cosine >= math.cos(math.radians(half_angle_deg))]

@@ -441,10 +441,10 @@ async def test_jobs_wait_for_a_slot(monkeypatch):
     import threading
     import time
 
-    from service import api
+    from service import routes
 
     running, most, lock = 0, 0, threading.Lock()
-    real = api.answer_points
+    real = routes.answer_json
 
     def counted(*args):
         nonlocal running, most
@@ -456,7 +456,7 @@ async def test_jobs_wait_for_a_slot(monkeypatch):
             running -= 1
         return real(*args)
 
-    monkeypatch.setattr(api, "answer_points", counted)
+    monkeypatch.setattr(routes, "answer_json", counted)
     for jobs, expected in ((1, 1), (3, 3)):
         running = most = 0
         app = create_app(Settings(max_jobs=jobs))
@@ -543,3 +543,148 @@ async def test_openapi_examples_are_what_the_service_answers(client):
     answer = problem(await flatten(client, "", bad, ico, "icosahedron.obj"), 422)
     assert answer == example("/v1/flatten", "422", "application/problem+json")
     assert (await client.get("/v1/samples")).json() == example("/v1/samples", "200")
+
+
+# -- /v1/fit and "auto" ------------------------------------------------------------------------
+
+SCALP_REGION = {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}
+
+
+async def post(client, endpoint, params, name="fsaverage-head.ply"):
+    """``params`` and a bundled scan to a mesh route."""
+    data = SAMPLES[name].path.read_bytes()
+    fields = {"params": json.dumps(params)}
+    return await client.post(endpoint, files={"mesh": (name, data)}, data=fields)
+
+
+@pytest.mark.anyio
+async def test_fit_answers_params_that_flatten_reproduces(client):
+    answer = await post(client, "/v1/fit", {"region": SCALP_REGION})
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    explain = body["explain"]
+    assert body["validation"]["seam_free"] and body["validation"]["star_shaped"]
+    assert explain["margin_deg"] >= 2.0 and explain["energy_end"] <= explain["energy_start"]
+    assert [item["sigma"] for item in explain["energy_at_sigma"]] == [0.3, 1.0]
+    assert body["metrics"]["isometric"]["mean"] == pytest.approx(explain["energy_end"])
+    # The resolved params sent back to /v1/flatten give the same map. The cone is selected
+    # around the mesh's box centre, so send the region as the faces fit used.
+    flat = await post(client, "/v1/flatten", {"region": SCALP_REGION, "center": "auto"})
+    faces = flat.json()["faces"]["ids"]
+    again = await post(client, "/v1/validate", {**body["params"], "region": {"faces": faces}})
+    assert again.status_code == 200, again.text
+    for name, summary in body["metrics"].items():
+        assert again.json()["metrics"][name] == pytest.approx(summary, rel=1e-9)
+    assert again.json()["validation"]["margin_deg"] == pytest.approx(
+        body["validation"]["margin_deg"]
+    )
+
+
+@pytest.mark.anyio
+async def test_auto_in_flatten_and_an_up_hint(client):
+    params = {
+        "region": SCALP_REGION,
+        "center": "auto",
+        "sigma": "auto",
+        "rotation": {"pole": "auto", "up": [0, 1, 0]},
+    }
+    answer = await post(client, "/v1/flatten", params)
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    assert "explain" not in body and body["validation"]["seam_free"]
+    rotation = np.array(body["params"]["rotation"])
+    assert rotation[2] @ [0, 1, 0] > 0.9  # local +Z follows the hint
+
+
+@pytest.mark.anyio
+@pytest.mark.parametrize(
+    ("params", "field"),
+    [
+        ({"min_margin_deg": 95}, "params.min_margin_deg"),
+        ({"min_kernel_depth": -0.1}, "params.min_kernel_depth"),
+        ({"method": "standard", "sigma": "auto"}, "params"),
+        ({"sigma": "auto", "pole_angle_deg": 30}, "params"),
+        ({"rotation": {"pole": "auto", "up": [0, 0, 0]}}, "params.up"),
+        ({"rotation": {"pole": "automatic"}}, "params.rotation"),
+    ],
+)
+async def test_bad_fit_params_name_the_field(client, params, field):
+    answer = await post(client, "/v1/fit", {"region": SCALP_REGION, **params})
+    assert answer.status_code == 422, answer.text
+    assert answer.json()["field"].startswith(field), answer.json()
+
+
+@pytest.mark.anyio
+async def test_locate_through_the_api_inverts_flatten(client):
+    params = {
+        "region": SCALP_REGION,
+        "center": "bbox_center",
+        "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+    }
+    flat = (await post(client, "/v1/flatten", params)).json()
+    faces = np.array(flat["faces"]["ids"])
+    vertex_of = {vid: i for i, vid in enumerate(flat["vertices"]["ids"])}
+    # Each triangle's centroid in the (phi, theta) map is inside its layout triangle; the
+    # true inverse goes through the ray, so ask for the map points of the corners instead.
+    corners = np.array(flat["faces"]["vertices"])[:50]
+    first = [vertex_of[c[0]] for c in corners]
+    theta = [flat["vertices"]["theta"][i] for i in first]
+    phi = [flat["vertices"]["phi"][i] for i in first]
+    answer = await post(
+        client, "/v1/locate", {**params, "theta": [*theta, 0.0], "phi": [*phi, 0.0]}
+    )
+    assert answer.status_code == 200, answer.text
+    hits = answer.json()["hits"]
+    vertices, _ = load_sample("fsaverage-head.ply")
+    for corner, hit in zip(corners, hits[:-1], strict=True):
+        # A corner is shared by several triangles: any of them, with weight 1 on it.
+        assert hit is not None and hit["face"] in faces
+        np.testing.assert_allclose(hit["point"], vertices[corner[0]], atol=1e-6)
+        assert max(hit["barycentric"]) == pytest.approx(1.0, abs=1e-6)
+    assert hits[-1] is None  # theta = 0 is a singular point's direction, in the cap
+
+
+@pytest.mark.anyio
+async def test_locate_checks_its_queries(client):
+    params = {"region": SCALP_REGION}
+    answer = await post(client, "/v1/locate", {**params, "theta": [1.0, 2.0], "phi": [0.0]})
+    assert answer.status_code == 422 and "one phi per theta" in answer.json()["detail"]
+    answer = await post(client, "/v1/locate", {**params, "theta": [4.0], "phi": [0.0]})
+    assert answer.status_code == 422 and answer.json()["field"] == "params.theta", answer.json()
+
+
+@pytest.mark.anyio
+async def test_mercator_through_the_api(client):
+    params = {
+        "region": SCALP_REGION,
+        "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+        "layout": "mercator",
+    }
+    answer = await post(client, "/v1/flatten", params)
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    vertices = body["vertices"]
+    assert body["params"]["layout"] == "mercator"
+    np.testing.assert_allclose(vertices["x"], vertices["phi"])
+    np.testing.assert_allclose(
+        vertices["y"], np.log(np.tan((np.pi - np.array(vertices["theta"])) / 2))
+    )
+    paper = (await post(client, "/v1/flatten", {**params, "layout": "theta_phi"})).json()
+    assert "x" not in paper["vertices"]
+    assert body["metrics"]["conformal"]["mean"] < paper["metrics"]["conformal"]["mean"]
+
+
+@pytest.mark.anyio
+async def test_locate_ignores_vertices_outside_the_region(client):
+    obj = b"v 0 0 1\nv 1 0 1\nv 0 1 1\nv 0 0 0\nf 1 2 3\n"
+    params = {"center": [0, 0, 0], "theta": [0.1], "phi": [0.5]}
+    answer = await client.post(
+        "/v1/locate", files={"mesh": ("t.obj", obj)}, data={"params": json.dumps(params)}
+    )
+    assert answer.status_code == 200, answer.text
+    obj = b"v 0 0 0\nv 1 0 1\nv 0 1 1\nf 1 2 3\n"  # now the region's own vertex 0
+    answer = await client.post(
+        "/v1/locate", files={"mesh": ("t.obj", obj)}, data={"params": json.dumps(params)}
+    )
+    assert answer.status_code == 422 and answer.json()["indices"] == [0], answer.text
+    assert "vertex 0" in answer.json()["detail"]

@@ -113,3 +113,44 @@ def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
         finally:
             browser.close()
     assert not problems, problems
+
+
+def test_docs_page_lists_the_operations_with_nothing_fetched_from_elsewhere(server):
+    """/docs works behind a firewall: Swagger UI's script and styles come from the service
+    (fastapi-offline), and the page lists every route of the document."""
+    require(
+        shutil.which(CHROMIUM) is not None or Path(CHROMIUM).exists(),
+        "Chromium",
+        "apt-get install chromium (or set MESHFLAT_CHROMIUM)",
+    )
+    from playwright.sync_api import sync_playwright
+
+    paths = httpx.get(f"{server}/openapi.json", timeout=30).json()["paths"]
+    elsewhere: list[str] = []
+    failed: list[str] = []
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+        try:
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page.on(
+                "request",
+                lambda r: (
+                    r.url.startswith(("http", "ws"))
+                    and not r.url.startswith(server)
+                    and elsewhere.append(r.url)
+                ),
+            )
+            page.on("requestfailed", lambda r: failed.append(f"{r.url}: {r.failure}"))
+            page.goto(f"{server}/docs", wait_until="load")
+            page.wait_for_selector(".opblock-summary-path", timeout=30_000)
+            shown = {
+                text.strip().replace("\u200b", "")
+                for text in page.locator(".opblock-summary-path").all_inner_texts()
+            }
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "docs.png"))
+        finally:
+            browser.close()
+    assert set(paths) <= shown, set(paths) - shown
+    assert not elsewhere, elsewhere
+    assert not failed, failed

@@ -14,7 +14,7 @@ import httpx
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
 
-from service import api
+from service import routes
 from service.app import create_app
 from service.auth import KeyCheck
 from service.encoding import Timings
@@ -187,7 +187,7 @@ async def test_jobs_beyond_the_bound_are_refused_at_once_with_retry_after():
             group.start_soon(slow_post)
             group.start_soon(slow_post)
             with anyio.fail_after(5):
-                while api.job_gate(app).in_flight < 2:
+                while routes.job_gate(app).in_flight < 2:
                     await anyio.sleep(0.005)
             started = time.perf_counter()
             refused = await c.post("/v1/points", json=POINTS)
@@ -205,7 +205,7 @@ async def test_jobs_beyond_the_bound_are_refused_at_once_with_retry_after():
         busy = sample(metrics, "meshflat_rejections_total", reason="busy")
         assert busy - sample(before, "meshflat_rejections_total", reason="busy") == 1
         assert (await c.post("/v1/points", json=POINTS)).status_code == 200
-        assert api.job_gate(app).in_flight == 0
+        assert routes.job_gate(app).in_flight == 0
 
 
 async def test_a_body_that_does_not_arrive_in_time_is_a_408():
@@ -227,7 +227,7 @@ async def test_a_job_past_its_time_limit_is_a_504_and_stops_at_its_next_stage(mo
     stages: list[str] = []
     finished = threading.Event()
 
-    def slow_points(body, content_type, settings):
+    def slow_points(capability, body, content_type, settings):
         timings = Timings()
         try:
             with timings.measure("parse"):
@@ -238,7 +238,7 @@ async def test_a_job_past_its_time_limit_is_a_504_and_stops_at_its_next_stage(mo
         finally:
             finished.set()
 
-    monkeypatch.setattr(api, "answer_points", slow_points)
+    monkeypatch.setattr(routes, "answer_json", slow_points)
     async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://m") as c:
         started = time.perf_counter()
         response = await c.post("/v1/points", json=POINTS)
@@ -247,11 +247,11 @@ async def test_a_job_past_its_time_limit_is_a_504_and_stops_at_its_next_stage(mo
         assert "MESHFLAT_REQUEST_TIMEOUT" in body["detail"]
         assert answered < 1.5  # answered at the limit, long before the job ended
         # The job still holds its admission until its thread stops, at the next stage.
-        assert api.job_gate(app).in_flight == 1
+        assert routes.job_gate(app).in_flight == 1
         await anyio.to_thread.run_sync(finished.wait, 5)
         await anyio.sleep(0.05)
         assert stages == ["parse"]
-        assert api.job_gate(app).in_flight == 0
+        assert routes.job_gate(app).in_flight == 0
 
 
 async def test_a_job_cancelled_before_its_thread_starts_leaves_no_admission_behind():
@@ -267,7 +267,7 @@ async def test_a_job_cancelled_before_its_thread_starts_leaves_no_admission_behi
             transport=httpx.ASGITransport(app=app), base_url="http://m"
         ) as c:
             problem(await c.post("/v1/points", json=POINTS), 504)
-            assert api.job_gate(app).in_flight == 0
+            assert routes.job_gate(app).in_flight == 0
     finally:
         for holder in holders:
             limiter.release_on_behalf_of(holder)

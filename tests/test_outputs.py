@@ -13,8 +13,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from service import api
-from service.outputs import Output, choose_output
+from service.outputs import Output, choose_output, render
 from service.problems import Problem
 from service.samples import SAMPLES
 
@@ -203,7 +202,7 @@ async def test_a_bad_output_or_image_size_names_the_field(client):
 
 
 async def test_vertex_ids_beyond_float32_refuse_a_glb(client, monkeypatch):
-    monkeypatch.setattr(api, "_FLOAT32_EXACT", 100)
+    monkeypatch.setattr(render, "FLOAT32_EXACT", 100)
     params = {**SCALP["fsaverage-head.ply"], "output": "glb"}
     body = problem(await flatten(client, "fsaverage-head.ply", params), 422, "params.output")
     assert "float32" in body["detail"] and body["indices"]

@@ -1,4 +1,4 @@
-"""Validation with answers known by construction (MATH.md, "Validation a region needs")."""
+"""Validation with answers known by construction (docs/math.md, section 6)."""
 
 import math
 from fractions import Fraction

@@ -1,9 +1,9 @@
 """meshflat's transform core: distorted-pole spherical coordinates over numpy arrays.
 
 Pure numpy (and scipy's sparse graphs, linear programs, hulls and minimisers); no web or
-file I/O. Every formula follows
-``shared/spec/MATH.md``: ``theta`` is the polar angle from local ``+Z``, ``phi`` the azimuth
-from ``+X`` towards ``+Y``, in the local frame ``q = R (p - c)``.
+file I/O. Every formula follows ``docs/math.md``, which also maps each equation to its
+function: ``theta`` is the polar angle from local ``+Z``, ``phi`` the azimuth from ``+X``
+towards ``+Y``, in the local frame ``q = R (p - c)``.
 
 >>> import numpy as np
 >>> from transforms import Chart, Frame, PoleCap, world_to_angles
@@ -19,7 +19,7 @@ from .cap import RHO_MAX, RHO_MIN, SIGMA_MAX, SIGMA_MIN, PoleCap, check_rho, che
 from .chart import LAYOUT_ORIENTATION, Chart, Method, angles_to_world, world_to_angles
 from .errors import TransformInputError
 from .faces import DEGENERATE_RTOL, FaceMeasures, measure_faces
-from .fit import Fit, FitExplanation, fit_region
+from .fit import Fit, FitBounds, FitExplanation, FitFixed, fit_region
 from .frames import Frame, check_rotation
 from .layouts import Layout, layout_xy
 from .locate import Hits, locate
@@ -34,6 +34,7 @@ from .metrics import (
 )
 from .predicates import orient3d_sign
 from .region import FlatRegion, assess_region, flatten_region
+from .selection import EmptyRegionError
 from .separable import separable_forward, separable_inverse, separable_residual
 from .spherical import cartesian_to_spherical, spherical_to_cartesian
 from .topology import RegionEdges, region_edges
@@ -50,10 +51,13 @@ __all__ = [
     "SIGMA_MIN",
     "Chart",
     "Distortion",
+    "EmptyRegionError",
     "FaceDistortion",
     "FaceMeasures",
     "Fit",
+    "FitBounds",
     "FitExplanation",
+    "FitFixed",
     "FlatRegion",
     "Frame",
     "Hits",

@@ -1,5 +1,5 @@
-"""The forbidden cap: where the warp puts the singular points and the seam (MATH.md, "Where the
-singular points and the seam go").
+"""The forbidden cap: where the warp puts the singular points and the seam (docs/math.md,
+section 4).
 
 With ``rho = 2 atan(sigma)``, the singular points (pre-images of ``+Z`` and ``-Z``) are
 ``(0, cos rho, +-sin rho)`` and the seam is the arc of the circle at angle ``rho`` from ``+Y``

@@ -1,5 +1,5 @@
-"""A chart: one of the three ways to give a direction its ``(theta, phi)`` (MATH.md: eq. 1,
-"The pole warp W_sigma", "The alternative ("separable") approach").
+"""A chart: one of the three ways to give a direction its ``(theta, phi)`` (docs/math.md,
+sections 1, 3 and 5).
 
 * ``standard``: eq. 1 alone; its cap is ``rho = 90`` degrees (``sigma = 1``).
 * ``distorted``: the pole warp ``W_sigma``, then eq. 1 (:mod:`.warp`).
@@ -31,10 +31,10 @@ LAYOUT_ORIENTATION = -1
 
 
 class Method(StrEnum):
-    """How directions get their angles."""
+    """How directions get their angles (the default first)."""
 
-    STANDARD = "standard"
     DISTORTED = "distorted"
+    STANDARD = "standard"
     SEPARABLE = "separable"
 
 

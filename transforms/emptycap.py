@@ -1,5 +1,6 @@
 """The largest spherical cap that holds none of a set of directions: where the warp's pole
-goes (MATH.md: put ``+Y`` in the middle of the part of the sphere the region does not cover).
+goes (docs/math.md, section 9: put ``+Y`` in the middle of the part of the sphere the region
+does not cover).
 
 Every facet of the convex hull of unit directions cuts off a cap that holds none of them
 (all lie on the facet's inner side), and the largest empty cap is one of these: its boundary

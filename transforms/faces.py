@@ -1,6 +1,6 @@
 """Per-face measurements of a region, in 3D and in the ``(phi, theta)`` layout, made in one
 pass over cache-sized blocks of faces and shared by :mod:`.validation` and :mod:`.metrics`
-(MATH.md: "Validation a region needs" and "Distortion").
+(docs/math.md, sections 6 and 7).
 
 Everything here is per face and elementwise, so the pass works block by block (whole blocks
 vectorised): the temporaries of a block stay in cache and are reused, instead of some thirty
@@ -51,7 +51,7 @@ class FaceMeasures:
     double_area : float, ``|(c1 - c0) x (c2 - c0)|`` in scaled units
     layout_double_area : float, twice the signed area in the ``(phi, theta)`` plane
     degenerate : bool, zero area in 3D or in the layout (``DEGENERATE_RTOL``)
-    crosses_seam : bool, the corners' ``phi`` span more than ``pi`` (MATH.md's seam test)
+    crosses_seam : bool, the corners' ``phi`` span more than ``pi`` (the brief's seam test)
     contains_north, contains_south : bool, the ray from the centre through that singular
         point of ``cap`` meets the closed triangle (exactly)
     stretch_max, stretch_min : float, singular values ``s1 >= s2`` of the affine map from the
@@ -321,7 +321,7 @@ def _contains_singular_points(
     unscaled, normal, orientation, singular, face_sides, north_out, south_out
 ) -> None:
     """Whether the ray from the centre through each singular point meets each closed triangle
-    (MATH.md: "contains a singular point").
+    (docs/math.md, section 6: "holds a singular point").
 
     Only faces whose corners lie on both sides of both planes through the singular line and
     not all behind the centre as seen along the ray (see :func:`_sides_of_singular_lines`)

@@ -1,6 +1,5 @@
 """Choosing the centre, the pole (with the roll about it) and sigma for a region: the three
-parameters the paper leaves to the user (MATH.md: "Where the singular points and the seam
-go" and "Distortion").
+parameters the paper leaves to the user (docs/math.md, section 9).
 
 The choice minimises the region's area-weighted isometric energy, subject to two bounds:
 
@@ -109,35 +108,81 @@ class Fit:
     explanation: FitExplanation
 
 
+@dataclass(frozen=True)
+class FitBounds:
+    """The bounds every choice keeps (module docstring).
+
+    Attributes
+    ----------
+    min_kernel_depth : float in [0, inf), fraction of the kernel's inscribed radius the
+        centre stays inside the kernel
+    min_margin_deg : float in [0, 90), least margin from the region to the seam and the
+        singular points
+
+    Raises
+    ------
+    TransformInputError
+        A bound out of range (named).
+    """
+
+    min_kernel_depth: float = 0.05
+    min_margin_deg: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("min_kernel_depth", "min_margin_deg"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and 0.0 <= value < math.inf):
+                raise TransformInputError(name, f"must be a finite number >= 0, got {value!r}")
+        if self.min_margin_deg >= 90.0:
+            raise TransformInputError(
+                "min_margin_deg", f"must be below 90, got {self.min_margin_deg}"
+            )
+
+
+@dataclass(frozen=True)
+class FitFixed:
+    """What the caller fixes; every field left None is chosen.
+
+    Attributes
+    ----------
+    center : (3,) float or None
+    rotation : Frame or None (choose the pole and the roll); only its rotation is used
+    up : (3,) float or None, a world direction the roll follows when the rotation is chosen
+        (local ``+Z`` is its part orthogonal to the pole); None: :func:`roll_axis`
+    sigma : float or None
+    """
+
+    center: np.ndarray | None = None
+    rotation: Frame | None = None
+    up: np.ndarray | None = None
+    sigma: float | None = None
+
+
 def fit_region(
     vertices,
     faces,
+    fixed: FitFixed | None = None,
+    bounds: FitBounds | None = None,
+    *,
     method: str | Method = Method.DISTORTED,
-    center=None,
-    rotation: Frame | None = None,
-    up=None,
-    sigma: float | None = None,
-    min_kernel_depth: float = 0.05,
-    min_margin_deg: float = 2.0,
-    threads: int = 1,
     layout: Layout | str = Layout.THETA_PHI,
+    threads: int = 1,
 ) -> Fit:
-    """Choose the parameters left as ``None`` and flatten the region with them.
+    """Choose the parameters ``fixed`` leaves as None and flatten the region with them.
+
+    The stages: :func:`_start` (the explainable first choice), the slide along the pole, the
+    refinement, :func:`_keep_margin` (on every face), :func:`_keep_the_better` (the start,
+    measured on every face, may win) and :func:`_explain`.
 
     Parameters
     ----------
     vertices : (n, 3) float, world coordinates
     faces : (m, 3) int, the region's faces
+    fixed : FitFixed, default: choose all
+    bounds : FitBounds, default: ``FitBounds()``
     method : the chart's method; ``standard`` has no sigma
-    center : (3,) float or None (choose)
-    rotation : Frame or None (choose the pole and the roll); only its rotation is used
-    up : (3,) float or None, a world direction the roll follows when the rotation is chosen
-        (local ``+Z`` is its part orthogonal to the pole); None: :func:`roll_axis`
-    sigma : float or None (choose)
-    min_kernel_depth : float >= 0, fraction of the kernel's inscribed radius
-    min_margin_deg : float >= 0
-    threads : int
     layout : the layout whose energy is minimised and returned (:mod:`.layouts`)
+    threads : int
 
     Returns
     -------
@@ -146,27 +191,71 @@ def fit_region(
     Raises
     ------
     TransformInputError
-        Bad input (as :func:`.region.flatten_region`), or bounds out of range.
+        Bad input (as :func:`.region.flatten_region`), or a sigma for ``standard``.
     """
+    fixed = fixed or FitFixed()
+    bounds = bounds or FitBounds()
     method = Method(method)
     points = as_points(vertices, "vertices")
     faces = as_faces(faces, len(points))
     if len(faces) == 0:
         raise TransformInputError("faces", "the region has no faces")
-    for name, value in (("min_kernel_depth", min_kernel_depth), ("min_margin_deg", min_margin_deg)):
-        if not (isinstance(value, (int, float)) and 0.0 <= value < math.inf):
-            raise TransformInputError(name, f"must be a finite number >= 0, got {value!r}")
-    if min_margin_deg >= 90.0:
-        raise TransformInputError("min_margin_deg", f"must be below 90, got {min_margin_deg}")
-    if sigma is not None and method is Method.STANDARD:
+    if fixed.sigma is not None and method is Method.STANDARD:
         raise TransformInputError("sigma", "method 'standard' has no warp, so it takes no sigma")
-    choose_sigma = sigma is None and method is not Method.STANDARD
     problem = _Problem(points, faces, method, threads, Layout(layout))
-    notes: list[str] = []
+    search = _start(problem, fixed, bounds)
+    start = search.initial
+    if search.move_center:
+        # The energy has shallow local minima near the deepest point; look along the pole
+        # first, towards the hole (a centre nearer the opening sees the region flatter).
+        start = problem.slide_towards_pole(
+            start, search.kernel, search.min_depth, search.margin, search.choose_sigma
+        )
+    # Where the kernel is empty, faces seen from behind fold over in the layout and their
+    # energy swamps the rest: refining would chase them. Keep the explainable start.
+    refine = any(search.free) and not search.kernel.empty
+    if refine:
+        start = problem.refine(start, search.free, search.kernel, search.min_depth, search.margin)
+    best = _keep_margin(problem, search, start)
+    if any(search.free):
+        best = _keep_the_better(problem, search, best)
+    return _explain(problem, search, best)
 
+
+@dataclass
+class _Search:
+    """What the stages share: the kernel, the bounds in the search's units, which
+    parameters are free, the explainable start and the notes so far."""
+
+    kernel: Kernel
+    bounds: FitBounds
+    min_depth: float
+    margin: float | None  # radians; None for a closed region (no margin can be kept)
+    choose_sigma: bool
+    move_center: bool
+    free: list[bool]
+    initial: _Candidate
+    notes: list[str]
+    energy_start: float | None = None
+
+
+@dataclass(frozen=True)
+class _Flattened:
+    """A candidate with its region flattened on every face and its least margin."""
+
+    candidate: _Candidate
+    flat: FlatRegion
+    margin_deg: float
+
+
+def _start(problem: _Problem, fixed: FitFixed, bounds: FitBounds) -> _Search:
+    """The explainable first choice: the kernel's deepest point, the middle of the largest
+    empty cap as the pole, the roll of :func:`roll_axis` (or the up hint), the best sigma
+    whose cap fits in the empty cap."""
+    notes: list[str] = []
     kernel = chebyshev_center(problem.planes)
-    move_center = center is None and not kernel.empty
-    if center is None:
+    move_center = fixed.center is None and not kernel.empty
+    if fixed.center is None:
         center = kernel.center
         if kernel.empty:
             notes.append(
@@ -175,29 +264,14 @@ def fit_region(
                 "triangles are listed"
             )
     else:
-        center = as_vector(center, "center")
-    min_depth = min_kernel_depth * kernel.inscribed_radius
-
+        center = as_vector(fixed.center, "center")
     directions = problem.directions(center)
-    if rotation is None:
-        hull_rows = np.linspace(0, len(directions) - 1, min(HULL_VERTICES, len(directions)))
-        pole, _ = largest_empty_cap(directions[hull_rows.astype(np.int64)])
-        if up is not None:
-            up = as_vector(up, "up")
-            length = float(np.linalg.norm(up))
-            if length > 0 and np.linalg.norm(np.cross(up / length, pole)) < _PARALLEL:
-                notes.append(
-                    "the up hint is parallel to the chosen pole, so it fixes no roll: the "
-                    "roll follows the region's widest spread instead"
-                )
-                up = None
-        if up is None:
-            up = roll_axis(directions, pole)
-        start_rotation = Frame.from_pole_up(pole, up).rotation
+    if fixed.rotation is None:
+        start_rotation = _start_rotation(directions, fixed.up, notes)
     else:
-        start_rotation = rotation.rotation
-        pole = start_rotation[1]
-    margin = math.radians(min_margin_deg)
+        start_rotation = fixed.rotation.rotation
+    pole = start_rotation[1]
+    margin = math.radians(bounds.min_margin_deg)
     if problem.closed:
         # A closed region seen from inside covers every direction: no cap fits, no margin can
         # be kept, and sigma only minimises the energy.
@@ -207,74 +281,113 @@ def fit_region(
         )
         margin = None
     room = math.pi if margin is None else cap_radius(directions, pole) - margin
+    choose_sigma = fixed.sigma is None and problem.method is not Method.STANDARD
+    sigma = problem.best_sigma(center, start_rotation, room) if choose_sigma else fixed.sigma
+    return _Search(
+        kernel=kernel,
+        bounds=bounds,
+        min_depth=bounds.min_kernel_depth * kernel.inscribed_radius,
+        margin=margin,
+        choose_sigma=choose_sigma,
+        move_center=move_center,
+        free=[move_center, fixed.rotation is None, choose_sigma],
+        initial=_Candidate(center, start_rotation, sigma),
+        notes=notes,
+    )
 
-    if choose_sigma:
-        sigma = problem.best_sigma(center, start_rotation, room)
-    start = initial = _Candidate(center, start_rotation, sigma)
-    if move_center:
-        # The energy has shallow local minima near the deepest point; look along the pole
-        # first, towards the hole (a centre nearer the opening sees the region flatter).
-        start = problem.slide_towards_pole(start, kernel, min_depth, margin, choose_sigma)
 
-    # Where the kernel is empty, faces seen from behind fold over in the layout and their
-    # energy swamps the rest: refining would chase them. Keep the explainable start.
-    free = [move_center, rotation is None, choose_sigma]
-    refine = any(free) and not kernel.empty
-    best = problem.refine(start, free, kernel, min_depth, margin) if refine else start
+def _start_rotation(directions: np.ndarray, up, notes: list[str]) -> np.ndarray:
+    """(3, 3): the pole in the middle of the largest empty cap, the roll by ``up`` (unless
+    it is parallel to the pole: then a note) or :func:`roll_axis`."""
+    hull_rows = np.linspace(0, len(directions) - 1, min(HULL_VERTICES, len(directions)))
+    pole, _ = largest_empty_cap(directions[hull_rows.astype(np.int64)])
+    if up is not None:
+        up = as_vector(up, "up")
+        length = float(np.linalg.norm(up))
+        if length > 0 and np.linalg.norm(np.cross(up / length, pole)) < _PARALLEL:
+            notes.append(
+                "the up hint is parallel to the chosen pole, so it fixes no roll: the "
+                "roll follows the region's widest spread instead"
+            )
+            up = None
+    if up is None:
+        up = roll_axis(directions, pole)
+    return Frame.from_pole_up(pole, up).rotation
 
-    # On every face: the answer's margin must hold (the search saw vertices, not edges).
-    flat = problem.flatten(best)
-    margin_deg = _margin_deg(flat)
+
+def _flattened(problem: _Problem, candidate: _Candidate) -> _Flattened:
+    flat = problem.flatten(candidate)
+    return _Flattened(candidate, flat, _margin_deg(flat))
+
+
+def _keep_margin(problem: _Problem, search: _Search, best: _Candidate) -> _Flattened:
+    """``best`` on every face, its cap narrowed (when sigma is free) until the margin holds
+    there too: the search saw vertices, not edges."""
+    answer = _flattened(problem, best)
+    if not (search.choose_sigma and search.margin is not None):
+        return answer
     for _ in range(6):
-        if not (choose_sigma and margin is not None and margin_deg < min_margin_deg):
+        if answer.margin_deg >= search.bounds.min_margin_deg:
             break
-        shortfall = math.radians(min_margin_deg - margin_deg) + 1e-3
-        rho = max(PoleCap.from_sigma(best.sigma).rho - shortfall, 1e-4)
-        smaller = _Candidate(best.center, best.rotation, math.tan(rho / 2.0))
-        tried = problem.flatten(smaller)
-        if not _margin_deg(tried) > margin_deg:
+        shortfall = math.radians(search.bounds.min_margin_deg - answer.margin_deg) + 1e-3
+        rho = max(PoleCap.from_sigma(answer.candidate.sigma).rho - shortfall, 1e-4)
+        c = answer.candidate
+        tried = _flattened(problem, _Candidate(c.center, c.rotation, math.tan(rho / 2.0)))
+        if not tried.margin_deg > answer.margin_deg:
             break  # the region covers the pole itself: a smaller cap does not help
-        best, flat, margin_deg = smaller, tried, _margin_deg(tried)
-    energy_start = None
-    if any(free):
-        first = problem.flatten(initial)
-        energy_start = first.distortion.isometric.mean
-        # The search saw a sample; on every face the start may still be the better answer.
-        first_margin = _margin_deg(first)
-        keeps_margin = margin is None or first_margin >= min(margin_deg, min_margin_deg)
-        if energy_start < flat.distortion.isometric.mean and keeps_margin:
-            best, flat, margin_deg = initial, first, first_margin
-    if margin is not None and margin_deg < min_margin_deg:
+        answer = tried
+    return answer
+
+
+def _keep_the_better(problem: _Problem, search: _Search, answer: _Flattened) -> _Flattened:
+    """The start instead of ``answer`` when, on every face, its energy is lower and it keeps
+    the margin: the search saw a sample."""
+    first = _flattened(problem, search.initial)
+    search.energy_start = first.flat.distortion.isometric.mean
+    keeps_margin = search.margin is None or first.margin_deg >= min(
+        answer.margin_deg, search.bounds.min_margin_deg
+    )
+    if search.energy_start < answer.flat.distortion.isometric.mean and keeps_margin:
+        return first
+    return answer
+
+
+def _explain(problem: _Problem, search: _Search, answer: _Flattened) -> Fit:
+    """The fit, with the notes on the bounds it could not keep and the energies at
+    :data:`REPORTED_SIGMAS`."""
+    best, flat, notes = answer.candidate, answer.flat, search.notes
+    if search.margin is not None and answer.margin_deg < search.bounds.min_margin_deg:
         notes.append(
-            f"the margin to the seam and the singular points is {margin_deg:.3g} degrees, "
-            f"below min_margin_deg ({min_margin_deg:g})"
+            f"the margin to the seam and the singular points is {answer.margin_deg:.3g} "
+            f"degrees, below min_margin_deg ({search.bounds.min_margin_deg:g})"
         )
+    kernel = search.kernel
     depth = problem.planes.depth(best.center)
-    if not kernel.empty and depth < min_depth:
+    if not kernel.empty and depth < search.min_depth:
         notes.append(
             f"the centre is {depth:.4g} deep in the kernel, less than min_kernel_depth "
-            f"({min_kernel_depth:g} of the inscribed radius {kernel.inscribed_radius:.4g})"
+            f"({search.bounds.min_kernel_depth:g} of the inscribed radius "
+            f"{kernel.inscribed_radius:.4g})"
         )
-
     energy_end = flat.distortion.isometric.mean
     energy_at_sigma = {}
-    if method is not Method.STANDARD:
+    if problem.method is not Method.STANDARD:
         for reported in REPORTED_SIGMAS:
             candidate = _Candidate(best.center, best.rotation, reported)
             energy_at_sigma[reported] = problem.flatten(candidate).distortion.isometric.mean
-    frame = Frame.from_matrix(best.rotation, best.center)
     explanation = FitExplanation(
-        energy_start=energy_end if energy_start is None else energy_start,
+        energy_start=energy_end if search.energy_start is None else search.energy_start,
         energy_end=energy_end,
         kernel_inscribed_radius=kernel.inscribed_radius,
         kernel_empty=kernel.empty,
         center_depth=depth,
         empty_cap_deg=math.degrees(cap_radius(problem.directions(best.center), best.rotation[1])),
-        margin_deg=margin_deg,
+        margin_deg=answer.margin_deg,
         energy_at_sigma=energy_at_sigma,
         backfacing_faces=flat.validation.backfacing_faces,
         notes=notes,
     )
+    frame = Frame.from_matrix(best.rotation, best.center)
     return Fit(frame=frame, chart=problem.chart(best.sigma), region=flat, explanation=explanation)
 
 
@@ -303,6 +416,33 @@ def roll_axis(directions: np.ndarray, pole: np.ndarray) -> np.ndarray:
     if float(((across @ axis) ** 3).sum()) < 0.0:
         axis = -axis
     return axis
+
+
+def _beats(e1: float, x1: float, e2: float, x2: float) -> bool:
+    """Whether energy ``e1`` at ``x1`` beats ``e2`` at ``x2``: energies equal to ``_TIE``
+    (relative) count as equal, and then the larger ``x`` wins."""
+    if abs(e1 - e2) <= _TIE * max(abs(e1), abs(e2)):
+        return x1 > x2
+    return e1 < e2
+
+
+def _golden_section(energy, bracket: tuple[float, float], best_x: float, best_e: float) -> float:
+    """The best ``x`` found by ``_GOLDEN_STEPS`` golden sections of ``bracket``, starting
+    from ``best_x`` of energy ``best_e``."""
+    a, b = bracket
+    ratio = (math.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(_GOLDEN_STEPS):
+        x1, x2 = b - ratio * (b - a), a + ratio * (b - a)
+        e1, e2 = energy(x1), energy(x2)
+        if _beats(e1, x1, e2, x2):
+            b = x2
+            if _beats(e1, x1, best_e, best_x):
+                best_x, best_e = x1, e1
+        else:
+            a = x1
+            if _beats(e2, x2, best_e, best_x):
+                best_x, best_e = x2, e2
+    return best_x
 
 
 def _margin_deg(flat: FlatRegion) -> float:
@@ -404,33 +544,14 @@ class _Problem:
         def energy(log_sigma: float) -> float:
             return self.energy(_Candidate(center, rotation, math.exp(log_sigma)))
 
-        def better(e1: float, x1: float, e2: float, x2: float) -> bool:
-            """Whether (e1 at x1) beats (e2 at x2)."""
-            if abs(e1 - e2) <= _TIE * max(abs(e1), abs(e2)):
-                return x1 > x2
-            return e1 < e2
-
         grid = np.linspace(math.log(low), math.log(high), _SIGMA_GRID)
         energies = [energy(x) for x in grid]
         best = 0
         for i in range(1, len(grid)):
-            if better(energies[i], grid[i], energies[best], grid[best]):
+            if _beats(energies[i], grid[i], energies[best], grid[best]):
                 best = i
-        a, b = grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]
-        best_x, best_e = grid[best], energies[best]
-        ratio = (math.sqrt(5.0) - 1.0) / 2.0
-        for _ in range(_GOLDEN_STEPS):
-            x1, x2 = b - ratio * (b - a), a + ratio * (b - a)
-            e1, e2 = energy(x1), energy(x2)
-            if better(e1, x1, e2, x2):
-                b = x2
-                if better(e1, x1, best_e, best_x):
-                    best_x, best_e = x1, e1
-            else:
-                a = x1
-                if better(e2, x2, best_e, best_x):
-                    best_x, best_e = x2, e2
-        return math.exp(best_x)
+        bracket = grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]
+        return math.exp(_golden_section(energy, bracket, grid[best], energies[best]))
 
     def slide_towards_pole(
         self,
@@ -468,11 +589,9 @@ class _Problem:
         min_depth: float,
         margin: float | None,
     ) -> _Candidate:
-        """Nelder-Mead over the free parameters, in the start's frame: the centre's offset
-        (in units of the inscribed radius, along the start's axes), the pole's tilt (radians,
-        towards the start's local X and Z) and log sigma. The bounds are penalties."""
-        move_center, turn_pole, change_sigma = free
-        axes = start.rotation  # rows: local X, Y (the pole), Z
+        """Nelder-Mead over the free parameters (:class:`_Coordinates`). The bounds are
+        penalties."""
+        move_center = free[0]
         # The depth on the planes that can bind near the start (the exact one is checked after).
         planes = self.planes
         j = len(planes.faces)
@@ -484,29 +603,11 @@ class _Problem:
             return float((offsets - normals @ center).min())
 
         unit = max(kernel.inscribed_radius, 1e-3 * self.planes.size)
+        coordinates = _Coordinates(start, free, unit)
         region = self.sample_points  # the margin is checked on every face afterwards
 
-        def candidate(x: np.ndarray) -> _Candidate:
-            x = list(x)
-            center = start.center
-            if move_center:
-                center = start.center + unit * (np.array(x[:3]) @ axes)
-                x = x[3:]
-            rotation = start.rotation
-            if turn_pole:
-                pole = axes[1] + x[0] * axes[0] + x[1] * axes[2]
-                rotation = Frame.from_pole_up(pole, axes[2]).rotation
-                x = x[2:]
-            low, high = SIGMA_SEARCH  # a flat landscape must not drift beyond the search
-            sigma = (
-                math.exp(min(max(x[0], math.log(low)), math.log(high)))
-                if change_sigma
-                else start.sigma
-            )
-            return _Candidate(center, rotation, sigma)
-
         def cost(x: np.ndarray) -> float:
-            c = candidate(x)
+            c = coordinates.candidate(x)
             penalty = 0.0
             if move_center:
                 penalty += max(0.0, min_depth - depth(c.center)) / unit
@@ -520,15 +621,10 @@ class _Problem:
             value = self.energy(c) + 100.0 * penalty
             return value if math.isfinite(value) else _INFEASIBLE
 
-        x0 = [0.0] * (3 * move_center + 2 * turn_pole)
-        steps = [0.5] * (3 * move_center) + [0.1] * (2 * turn_pole)
-        if change_sigma:
-            x0.append(math.log(start.sigma))
-            steps.append(0.3)
-        simplex = np.vstack([x0, np.array(x0) + np.diag(steps)])
+        x0, simplex = coordinates.start()
         found = minimize(
             cost,
-            np.array(x0),
+            x0,
             method="Nelder-Mead",
             options={
                 "xatol": 1e-4,
@@ -538,19 +634,62 @@ class _Problem:
                 "initial_simplex": simplex,
             },
         )
-        best = candidate(found.x)
-        if cost(found.x) > cost(np.array(x0)):
+        best = coordinates.candidate(found.x)
+        if cost(found.x) > cost(x0):
             return start
         if move_center and planes.depth(best.center) < min_depth:
             # A plane outside the subset binds: back towards the start, which is deep enough.
-            inside, outside = 0.0, 1.0
-            for _ in range(30):
-                middle = 0.5 * (inside + outside)
-                center = start.center + middle * (best.center - start.center)
-                if planes.depth(center) >= min_depth:
-                    inside = middle
-                else:
-                    outside = middle
-            center = start.center + inside * (best.center - start.center)
-            best = _Candidate(center, best.rotation, best.sigma)
+            best = self.back_inside(start, best, min_depth)
         return best
+
+    def back_inside(self, start: _Candidate, best: _Candidate, min_depth: float) -> _Candidate:
+        """``best`` with its centre moved back towards ``start``'s (which is deep enough) to
+        the last point found at least ``min_depth`` deep (30 bisections)."""
+        inside, outside = 0.0, 1.0
+        for _ in range(30):
+            middle = 0.5 * (inside + outside)
+            center = start.center + middle * (best.center - start.center)
+            if self.planes.depth(center) >= min_depth:
+                inside = middle
+            else:
+                outside = middle
+        center = start.center + inside * (best.center - start.center)
+        return _Candidate(center, best.rotation, best.sigma)
+
+
+class _Coordinates:
+    """The refinement's coordinates, in the start's frame: the centre's offset (in units of
+    the inscribed radius, along the start's axes), the pole's tilt (radians, towards the
+    start's local X and Z) and log sigma, each only when free."""
+
+    def __init__(self, start: _Candidate, free: list[bool], unit: float) -> None:
+        self.start_candidate, self.unit = start, unit
+        self.move_center, self.turn_pole, self.change_sigma = free
+
+    def start(self) -> tuple[np.ndarray, np.ndarray]:
+        """The start's coordinates and the initial simplex around them."""
+        x0 = [0.0] * (3 * self.move_center + 2 * self.turn_pole)
+        steps = [0.5] * (3 * self.move_center) + [0.1] * (2 * self.turn_pole)
+        if self.change_sigma:
+            x0.append(math.log(self.start_candidate.sigma))
+            steps.append(0.3)
+        return np.array(x0), np.vstack([x0, np.array(x0) + np.diag(steps)])
+
+    def candidate(self, x: np.ndarray) -> _Candidate:
+        start = self.start_candidate
+        axes = start.rotation  # rows: local X, Y (the pole), Z
+        x = list(x)
+        center = start.center
+        if self.move_center:
+            center = start.center + self.unit * (np.array(x[:3]) @ axes)
+            x = x[3:]
+        rotation = start.rotation
+        if self.turn_pole:
+            pole = axes[1] + x[0] * axes[0] + x[1] * axes[2]
+            rotation = Frame.from_pole_up(pole, axes[2]).rotation
+            x = x[2:]
+        sigma = start.sigma
+        if self.change_sigma:
+            low, high = SIGMA_SEARCH  # a flat landscape must not drift beyond the search
+            sigma = math.exp(min(max(x[0], math.log(low)), math.log(high)))
+        return _Candidate(center, rotation, sigma)

@@ -1,4 +1,4 @@
-"""The local frame every formula works in: ``q = R (p - c)`` (MATH.md, "Frames and names").
+"""The local frame every formula works in: ``q = R (p - c)`` (docs/math.md, section 1).
 
 ``c`` is the centre the region is star-shaped from; ``R`` is a proper rotation whose rows
 are the local axes written in world coordinates. Local ``+Y`` is the warp's fixed pole, the

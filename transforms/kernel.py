@@ -1,5 +1,6 @@
-"""The kernel of a region: the points every region triangle faces (MATH.md: back-facing is
-``dot(centroid - c, outward normal) <= 0``, so the kernel is where no face is back-facing).
+"""The kernel of a region: the points every region triangle faces (docs/math.md, section 9:
+back-facing is ``dot(centroid - c, outward normal) <= 0``, so the kernel is where no face is
+back-facing).
 
 Each face keeps the centre on the inner side of its plane: ``n . c < n . v0`` with ``n`` its
 unit outward normal. An open region (a scalp) faces every point far enough behind it, so each

@@ -1,5 +1,5 @@
-"""The 2D layouts a flattened region can be returned in (MATH.md, "Distortion": metrics are
-measured on the layout actually returned).
+"""The 2D layouts a flattened region can be returned in (docs/math.md, section 7: metrics
+are measured on the layout actually returned).
 
 * ``theta_phi``: the paper's, ``(x, y) = (phi, theta)``.
 * ``mercator``: ``x = phi``, ``y = ln tan((pi - theta) / 2)`` in the distorted frame. The

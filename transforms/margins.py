@@ -1,5 +1,5 @@
 """Angular distances on the unit sphere from the projected outline of a region to the singular
-points and to the seam (MATH.md, "Validation a region needs": margins).
+points and to the seam (docs/math.md, section 6: margins).
 
 Seen from the centre, a straight edge ``(a, b)`` projects to the minor great-circle arc between
 the unit directions ``a`` and ``b``. The seam is an arc of a small circle (angle ``rho`` from

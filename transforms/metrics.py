@@ -1,4 +1,4 @@
-"""Distortion of the ``(phi, theta)`` layout (MATH.md, "Distortion").
+"""Distortion of the ``(phi, theta)`` layout (docs/math.md, section 7).
 
 For each triangle the affine map from the 3D triangle (in its own plane) to its 2D triangle
 has singular values ``s1 >= s2``; the layout is first scaled by one factor so that its total
@@ -166,7 +166,8 @@ def distortion(measures: FaceMeasures) -> Distortion:
 
 def _measured_faces(measures: FaceMeasures) -> tuple[np.ndarray, float]:
     """Positions of the non-degenerate faces, and the square of the factor that gives the
-    layout the region's 3D area (MATH.md: one factor for the whole layout, every face counts).
+    layout the region's 3D area (docs/math.md, section 7: one factor for the whole layout,
+    every face counts).
 
     Raises
     ------

@@ -1,5 +1,5 @@
 """Exact orientation signs: on which side of a plane through the centre a point lies (used by
-MATH.md's "exact ray-triangle test" and the back-facing test).
+the exact ray-triangle test and the back-facing test, docs/math.md, section 6).
 
 ``orient3d_sign(a, b, c)`` is the sign of ``det[a, b, c] = a . (b x c)`` computed exactly for
 any finite float64 input. Each vector is first scaled by a power of two to a largest component

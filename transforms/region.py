@@ -1,5 +1,5 @@
 """A region of a mesh flattened in one call: frame, chart, per-face measurements, validation
-and distortion metrics (MATH.md end to end: frames, a method, validation, distortion)."""
+and distortion metrics (docs/math.md end to end: frames, a method, validation, distortion)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The paper's alternative, "separable" coordinates (MATH.md, "The alternative approach").
+"""The paper's alternative, "separable" coordinates (docs/math.md, section 5).
 
 The two angles come from two separate formulas. With pole angle ``rho`` (the paper writes it
 ``sigma`` there) and ``k = 1 - 2 rho / pi``:
@@ -7,7 +7,7 @@ The two angles come from two separate formulas. With pole angle ``rho`` (the pap
 * polar angle ``theta = pi/2 - f`` with ``f`` the unique root in ``[-pi/2, pi/2]`` of
   ``F(f) = u_y sin(k f) + u_z cos(k f) - sin(f)``.
 
-MATH.md's names are used (Slip 2): ``theta`` is polar-like, ``phi`` azimuth-like, as in eq. 1.
+docs/math.md's names are used (slip 2): ``theta`` is polar-like, ``phi`` azimuth-like, as in eq. 1.
 
 Solving for theta
 -----------------
@@ -181,7 +181,7 @@ def _aitken(theta: np.ndarray, gamma: np.ndarray, s: np.ndarray, k: float) -> np
 
 
 def separable_residual(f, points, rho: float) -> np.ndarray:
-    """MATH.md's ``F(f) = u_y sin(k f) + u_z cos(k f) - sin(f)`` as printed, for checking roots.
+    """docs/math.md's ``F(f) = u_y sin(k f) + u_z cos(k f) - sin(f)``, for checking roots.
 
     Parameters
     ----------

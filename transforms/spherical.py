@@ -1,4 +1,4 @@
-"""Standard spherical coordinates: the paper's eq. 1 and its true inverse (MATH.md, Slip 1).
+"""Standard spherical coordinates: the paper's eq. 1 and its true inverse (docs/math.md, section 2).
 
 ``theta`` is the polar angle from local ``+Z`` in ``[0, pi]``; ``phi`` the azimuth from
 ``+X`` towards ``+Y`` in ``(-pi, pi]``. The paper's printed eq. 2 swaps the two angles and is

@@ -1,5 +1,5 @@
 """Edges of a region: its boundary, its boundary loops, and the edges where its outline seen
-from the centre can run (MATH.md: "Validation a region needs", boundary loops and margins).
+from the centre can run (docs/math.md, section 6: boundary loops and margins).
 """
 
 from __future__ import annotations

@@ -1,18 +1,18 @@
-"""Per-triangle validation of a region and its margins (MATH.md, "Validation a region needs").
+"""Per-triangle validation of a region and its margins (docs/math.md, section 6).
 
 For each face, by its position in the region's face list (the measurements come from
 :mod:`.faces`):
 
 * **contains a singular point**: the ray from the centre through a singular point hits the
   closed triangle, decided with exact orientation signs (:mod:`.predicates`);
-* **crosses the seam**: its vertices' ``phi`` span more than ``pi`` (MATH.md's test), or one
+* **crosses the seam**: its vertices' ``phi`` span more than ``pi`` (the brief's test), or one
   of its edges, seen from the centre, meets the seam arc: with ``rho < 90`` degrees an edge
   between two corners outside the cap can dip into it and cross the seam twice, which the
   span test cannot see;
 * **folded**: its orientation in the ``(phi, theta)`` layout is opposite to the orientation
   its outward side has seen from the centre, that is a flipped triangle in the 2D map (an
   overhang or a non-star-shaped spot); faces with zero layout area are not called folded.
-  MATH.md's "its orientation seen from the centre" is read as the orientation of the face's
+  The brief's "its orientation seen from the centre" is read as the orientation of the face's
   outward side: compared with the raw winding instead, an overhang's triangles, which the
   map shows flipped over their neighbours, would not count as folded. Back-facing is the
   3D cause, folded the 2D effect; folded also catches flips the layout makes by itself
@@ -123,7 +123,7 @@ def validate(
     contains_north, contains_south = measures.contains_north.any(), measures.contains_south.any()
     flagged = seam.any() or contains_north or contains_south
     # Where the region meets the seam, also find the faces an edge of which dips across it
-    # while their corners' phi do not straddle the cut (MATH.md's span test misses those).
+    # while their corners' phi do not straddle the cut (the brief's span test misses those).
     # When faces are flagged already that search runs beside the edge classification.
     edges, dipping = run_all(
         [

@@ -1,5 +1,5 @@
-"""The pole warp ``W_sigma`` (paper eq. 3) and distorted-pole coordinates (MATH.md, "The pole
-warp W_sigma").
+"""The pole warp ``W_sigma`` (paper eq. 3) and distorted-pole coordinates (docs/math.md,
+section 3).
 
 ``W_sigma`` is stereographic projection from ``+Y``, scaling by ``sigma``, and projection
 back. On the unit sphere it has the singularity-free form

@@ -2,25 +2,98 @@
 
 Only the uploaded bytes are read (never a file or URL they refer to), and the file's own
 order is kept: vertex ``i`` and face ``i`` are the file's ``i``-th vertex and triangle.
+
+:data:`READERS` is the one list of formats: the ``format`` parameter, the sample files'
+media types and the documentation's rules for each format come from it.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 from .gltf import read_glb, read_gltf
-from .mesh import Limits, Mesh, MeshFormatError
+from .mesh import Limits, Mesh, MeshFormatError, MeshTooLargeError
 from .obj import read_obj
 from .ply import read_ply
 from .stl import read_stl
 
-READERS = {
-    "obj": read_obj,
-    "gltf": read_gltf,
-    "glb": read_glb,
-    "ply": read_ply,
-    "stl": read_stl,
-}
 
-__all__ = ["READERS", "Limits", "Mesh", "MeshFormatError", "format_of", "read_mesh"]
+@dataclass(frozen=True)
+class Reader:
+    """One format: its name (and file extension), title, reader, media type and the rules by
+    which its ids are the file's."""
+
+    name: str
+    title: str
+    read: Callable[[bytes, Limits], Mesh]
+    media_type: str
+    rules: str
+
+
+_GLTF_RULES = (
+    "glTF triangles come primitive by primitive in document order (the default scene's nodes "
+    "depth first, children in order, each node's mesh's primitives in order) with node "
+    "transforms applied; groups are mesh and node names."
+)
+
+READERS: dict[str, Reader] = {
+    reader.name: reader
+    for reader in (
+        Reader(
+            "obj",
+            "OBJ",
+            read_obj,
+            "model/obj",
+            "OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; "
+            "negative references count back; groups are ``g`` (each name), ``o`` and "
+            "``usemtl`` names.",
+        ),
+        Reader("gltf", "glTF (embedded buffers)", read_gltf, "model/gltf+json", _GLTF_RULES),
+        Reader("glb", "GLB", read_glb, "model/gltf-binary", _GLTF_RULES),
+        Reader(
+            "ply",
+            "PLY",
+            read_ply,
+            "application/octet-stream",
+            "PLY polygons are fan-triangulated like OBJ's; other elements and properties are "
+            "skipped.",
+        ),
+        Reader(
+            "stl",
+            "STL",
+            read_stl,
+            "model/stl",
+            "STL triangles keep their own corners (nothing is merged).",
+        ),
+    )
+}
+#: The format names, in the registry's order.
+FORMATS = tuple(READERS)
+
+
+def reading_rules() -> str:
+    """How every format's bytes become vertex and face ids, in words (for the docs)."""
+    rules = dict.fromkeys(reader.rules for reader in READERS.values())  # glTF's once
+    return (
+        "Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers "
+        "to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's "
+        "``i``-th vertex and face ``i`` its ``i``-th triangle. " + " ".join(rules)
+    )
+
+
+__all__ = [
+    "FORMATS",
+    "READERS",
+    "Limits",
+    "Mesh",
+    "MeshFormatError",
+    "MeshTooLargeError",
+    "Reader",
+    "format_of",
+    "read_mesh",
+    "reading_rules",
+]
 
 
 def format_of(filename: str | None, declared: str | None) -> str:
@@ -31,7 +104,7 @@ def format_of(filename: str | None, declared: str | None) -> str:
     MeshFormatError
         Neither names a supported format.
     """
-    supported = ", ".join(READERS)
+    supported = ", ".join(FORMATS)
     if declared:
         fmt = declared.lower().lstrip(".")
         if fmt not in READERS:
@@ -57,12 +130,14 @@ def read_mesh(data: bytes, fmt: str, limits: Limits) -> Mesh:
     Raises
     ------
     MeshFormatError
-        The bytes are not a readable mesh of that format, or exceed ``limits``.
+        The bytes are not a readable mesh of that format.
+    MeshTooLargeError
+        They exceed ``limits``.
     """
     if not data:
         raise MeshFormatError("the file is empty")
     if len(data) > limits.max_bytes:
-        raise MeshFormatError(
-            f"the file has {len(data):,} bytes; the limit is {limits.max_bytes:,}", status=413
+        raise MeshTooLargeError(
+            f"the file has {len(data):,} bytes; the limit is {limits.max_bytes:,}"
         )
-    return READERS[fmt](data, limits)
+    return READERS[fmt].read(data, limits)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mesh import Limits, Mesh, MeshFormatError, check_counts, checked_vertices
+from .mesh import Limits, Mesh, MeshFormatError, MeshTooLargeError, check_counts, checked_vertices
 
 _GLB_MAGIC = 0x46546C67  # "glTF"
 _JSON_CHUNK = 0x4E4F534A
@@ -202,10 +202,9 @@ class _Document:
         if not header.endswith(";base64"):
             raise MeshFormatError(f"buffers[{index}] data: URI is not base64")
         if len(payload) * 3 // 4 > self.limits.max_bytes:
-            raise MeshFormatError(
+            raise MeshTooLargeError(
                 f"buffers[{index}] data: URI decodes to about {len(payload) * 3 // 4:,} bytes; "
                 f"the limit is {self.limits.max_bytes:,} (MESHFLAT_MAX_UPLOAD_BYTES)",
-                status=413,
             )
         try:
             return base64.b64decode(payload, validate=True)

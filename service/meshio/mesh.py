@@ -7,19 +7,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from transforms import MAX_ABS_COORDINATE
+from transforms.selection import faces_of_groups
 
 
 class MeshFormatError(ValueError):
-    """The uploaded file cannot be read as a mesh; the message says where and why.
+    """The uploaded file cannot be read as a mesh; the message says where and why."""
 
-    Attributes
-    ----------
-    status : int, the HTTP status to answer with (422, or 413 for a limit)
-    """
 
-    def __init__(self, message: str, status: int = 422) -> None:
-        super().__init__(message)
-        self.status = status
+class MeshTooLargeError(MeshFormatError):
+    """The file, a buffer in it, or its vertex or face count is beyond a limit; the message
+    names the limit."""
 
 
 @dataclass(frozen=True)
@@ -58,12 +55,7 @@ class Mesh:
 
     def group_faces(self, names: list[str]) -> np.ndarray:
         """Ascending face ids in any of the groups ``names`` (each a key of ``groups``)."""
-        ranges = np.concatenate([self.groups[name] for name in names]).reshape(-1, 2)
-        # +1 at each start, -1 at each stop: faces with a positive running sum are covered.
-        marks = np.zeros(len(self.faces) + 1, dtype=np.int64)
-        np.add.at(marks, ranges[:, 0], 1)
-        np.add.at(marks, ranges[:, 1], -1)
-        return np.flatnonzero(np.cumsum(marks[:-1]) > 0)
+        return faces_of_groups(self.groups, names, len(self.faces))
 
 
 def checked_vertices(vertices: np.ndarray, file_lines: np.ndarray | None = None) -> np.ndarray:
@@ -103,14 +95,12 @@ def fan_triangles(items: np.ndarray, corners: np.ndarray) -> np.ndarray:
 def check_counts(n_vertices: int, n_faces: int, limits: Limits) -> None:
     """Refuse a mesh beyond the vertex or face limit (413), before reading it all."""
     if n_vertices > limits.max_vertices:
-        raise MeshFormatError(
+        raise MeshTooLargeError(
             f"the file has {n_vertices:,} vertices; the limit is {limits.max_vertices:,} "
-            "(MESHFLAT_MAX_VERTICES)",
-            status=413,
+            "(MESHFLAT_MAX_VERTICES)"
         )
     if n_faces > limits.max_faces:
-        raise MeshFormatError(
+        raise MeshTooLargeError(
             f"the file has {n_faces:,} triangles; the limit is {limits.max_faces:,} "
-            "(MESHFLAT_MAX_FACES)",
-            status=413,
+            "(MESHFLAT_MAX_FACES)"
         )

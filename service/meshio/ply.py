@@ -20,7 +20,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mesh import Limits, Mesh, MeshFormatError, check_counts, checked_vertices, fan_triangles
+from .mesh import (
+    Limits,
+    Mesh,
+    MeshFormatError,
+    MeshTooLargeError,
+    check_counts,
+    checked_vertices,
+    fan_triangles,
+)
 from .text import LF, TextLines, parse_numbers
 
 _TYPES = {
@@ -76,10 +84,9 @@ def read_ply(data: bytes, limits: Limits) -> Mesh:
     largest = max(limits.max_vertices, limits.max_faces)
     for element in elements:
         if element.count > largest:
-            raise MeshFormatError(
+            raise MeshTooLargeError(
                 f"the PLY {element.name} element declares {element.count:,} rows; the limit "
                 f"is {largest:,}",
-                status=413,
             )
 
     rows = _binary_rows if order else _ascii_rows
@@ -117,22 +124,7 @@ def _indices(items: np.ndarray, corners: np.ndarray) -> np.ndarray:
 
 def _header(data: bytes) -> tuple[str | None, list[_Element], int]:
     """The byte order (None for ASCII), the elements, and where the body starts."""
-    if not data.startswith(b"ply"):
-        raise MeshFormatError("not a PLY file: it does not start with 'ply'")
-    head = data[: 1 << 16]
-    lines, offset, body = [], 0, None
-    while offset < len(head):
-        newline = head.find(b"\n", offset)
-        if newline < 0:
-            break
-        line = head[offset:newline].decode("ascii", "replace").strip()
-        offset = newline + 1
-        if line == "end_header":
-            body = offset
-            break
-        lines.append(line)
-    if body is None:
-        raise MeshFormatError("not a PLY file: no 'end_header' line within its first 64 KiB")
+    lines, body = _header_lines(data)
     order, elements = None, []
     seen_format = False
     for number, line in enumerate(lines, 1):
@@ -146,17 +138,40 @@ def _header(data: bytes) -> tuple[str | None, list[_Element], int]:
                 raise MeshFormatError(f"PLY header line {number}: a second {words[1]!r} element")
             elements.append(_Element(words[1], int(words[2]), ()))
         elif words[0] == "property" and elements:
-            last, new = elements[-1], _prop(words)
-            if any(p.name == new.name for p in last.properties):
-                raise MeshFormatError(
-                    f"PLY header line {number}: {last.name!r} has a second {new.name!r} property"
-                )
-            elements[-1] = _Element(last.name, last.count, (*last.properties, new))
+            elements[-1] = _with_property(elements[-1], words, number)
         else:
             raise MeshFormatError(f"PLY header line {number} is not understood: {line!r}")
     if not seen_format:
         raise MeshFormatError("the PLY header has no 'format ascii|binary_... 1.0' line")
     return order, elements, body
+
+
+def _header_lines(data: bytes) -> tuple[list[str], int]:
+    """The header's lines before ``end_header``, and where the body starts."""
+    if not data.startswith(b"ply"):
+        raise MeshFormatError("not a PLY file: it does not start with 'ply'")
+    head = data[: 1 << 16]
+    lines, offset = [], 0
+    while offset < len(head):
+        newline = head.find(b"\n", offset)
+        if newline < 0:
+            break
+        line = head[offset:newline].decode("ascii", "replace").strip()
+        offset = newline + 1
+        if line == "end_header":
+            return lines, offset
+        lines.append(line)
+    raise MeshFormatError("not a PLY file: no 'end_header' line within its first 64 KiB")
+
+
+def _with_property(element: _Element, words: list[str], number: int) -> _Element:
+    """``element`` with the property of header line ``number`` added."""
+    new = _prop(words)
+    if any(p.name == new.name for p in element.properties):
+        raise MeshFormatError(
+            f"PLY header line {number}: {element.name!r} has a second {new.name!r} property"
+        )
+    return _Element(element.name, element.count, (*element.properties, new))
 
 
 def _prop(words: list[str]) -> _Property:

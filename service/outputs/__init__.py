@@ -20,6 +20,11 @@ class Output(StrEnum):
     def media_type(self) -> str:
         return _MEDIA_TYPES[self]
 
+    @property
+    def binary(self) -> bool:
+        """Whether the form is bytes rather than text."""
+        return self in (Output.GLB, Output.PNG)
+
 
 _MEDIA_TYPES = {
     Output.JSON: "application/json",

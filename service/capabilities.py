@@ -1,0 +1,213 @@
+"""What the service can do, one row each: route, parameter model, operation, response model
+and the forms of the answer. The routes (:mod:`service.routes`), the OpenAPI document
+(:mod:`service.document`), its examples and the command line are all derived from these rows,
+so a new capability is a row here, an operation, a params model and a response model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+from pydantic import BaseModel
+
+from . import operations
+from .encoding import Timings, encode
+from .meshio import Mesh
+from .outputs import Output
+from .outputs.render import RENDERERS
+from .params import (
+    FitParams,
+    FlattenParams,
+    InverseRequest,
+    LocateParams,
+    MeshParams,
+    PointsRequest,
+)
+from .schemas import (
+    FitResponse,
+    FlattenResponse,
+    InverseResponse,
+    LocateResponse,
+    PointsResponse,
+    ValidateResponse,
+)
+from .settings import Settings
+
+
+@dataclass(frozen=True)
+class Capability:
+    """What every route of the table has.
+
+    Attributes
+    ----------
+    name : the route's name (its OpenAPI operation id starts with it)
+    path, summary, description : the route and its documentation
+    operation : the use-case (:mod:`service.operations`), ``result`` from parsed input
+    response : the JSON answer's model; ``response.of(result)`` builds it
+    """
+
+    name: str
+    path: str
+    summary: str
+    description: str
+    operation: Callable
+    response: type[BaseModel]
+
+    def encoded(self, result, timings: Timings) -> bytes:
+        """The JSON answer to ``result`` (timed as ``encode``)."""
+        with timings.measure("encode"):
+            return encode(self.response.of(result))
+
+
+@dataclass(frozen=True)
+class MeshCapability(Capability):
+    """A multipart route: a ``mesh`` file and a ``params`` JSON field; its operation is
+    ``(mesh, params, settings) -> result``.
+
+    Attributes
+    ----------
+    params : the model of the ``params`` field
+    renderers : the other forms of the answer, ``(result, params) -> bytes`` by Output
+    """
+
+    params: type[MeshParams]
+    renderers: Mapping[Output, Callable] = field(default_factory=dict)
+
+    @property
+    def command(self) -> str:
+        """The command line's command: the path's last part."""
+        return self.path.rsplit("/", 1)[-1]
+
+    @property
+    def outputs(self) -> tuple[Output, ...]:
+        """The forms of the answer, JSON first."""
+        return (Output.JSON, *self.renderers)
+
+    def answer(
+        self, mesh: Mesh, params: MeshParams, settings: Settings, output: Output, timings: Timings
+    ) -> bytes:
+        """The answer's bytes in ``output`` (one of :attr:`outputs`)."""
+        with timings.measure("compute"):
+            result = self.operation(mesh, params, settings)
+        if output is Output.JSON:
+            return self.encoded(result, timings)
+        with timings.measure("encode"):
+            return self.renderers[output](result, params)
+
+
+@dataclass(frozen=True)
+class JsonCapability(Capability):
+    """A route whose body is one JSON model; its operation is ``(request, settings) ->
+    result``.
+
+    Attributes
+    ----------
+    request : the body's model
+    """
+
+    request: type[BaseModel]
+
+    def answer(self, request: BaseModel, settings: Settings, timings: Timings) -> bytes:
+        with timings.measure("compute"):
+            result = self.operation(request, settings)
+        return self.encoded(result, timings)
+
+
+GLB_RULES = """
+The GLB holds one triangle mesh: `POSITION`, the file's coordinates of the region's vertices
+in the order of `vertices.ids`; `TEXCOORD_0`, the layout scaled into [0, 1] by one factor
+(`u = (x - x_min) * scale`, `v = (s - s_min) * scale`, with `s = s_sign * y` growing with
+theta: +1 for theta_phi, -1 for mercator; the numbers are in `asset.extras.meshflat.uv`);
+`_VERTEX_ID`, each vertex's file id (float32, exact below 2^24); and a material that shows a
+checker through the UVs. Triangle `k` (indices `3k .. 3k+2`) is file face `faces.ids[k]`;
+the ids are also the accessor named by `asset.extras.meshflat.face_ids_accessor`.
+`asset.extras.meshflat` also holds the resolved `params`, the validation summary (counts of
+flagged faces) and the metrics.
+"""
+
+MESH_CAPABILITIES = (
+    MeshCapability(
+        name="flatten",
+        path="/v1/flatten",
+        summary="Flatten a region of a mesh",
+        description="Multipart: a `mesh` file and a `params` JSON field (FlattenParams). "
+        "Answers the resolved parameters, (theta, phi, r) of every vertex the region uses, the "
+        "region's triangles, the validation report and the distortion metrics; or, by the "
+        "Accept header or params.output, the region as a GLB (model/gltf-binary) whose "
+        "TEXCOORD_0 is the layout, or a picture of the map (image/svg+xml, image/png).\n"
+        + GLB_RULES,
+        params=FlattenParams,
+        operation=operations.flatten,
+        response=FlattenResponse,
+        renderers=RENDERERS,
+    ),
+    MeshCapability(
+        name="validate",
+        path="/v1/validate",
+        summary="Validate a region of a mesh",
+        description="The same input as /v1/flatten; answers only the resolved parameters, the "
+        "validation report and the distortion metrics.",
+        params=MeshParams,
+        operation=operations.flatten,
+        response=ValidateResponse,
+    ),
+    MeshCapability(
+        name="fit",
+        path="/v1/fit",
+        summary="Choose the centre, rotation and sigma for a region",
+        description="The same input as /v1/flatten, but centre, rotation and sigma not given "
+        'are chosen ("auto"); any of them may be fixed. They are chosen together to minimise '
+        "the region's area-weighted isometric energy, keeping the centre inside the region's "
+        "kernel at a depth of at least min_kernel_depth of its inscribed radius and the margin "
+        "to the seam and the singular points at least min_margin_deg. The search starts from "
+        "the kernel's deepest point (a linear program), the middle of the largest cap free of "
+        "region directions as the pole, the roll along the region's widest spread about the "
+        "pole (or the up hint), and the best sigma with that cap; then refines the free ones "
+        "together on an area-weighted sample of the triangles. Answers the resolved "
+        "parameters, the validation and metrics they give on every triangle, and `explain`.",
+        params=FitParams,
+        operation=operations.flatten,
+        response=FitResponse,
+    ),
+    MeshCapability(
+        name="locate_points",
+        path="/v1/locate",
+        summary="Find the surface points of directions on the map",
+        description="Multipart like /v1/flatten; `params` also holds the queries, `theta` and "
+        "`phi` (radians, in the frame the other params resolve to). Answers, per query, the "
+        "region triangle the ray from the centre in that direction meets first, the "
+        "barycentric weights of the hit (of the triangle's vertices in file order) and the hit "
+        "point (world coordinates), or null where the ray misses the region.",
+        params=LocateParams,
+        operation=operations.locate_directions,
+        response=LocateResponse,
+    ),
+)
+
+JSON_CAPABILITIES = (
+    JsonCapability(
+        name="points",
+        path="/v1/points",
+        summary="Points to (theta, phi, r)",
+        description="World points to distorted-pole (or standard, or separable) coordinates, "
+        "radians:\n``theta`` the polar angle from local +Z, ``phi`` the azimuth from +X "
+        "towards +Y.\nBody: JSON, as the PointsRequest schema.",
+        request=PointsRequest,
+        operation=operations.points_to_angles,
+        response=PointsResponse,
+    ),
+    JsonCapability(
+        name="points_inverse",
+        path="/v1/points/inverse",
+        summary="(theta, phi, r) to points",
+        description="Coordinates back to world points, with the same parameters as "
+        "/v1/points.\nBody: JSON, as the InverseRequest schema.",
+        request=InverseRequest,
+        operation=operations.angles_to_points,
+        response=InverseResponse,
+    ),
+)
+
+#: The mesh routes by command-line command.
+MESH_COMMANDS = {capability.command: capability for capability in MESH_CAPABILITIES}

@@ -1,0 +1,301 @@
+"""The use-cases: plain functions over parsed parameter models and a :class:`Mesh`, shared by
+the API (:mod:`service.routes`), the command line (:mod:`service.cli`) and the OpenAPI
+examples (:mod:`service.examples`).
+
+They know nothing of HTTP. Bad input surfaces as the core's
+:class:`~transforms.TransformInputError` (placed in the request by
+:func:`service.problems.core_errors_as_problems`) or, for the service's own limits, a
+:class:`~service.problems.Problem`. Each returns a result that a response model of
+:mod:`service.schemas` presents (``Model.of(result)``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+
+import numpy as np
+
+from transforms import (
+    Chart,
+    Fit,
+    FitBounds,
+    FitFixed,
+    FlatRegion,
+    Frame,
+    Hits,
+    Method,
+    PoleCap,
+    angles_to_world,
+    fit_region,
+    flatten_region,
+    locate,
+    world_to_angles,
+)
+from transforms import selection as select
+
+from .meshio import Mesh, format_of, read_mesh
+from .params import (
+    DEFAULT_SIGMA,
+    AutoPole,
+    ChartParams,
+    InverseRequest,
+    LocateParams,
+    MeshParams,
+    PointsRequest,
+    PoleUp,
+)
+from .problems import Problem
+from .samples import SAMPLES
+from .schemas import SampleInfo
+from .settings import Settings
+
+# -- parameters into the core's objects ---------------------------------------------------
+
+
+def chart_of(params: ChartParams) -> Chart:
+    """The chart the parameters name (sigma 0.3 when neither sigma nor a pole angle is set)."""
+    if params.method is Method.STANDARD:
+        return Chart.standard()
+    if params.pole_angle_deg is not None and params.sigma is None:
+        cap = PoleCap.from_rho_deg(params.pole_angle_deg)
+    else:
+        cap = PoleCap.from_sigma(DEFAULT_SIGMA if params.sigma is None else params.sigma)
+    return Chart.from_method(params.method, cap)
+
+
+def frame_of(params: ChartParams, center: np.ndarray) -> Frame:
+    """The frame at ``center`` with the parameters' rotation (identity when none)."""
+    if params.rotation is None:
+        return Frame.identity(center)
+    if isinstance(params.rotation, PoleUp):
+        return Frame.from_pole_up(params.rotation.pole, params.rotation.up, center)
+    return Frame.from_matrix(params.rotation, center)
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The region a request names: its file face ids (ascending) and the centre the
+    parameters ask for (before any fit)."""
+
+    faces: np.ndarray
+    center: np.ndarray
+
+
+def select_region(mesh: Mesh, params: MeshParams) -> Selection:
+    """The faces and the centre of ``params.region`` and ``params.center``
+    (:mod:`transforms.selection`); a cone is taken around the centre of the whole mesh.
+
+    Raises
+    ------
+    TransformInputError
+        Ids out of range or repeated, unknown groups, a zero cone axis, a centroid of no
+        area; :class:`~transforms.EmptyRegionError` when nothing is selected.
+    """
+    region, n_faces = params.region, len(mesh.faces)
+    if region is not None and region.cone is not None:
+        center = _center(mesh, mesh.faces, params.center)
+        cone = region.cone
+        faces = select.cone_faces(mesh.vertices, mesh.faces, center, cone.axis, cone.half_angle_deg)
+        return Selection(select.nonempty(faces), center)
+    if region is None:
+        faces = np.arange(n_faces)
+    elif region.faces is not None:
+        faces = select.faces_listed(region.faces, n_faces)
+    elif region.vertices is not None:
+        faces = select.faces_of_vertices(mesh.faces, region.vertices, len(mesh.vertices))
+    else:
+        faces = select.faces_of_groups(mesh.groups, region.groups, n_faces)
+    faces = select.nonempty(faces)
+    return Selection(faces, _center(mesh, mesh.faces[faces], params.center))
+
+
+def _center(mesh: Mesh, faces: np.ndarray, center) -> np.ndarray:
+    """A world point, or the centre named (``auto`` starts from the bounding-box centre)."""
+    if not isinstance(center, str):
+        return np.asarray(center, dtype=np.float64)
+    name = "bbox_center" if center == "auto" else center
+    return select.named_center(mesh.vertices, faces, name)
+
+
+def fixed_choices(params: MeshParams, center: np.ndarray) -> FitFixed:
+    """What the caller fixed for :func:`transforms.fit_region` (None: choose it)."""
+    rotation, up = params.rotation, None
+    if rotation == "auto":
+        rotation = None
+    elif isinstance(rotation, AutoPole):
+        rotation, up = None, rotation.up
+    else:
+        rotation = frame_of(params, np.zeros(3))
+    sigma = None
+    if params.sigma != "auto" and params.method is not Method.STANDARD:
+        sigma = chart_of(params).cap.sigma  # given, or the default
+    return FitFixed(
+        center=None if params.center == "auto" else center,
+        rotation=rotation,
+        up=None if up is None else np.asarray(up, dtype=np.float64),
+        sigma=sigma,
+    )
+
+
+def fit_bounds(params: MeshParams) -> FitBounds:
+    return FitBounds(params.min_kernel_depth, params.min_margin_deg)
+
+
+# -- meshes ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MeshRegion:
+    """A request's region flattened: its file face ids, the chart and frame used, the
+    flattened region, and the fit when any parameter was chosen.
+
+    Attributes
+    ----------
+    mesh : Mesh, as read
+    faces : (m,) int, the region's file face ids, ascending
+    chart, frame : what the region was flattened with
+    flat : FlatRegion, positions in ``faces`` and ``flat.vertex_ids``
+    fit : Fit or None
+    """
+
+    mesh: Mesh
+    faces: np.ndarray
+    chart: Chart
+    frame: Frame
+    flat: FlatRegion
+    fit: Fit | None
+
+
+def resolve(
+    mesh: Mesh, selection: Selection, params: MeshParams, settings: Settings
+) -> tuple[Chart, Frame, Fit | None]:
+    """The chart and frame the parameters name, or fitted (with the fit) where any is
+    ``"auto"`` (and always for /v1/fit's :class:`~service.params.FitParams`)."""
+    if not params.auto:
+        return chart_of(params), frame_of(params, selection.center), None
+    fit = fit_region(
+        mesh.vertices,
+        mesh.faces[selection.faces],
+        fixed_choices(params, selection.center),
+        fit_bounds(params),
+        method=params.method,
+        layout=params.layout,
+        threads=settings.threads,
+    )
+    return fit.chart, fit.frame, fit
+
+
+def flatten(mesh: Mesh, params: MeshParams, settings: Settings) -> MeshRegion:
+    """The region flattened with the chart and frame :func:`resolve` gives."""
+    selection = select_region(mesh, params)
+    chart, frame, fit = resolve(mesh, selection, params, settings)
+    if fit is not None:
+        flat = fit.region
+    else:
+        faces = mesh.faces[selection.faces]
+        flat = flatten_region(
+            mesh.vertices, faces, frame, chart, threads=settings.threads, layout=params.layout
+        )
+    return MeshRegion(mesh, selection.faces, chart, frame, flat, fit)
+
+
+@dataclass(frozen=True)
+class Located:
+    """Where the query directions meet the region.
+
+    Attributes
+    ----------
+    chart, frame : what the directions were read in
+    faces : (m,) int, the region's file face ids
+    hits : Hits, face positions in ``faces``, points in the local frame
+    """
+
+    chart: Chart
+    frame: Frame
+    faces: np.ndarray
+    hits: Hits
+
+    @property
+    def found(self) -> np.ndarray:
+        """(k,) bool: the queries whose ray meets the region."""
+        return self.hits.faces >= 0
+
+
+def locate_directions(mesh: Mesh, params: LocateParams, settings: Settings) -> Located:
+    """For each ``(theta, phi)`` of ``params``, the region triangle the ray from the centre
+    meets first (:func:`transforms.locate`)."""
+    check_count(len(params.theta), settings.max_points, "params.theta")
+    selection = select_region(mesh, params)
+    chart, frame, _ = resolve(mesh, selection, params, settings)
+    directions = chart.inverse(params.theta, params.phi, 1.0)
+    # Every vertex given, so that an error names the file's vertex ids.
+    hits = locate(frame.to_local(mesh.vertices), mesh.faces[selection.faces], directions)
+    return Located(chart, frame, selection.faces, hits)
+
+
+# -- points --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Angles:
+    """(k,) float each: the coordinates of points, radians and distances."""
+
+    theta: np.ndarray
+    phi: np.ndarray
+    r: np.ndarray
+
+
+def points_to_angles(request: PointsRequest, settings: Settings) -> Angles:
+    """World points to ``(theta, phi, r)`` (:func:`transforms.world_to_angles`)."""
+    check_count(len(request.points), settings.max_points, "points")
+    points = np.asarray(request.points, dtype=np.float64)
+    frame = frame_of(request, np.asarray(request.center, dtype=np.float64))
+    theta, phi, r = world_to_angles(points, frame, chart_of(request), threads=settings.threads)
+    return Angles(theta, phi, r)
+
+
+def angles_to_points(request: InverseRequest, settings: Settings) -> np.ndarray:
+    """(k, 3) float: ``(theta, phi, r)`` back to world points
+    (:func:`transforms.angles_to_world`)."""
+    check_count(len(request.theta), settings.max_points, "theta")
+    frame = frame_of(request, np.asarray(request.center, dtype=np.float64))
+    r = 1.0 if request.r is None else request.r
+    return angles_to_world(request.theta, request.phi, r, frame, chart_of(request))
+
+
+def check_count(count: int, limit: int, field: str) -> None:
+    """Refuse more than ``limit`` query points (413, naming ``field``)."""
+    if count > limit:
+        raise Problem(
+            413,
+            f"{field}: {count:,} items; the limit is {limit:,} (MESHFLAT_MAX_POINTS)",
+            "too-many-points",
+            field,
+        )
+
+
+# -- samples -------------------------------------------------------------------------------
+
+
+@cache
+def _sample_info(name: str) -> SampleInfo:
+    sample = SAMPLES[name]
+    data = sample.path.read_bytes()
+    # A bundled file is trusted: read with the default limits, whatever the service's are.
+    mesh = read_mesh(data, format_of(name, None), Settings().limits)
+    return SampleInfo(
+        name=name,
+        format=mesh.format,
+        vertices=len(mesh.vertices),
+        faces=len(mesh.faces),
+        bytes=len(data),
+        description=sample.description,
+        credit=sample.credit,
+        licence=sample.licence,
+        url=f"/v1/samples/{name}",
+    )
+
+
+def sample_infos() -> list[SampleInfo]:
+    return [_sample_info(name) for name in SAMPLES]

@@ -1,0 +1,83 @@
+"""A flattened region in the forms besides JSON: the GLB (:mod:`.glb`) and the picture of its
+map as SVG or PNG (:mod:`.picture`, :mod:`.draw`). What they carry of the answer (params,
+validation, metrics) comes from the same response models as the JSON answer."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from transforms import Layout
+
+from ..encoding import plain
+from ..params import FlattenParams
+from ..problems import Problem
+from ..schemas import Metrics, ResolvedParams, Validation
+from . import Output
+from .draw import to_png, to_svg
+from .glb import layout_uv, region_glb
+from .picture import describe
+
+if TYPE_CHECKING:
+    from ..operations import MeshRegion
+
+#: Vertex ids travel in the GLB as float32 (glTF allows no 32-bit integer attributes).
+FLOAT32_EXACT = 2**24
+
+
+def glb(region: MeshRegion, params: FlattenParams) -> bytes:
+    """The region as a GLB with ``TEXCOORD_0`` from the layout.
+
+    Raises
+    ------
+    Problem
+        422 when a vertex id is beyond float32's exact integers.
+    """
+    flat = region.flat
+    largest = int(flat.vertex_ids[-1])
+    if largest >= FLOAT32_EXACT:
+        raise Problem(
+            422,
+            f"params.output: a GLB carries vertex ids as float32, exact below "
+            f"{FLOAT32_EXACT:,}; this region uses vertex {largest:,}. Ask for JSON instead.",
+            "invalid-request",
+            "params.output",
+            [largest],
+        )
+    s_sign = 1.0 if flat.layout is Layout.THETA_PHI else -1.0  # s grows with theta
+    uv, affine = layout_uv(flat.x, s_sign * flat.y)
+    validation = plain(Validation.of(region))
+    summary = {
+        key: value if not isinstance(value, np.ndarray) else len(value)
+        for key, value in validation.items()
+    }
+    extras = {
+        "params": plain(ResolvedParams.of_region(region)),
+        "validation": summary,
+        "metrics": plain(Metrics.of(region)),
+        "uv": affine | {"s_sign": s_sign, "layout": flat.layout.value},
+    }
+    positions = region.mesh.vertices[flat.vertex_ids]
+    return region_glb(positions, uv, flat.vertex_ids, flat.faces, region.faces, extras)
+
+
+def svg(region: MeshRegion, params: FlattenParams) -> bytes:
+    """The picture of the region's map as SVG, ``params.image_width`` by ``image_height``."""
+    return to_svg(_picture(region, params))
+
+
+def png(region: MeshRegion, params: FlattenParams) -> bytes:
+    """The same picture as PNG."""
+    return to_png(_picture(region, params))
+
+
+def _picture(region: MeshRegion, params: FlattenParams):
+    resolved = plain(ResolvedParams.of_region(region))
+    return describe(
+        region.flat, resolved, len(region.faces), params.image_width, params.image_height
+    )
+
+
+#: The forms of a flattened region besides JSON, by :class:`Output`.
+RENDERERS = {Output.GLB: glb, Output.SVG: svg, Output.PNG: png}

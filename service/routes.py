@@ -1,0 +1,268 @@
+"""The HTTP edge: health, the samples, and the routes of :mod:`service.capabilities`
+registered from their rows. A handler admits the job, reads the body, and runs the
+capability off the event loop (:func:`run_job`); the use-cases are :mod:`service.operations`.
+"""
+
+from __future__ import annotations
+
+import gc
+from functools import partial
+from typing import Annotated
+
+import anyio
+import anyio.to_thread
+from fastapi import APIRouter, FastAPI, Path, Request
+from starlette.concurrency import run_in_threadpool
+from starlette.requests import ClientDisconnect
+from starlette.responses import Response
+
+from . import document
+from .allocator import release_free_memory
+from .capabilities import (
+    JSON_CAPABILITIES,
+    MESH_CAPABILITIES,
+    Capability,
+    JsonCapability,
+    MeshCapability,
+)
+from .encoding import JSON, Timings
+from .inputs import mesh_form, parse_json
+from .jobs import Deadline, JobGate, TimeLimit
+from .meshio import READERS, format_of
+from .observability import metrics_response
+from .operations import sample_infos
+from .outputs import Output, choose_output
+from .problems import JSON_BODY, MESH_FORM, PROBLEMS, Problem, core_errors_as_problems
+from .samples import SAMPLES
+from .schemas import Health, SampleInfo
+from .settings import Settings
+
+router = APIRouter()
+
+
+def settings_of(request: Request) -> Settings:
+    return request.app.state.settings
+
+
+# -- health and samples ------------------------------------------------------------------
+
+
+@router.get("/healthz", tags=["health"], summary="Liveness")
+async def healthz() -> Health:
+    """Answers while the process serves requests (on the event loop: never queued behind the
+    jobs' threads)."""
+    return Health()
+
+
+@router.get(
+    "/readyz",
+    tags=["health"],
+    summary="Readiness",
+    responses={503: PROBLEMS[422] | {"description": "The start-up self-check has not passed."}},
+)
+async def readyz(request: Request) -> Health:
+    """Answers 200 once the start-up self-check (a bundled scan flattened) has passed."""
+    if not getattr(request.app.state, "ready", False):
+        raise Problem(503, "the start-up self-check has not passed yet", "not-ready")
+    return Health()
+
+
+@router.get(
+    "/metrics",
+    tags=["health"],
+    summary="Prometheus metrics",
+    response_class=Response,
+    responses={
+        200: {
+            "content": {"text/plain": {"schema": {"type": "string"}}},
+            "description": "The Prometheus text exposition format, version 0.0.4.",
+        }
+    },
+)
+async def metrics() -> Response:
+    """Requests by route, method and status (counts and latency histograms), the sizes of the
+    meshes read, jobs in flight and computing, and refusals by reason; with several worker
+    processes, summed over all of them."""
+    return metrics_response()
+
+
+@router.get(
+    "/v1/samples",
+    tags=["samples"],
+    summary="The bundled sample meshes",
+    responses={401: PROBLEMS[401]},
+)
+async def samples() -> list[SampleInfo]:
+    """Real scans bundled with the service, with their face counts and credits."""
+    return await run_in_threadpool(sample_infos)
+
+
+def _media_type(name: str) -> str:
+    return READERS[format_of(name, None)].media_type
+
+
+_MEDIA_TYPES = {reader.media_type: {} for reader in READERS.values()}
+
+
+@router.get(
+    "/v1/samples/{name}",
+    tags=["samples"],
+    summary="Download a sample mesh",
+    response_class=Response,
+    responses={
+        200: {
+            "content": _MEDIA_TYPES,
+            "description": "The file.",
+        },
+        401: PROBLEMS[401],
+        404: PROBLEMS[422] | {"description": "No such sample."},
+        422: PROBLEMS[422],
+    },
+)
+def sample_file(
+    name: Annotated[
+        str,
+        Path(description="A bundled sample's name.", json_schema_extra={"enum": list(SAMPLES)}),
+    ],
+) -> Response:
+    """The file itself, as bundled."""
+    if name not in SAMPLES:
+        raise Problem(404, f"no sample named {name!r}; see /v1/samples", "not-found", "name")
+    return Response(
+        SAMPLES[name].path.read_bytes(),
+        media_type=_media_type(name),
+        headers={"Content-Disposition": f'attachment; filename="{name}"'},
+    )
+
+
+# -- jobs --------------------------------------------------------------------------------
+
+
+async def run_job(request: Request, work) -> Response:
+    """Admit the job (a 503 at once when this process has no room, see :mod:`service.jobs`),
+    read the body (bounded by the upload limit), then run ``work(body, content_type,
+    settings)`` off the event loop in a compute slot, all within the time limit. A slow upload
+    holds an admission but no compute slot."""
+    settings = settings_of(request)
+    ticket = job_gate(request.app).admit()
+    deadline = Deadline.after(settings.request_timeout)
+    try:
+        try:
+            with anyio.fail_after(settings.request_timeout):
+                body = await request.body()
+        except ClientDisconnect:
+            # Nobody is left to answer; 499 (as nginx says) marks it in the log and metrics.
+            return Response(status_code=499)
+        except TimeoutError:
+            raise TimeLimit(settings.request_timeout, while_reading=True) from None
+        content_type = request.headers.get("content-type", "")
+        job = partial(ticket.run, work, deadline, body, content_type, settings)
+        try:
+            with anyio.fail_after(max(0.0, deadline.remaining())):
+                return await anyio.to_thread.run_sync(job, abandon_on_cancel=True)
+        except TimeoutError:
+            raise TimeLimit(settings.request_timeout, while_reading=False) from None
+    finally:
+        # A computation that started ends the admission itself, even one that runs on after
+        # its client had the 504; this ends it for one that never started.
+        ticket.release()
+
+
+def job_gate(app: FastAPI) -> JobGate:
+    """The process's :class:`JobGate` (one per app: a worker process has one app)."""
+    if getattr(app.state, "job_gate", None) is None:
+        settings = app.state.settings
+        app.state.job_gate = JobGate(settings.max_jobs, settings.max_waiting, on_idle=_shrink)
+    return app.state.job_gate
+
+
+def _shrink() -> None:
+    """An idle worker gives its free heap back (see service.allocator), after freeing what
+    only reference cycles kept (arrays held by a traceback's frames, say)."""
+    gc.collect()
+    release_free_memory()
+
+
+# -- the capabilities ----------------------------------------------------------------------
+
+
+def answer_json(
+    capability: JsonCapability, body: bytes, content_type: str, settings: Settings
+) -> Response:
+    """A JSON route's answer to its body (CPU-bound: run it off the event loop)."""
+    timings = Timings()
+    with core_errors_as_problems(JSON_BODY):
+        with timings.measure("parse"):
+            request = parse_json(capability.request, body, content_type)
+        data = capability.answer(request, settings, timings)
+    return Response(data, media_type=JSON, headers={"Server-Timing": timings.header()})
+
+
+def answer_mesh(
+    capability: MeshCapability,
+    body: bytes,
+    content_type: str,
+    settings: Settings,
+    accept: str | None = None,
+) -> Response:
+    """A mesh route's answer to a multipart body, in the form ``Accept`` or
+    ``params.output`` asks for (CPU-bound: run it off the event loop)."""
+    timings = Timings()
+    with core_errors_as_problems(MESH_FORM):
+        with timings.measure("parse"):
+            params, mesh = mesh_form(body, content_type, settings, capability.params)
+            output = Output.JSON
+            if len(capability.outputs) > 1:
+                output = choose_output(accept, params.output)
+        data = capability.answer(mesh, params, settings, output, timings)
+    headers = {"Server-Timing": timings.header()}
+    if len(capability.outputs) > 1:
+        headers["Vary"] = "Accept"
+    if output is not Output.JSON:
+        headers["Content-Disposition"] = f'inline; filename="region.{output.value}"'
+    return Response(data, media_type=output.media_type, headers=headers)
+
+
+def _post(capability: Capability, work_of, **documentation) -> None:
+    """Register ``capability``'s route: its handler runs ``work_of(request)`` as a job."""
+
+    async def endpoint(request: Request) -> Response:
+        return await run_job(request, work_of(request))
+
+    router.add_api_route(
+        capability.path,
+        endpoint,
+        methods=["POST"],
+        name=capability.name,
+        summary=capability.summary,
+        response_model=capability.response,
+        **documentation,
+    )
+
+
+def _json_route(capability: JsonCapability) -> None:
+    _post(
+        capability,
+        lambda _: partial(answer_json, capability),
+        tags=["transforms"],
+        description=capability.description,
+        responses=PROBLEMS,
+        openapi_extra=document.json_body(capability.request),
+    )
+
+
+def _mesh_route(capability: MeshCapability) -> None:
+    _post(
+        capability,
+        lambda request: partial(answer_mesh, capability, accept=request.headers.get("accept")),
+        tags=["meshes"],
+        description=document.mesh_description(capability),
+        responses=PROBLEMS | document.other_forms(capability),
+        openapi_extra=document.multipart_body(capability.params),
+    )
+
+
+for _capability in JSON_CAPABILITIES:
+    _json_route(_capability)
+for _capability in MESH_CAPABILITIES:
+    _mesh_route(_capability)

@@ -1,0 +1,27 @@
+"""The kernel of a region and its deepest point (transforms.kernel; docs/math.md, section 9)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from transforms.kernel import chebyshev_center, kernel_planes
+
+from .conftest import sphere_mesh
+
+
+def test_chebyshev_centre_of_a_closed_sphere_is_its_centre():
+    vertices, faces = sphere_mesh(24, 48)
+    kernel = chebyshev_center(kernel_planes(vertices + np.array([3.0, -2.0, 1.0]), faces))
+    assert not kernel.empty
+    np.testing.assert_allclose(kernel.center, [3.0, -2.0, 1.0], atol=1e-9)
+    # The inscribed ball touches the facets: a little less than the unit radius.
+    assert 0.98 < kernel.inscribed_radius < 1.0
+
+
+def test_an_open_cap_is_closed_over_its_hole():
+    # The upper half of a sphere faces every point below it: the hole's plane bounds it.
+    vertices, faces = sphere_mesh(24, 48)
+    upper = faces[vertices[faces].mean(axis=1)[:, 2] > 0.0]
+    kernel = chebyshev_center(kernel_planes(vertices, upper))
+    assert not kernel.empty and 0.0 < kernel.center[2] < 0.6
+    assert kernel.inscribed_radius > 0.4

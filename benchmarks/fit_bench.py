@@ -10,7 +10,7 @@ faces) it times, as the median of several runs:
 
 and in the same run, on the same region, libigl's harmonic map (``igl.harmonic``, boundary on
 a circle) and LSCM (``igl.lscm``, two boundary vertices pinned), with the area-weighted
-isometric energy of every layout (MATH.md, "Distortion", measured by the same code for all).
+isometric energy of every layout (docs/math.md, section 7, measured by the same code for all).
 Then, on the scalps of the bundled samples, the energy of the automatic choice against LSCM's.
 
     python -m benchmarks.fit_bench [--runs 3] [--write-docs]
@@ -85,7 +85,7 @@ def progress(text: str) -> None:
 
 def layout_energy(vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray) -> float:
     """Area-weighted isometric energy of any 2D layout ``uv`` (n, 2) of the region, measured
-    by meshflat's own metrics (one scale factor for the whole layout, as MATH.md says)."""
+    by meshflat's own metrics (one scale factor for the whole layout, as docs/math.md says)."""
     span = float(np.abs(uv).max()) or 1.0
     u, v = uv[:, 0] / span, uv[:, 1] / span  # in [-1, 1]: no phi span reaches the seam test
     theta = np.full(len(u), math.pi / 2)

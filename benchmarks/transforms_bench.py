@@ -80,7 +80,7 @@ def cases(subdivisions: int) -> list[Case]:
       bounding-box centre: it holds both singular points, crosses the seam and has overhangs,
       so every part of the validation runs.
     * ``fsaverage-head.ply`` subdivided two more times, its scalp (faces whose centroid is
-      within 70.86 degrees of up, MATH.md's example region) seen from the bounding-box centre
+      within 70.86 degrees of up, the brief's example region) seen from the bounding-box centre
       with the pole at the chin: seam-free, what the service is for.
     """
     vertices, faces = subdivided("lee-perry-smith.obj", subdivisions)

@@ -24,6 +24,7 @@ from .params import (
     MeshParams,
     PointsRequest,
 )
+from .problems import ErrorPlaces
 from .schemas import (
     FitResponse,
     FlattenResponse,
@@ -207,6 +208,15 @@ JSON_CAPABILITIES = (
         operation=operations.angles_to_points,
         response=InverseResponse,
     ),
+)
+
+#: Where a mesh route's fields lie: the parameters of every mesh route (and ``pole`` and
+#: ``up``, of the rotation) in the ``params`` part; whatever else the core names (vertices,
+#: faces, points it derived from them) is the uploaded mesh's.
+MESH_FORM = ErrorPlaces(
+    "params.",
+    frozenset(name for c in MESH_CAPABILITIES for name in c.params.model_fields) | {"pole", "up"},
+    "mesh",
 )
 
 #: The mesh routes by command-line command.

@@ -32,9 +32,11 @@ import orjson
 
 from transforms import Layout
 
-from .capabilities import MESH_COMMANDS
+from .capabilities import MESH_COMMANDS, MESH_FORM
+from .meshio import READERS
 from .outputs import Output
-from .problems import MESH_FORM, Problem, core_errors_as_problems
+from .params import CENTERS
+from .problems import Problem, core_errors_as_problems
 from .settings import Settings
 
 
@@ -88,8 +90,8 @@ def params_of(args: argparse.Namespace) -> dict:
     options = {"sigma": args.sigma, "pole_angle_deg": args.pole_angle, "layout": args.layout}
     params.update({name: value for name, value in options.items() if value is not None})
     if args.center:
-        known = ("bbox_center", "centroid", "auto")
-        params["center"] = args.center if args.center in known else _vector(args.center, "--center")
+        named = args.center in CENTERS
+        params["center"] = args.center if named else _vector(args.center, "--center")
     if args.pole or args.up:
         if not (args.pole and args.up):
             raise Problem(422, "--pole, --up: give both", field="--pole")
@@ -111,14 +113,15 @@ def _cone(text: str) -> dict:
 
 
 def _output(capability, out: str | None) -> Output:
-    """The form ``--out``'s extension asks for, among the capability's (JSON without one)."""
-    if not out:
+    """The form ``--out``'s extension asks for, when the command answers several (JSON
+    otherwise, whatever the file is called)."""
+    if not out or len(capability.outputs) == 1:
         return Output.JSON
     by_suffix = {f".{output.value}": output for output in capability.outputs}
     suffix = Path(out).suffix.lower()
     if suffix not in by_suffix:
-        known = ", ".join(by_suffix)
-        raise Problem(422, f"--out: {out!r}: use {known}", field="--out")
+        *most, last = by_suffix
+        raise Problem(422, f"--out: {out!r}: use {', '.join(most)} or {last}", field="--out")
     return by_suffix[suffix]
 
 
@@ -169,13 +172,14 @@ def parser() -> argparse.ArgumentParser:
         command = commands.add_parser(
             name, help=f"{capability.summary[0].lower()}{capability.summary[1:]} ({forms})"
         )
-        command.add_argument("mesh", metavar="MESH", help="OBJ, glTF, GLB, PLY or STL file")
+        *most, last = (reader.title.split()[0] for reader in READERS.values())
+        command.add_argument("mesh", metavar="MESH", help=f"{', '.join(most)} or {last} file")
         command.add_argument("--region-cone", metavar="AXIS:DEG", help="e.g. 0,1,0:60")
         cap = command.add_mutually_exclusive_group()
         cap.add_argument("--sigma", type=float, help="the warp parameter (default 0.3)")
         cap.add_argument("--pole-angle", type=float, metavar="DEG", help="the cap's angle")
         cap.add_argument("--auto", action="store_true", help="choose centre, pole and sigma")
-        command.add_argument("--center", help="X,Y,Z, bbox_center (default) or centroid")
+        command.add_argument("--center", help=f"X,Y,Z or one of {', '.join(CENTERS)}")
         command.add_argument("--pole", metavar="X,Y,Z", help="world direction of local +Y")
         command.add_argument("--up", metavar="X,Y,Z", help="world direction towards local +Z")
         command.add_argument("--layout", choices=[layout.value for layout in Layout])

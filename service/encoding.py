@@ -10,7 +10,6 @@ from contextlib import contextmanager
 import numpy as np
 import orjson
 from pydantic import BaseModel
-from starlette.responses import Response
 
 from .jobs import current_deadline
 
@@ -32,13 +31,13 @@ def encode(answer: BaseModel) -> bytes:
 
 
 def plain(value):
-    """``value`` with every model turned into a dict of the fields it was given (numpy
-    arrays and enums are left to orjson)."""
+    """``value`` with every model turned into a dict of the fields it was given, in the order
+    given (numpy arrays and enums are left to orjson)."""
     if isinstance(value, BaseModel):
-        given = value.model_fields_set
-        return {
-            name: plain(getattr(value, name)) for name in type(value).model_fields if name in given
-        }
+        names = getattr(value, "_order", None) or [
+            name for name in type(value).model_fields if name in value.model_fields_set
+        ]
+        return {name: plain(getattr(value, name)) for name in names}
     if isinstance(value, list) and value and isinstance(value[0], (BaseModel, type(None))):
         return [plain(item) for item in value]
     return value
@@ -88,9 +87,3 @@ class Timings:
         return ", ".join(
             f"{name};dur={seconds * 1e3:.1f}" for name, seconds in self.durations.items()
         )
-
-
-def json_response(answer: BaseModel, timings: Timings) -> Response:
-    """Encode (timed) and wrap with the Server-Timing header."""
-    body = timings.timed("encode", lambda: encode(answer))
-    return Response(body, media_type=JSON, headers={"Server-Timing": timings.header()})

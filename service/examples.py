@@ -12,7 +12,7 @@ import json
 import orjson
 import trimesh
 
-from .capabilities import JSON_CAPABILITIES, MESH_CAPABILITIES
+from .capabilities import JSON_CAPABILITIES, MESH_CAPABILITIES, MESH_FORM
 from .encoding import JSON, Timings
 from .inputs import load_mesh, mesh_params, parse_json
 from .meshio import read_mesh
@@ -21,7 +21,6 @@ from .outputs import Output
 from .params import MESH_PARAMS_EXAMPLE
 from .problems import (
     JSON_BODY,
-    MESH_FORM,
     PROBLEM_JSON,
     Problem,
     core_errors_as_problems,
@@ -114,7 +113,8 @@ def examples() -> dict[tuple[str, str], dict | list]:
     for capability in MESH_CAPABILITIES:
         example = request_example(capability.params)
         found[capability.path, "200"] = _json(mesh_answer(capability, example, mesh, settings))
-    points, inverse = JSON_CAPABILITIES
+    by_path = {c.path: c for c in (*JSON_CAPABILITIES, *MESH_CAPABILITIES)}
+    points, inverse = by_path["/v1/points"], by_path["/v1/points/inverse"]
     bad_points = dict(request_example(points.request), sigma=-1.0)
     found[points.path, "422"] = _problem(
         lambda: json_answer(points, bad_points, settings), JSON_BODY
@@ -125,8 +125,7 @@ def examples() -> dict[tuple[str, str], dict | list]:
     )
     bad_region = dict(MESH_PARAMS_EXAMPLE, region={"faces": [3, 20]})
     tiny = Settings(max_faces=10).limits
-    flatten, validate = MESH_CAPABILITIES[:2]
-    for capability in (flatten, validate):
+    for capability in (by_path["/v1/flatten"], by_path["/v1/validate"]):
         found[capability.path, "422"] = _problem(
             lambda c=capability: mesh_answer(c, bad_region, mesh, settings), MESH_FORM
         )

@@ -105,7 +105,7 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
     elif region.vertices is not None:
         faces = select.faces_of_vertices(mesh.faces, region.vertices, len(mesh.vertices))
     else:
-        faces = select.faces_of_groups(mesh.groups, region.groups, n_faces)
+        faces = mesh.group_faces(region.groups)
     faces = select.nonempty(faces)
     return Selection(faces, _center(mesh, mesh.faces[faces], params.center))
 
@@ -250,8 +250,9 @@ def points_to_angles(request: PointsRequest, settings: Settings) -> Angles:
     """World points to ``(theta, phi, r)`` (:func:`transforms.world_to_angles`)."""
     check_count(len(request.points), settings.max_points, "points")
     points = np.asarray(request.points, dtype=np.float64)
+    chart = chart_of(request)  # before the frame: a bad cap is named first
     frame = frame_of(request, np.asarray(request.center, dtype=np.float64))
-    theta, phi, r = world_to_angles(points, frame, chart_of(request), threads=settings.threads)
+    theta, phi, r = world_to_angles(points, frame, chart, threads=settings.threads)
     return Angles(theta, phi, r)
 
 
@@ -259,9 +260,10 @@ def angles_to_points(request: InverseRequest, settings: Settings) -> np.ndarray:
     """(k, 3) float: ``(theta, phi, r)`` back to world points
     (:func:`transforms.angles_to_world`)."""
     check_count(len(request.theta), settings.max_points, "theta")
+    chart = chart_of(request)
     frame = frame_of(request, np.asarray(request.center, dtype=np.float64))
     r = 1.0 if request.r is None else request.r
-    return angles_to_world(request.theta, request.phi, r, frame, chart_of(request))
+    return angles_to_world(request.theta, request.phi, r, frame, chart)
 
 
 def check_count(count: int, limit: int, field: str) -> None:

@@ -16,6 +16,7 @@ from typing import Annotated, Literal
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
 from transforms import Layout, Method
+from transforms.selection import NAMED_CENTERS
 
 from .meshio import FORMATS
 from .outputs import Output
@@ -27,6 +28,9 @@ def choice(vocabulary: type[StrEnum]):
     values = tuple(member.value for member in vocabulary)
     return Annotated[Literal[values], AfterValidator(vocabulary)]
 
+
+#: The centres a mesh request may name instead of a point: the core's, and "auto" (fitted).
+CENTERS = (*NAMED_CENTERS, "auto")
 
 Number = Annotated[float, Field(allow_inf_nan=False)]
 PositiveNumber = Annotated[float, Field(allow_inf_nan=False, gt=0)]
@@ -236,7 +240,7 @@ AUTO_DESCRIPTION = (
 class MeshParams(ChartParams):
     """The JSON of the ``params`` field of /v1/flatten, /v1/validate and /v1/fit."""
 
-    center: Vector3 | Literal["centroid", "bbox_center", "auto"] = Field(
+    center: Vector3 | Literal[CENTERS] = Field(
         "bbox_center",
         description="The centre: world point, or the area-weighted centroid or bounding-box "
         "centre of the region (of the whole mesh when the region is a cone), or "
@@ -299,7 +303,7 @@ class FitParams(MeshParams):
     """The JSON of the ``params`` field of /v1/fit: as for /v1/flatten, but centre, rotation
     and sigma not given are chosen ("auto")."""
 
-    center: Vector3 | Literal["centroid", "bbox_center", "auto"] = Field(
+    center: Vector3 | Literal[CENTERS] = Field(
         "auto", description=MeshParams.model_fields["center"].description
     )
     rotation: Matrix3 | PoleUp | AutoPole | Literal["auto"] | None = Field(

@@ -8,9 +8,9 @@ first two for programs.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from http import HTTPStatus
 
 import orjson
@@ -66,7 +66,7 @@ class Problem(Exception):
 PROBLEMS = {
     status: {
         # Problems are only ever application/problem+json (the schema is added to the
-        # document's components by service.app).
+        # document's components by service.document).
         "content": {
             "application/problem+json": {"schema": {"$ref": "#/components/schemas/ProblemDetails"}}
         },
@@ -113,22 +113,28 @@ def problem_response(problem: Problem) -> Response:
 
 @dataclass(frozen=True)
 class ErrorPlaces:
-    """Where the fields a core error names lie in a request: under ``prefix``, except those
-    ``renamed`` (the core's arrays that hold the uploaded mesh are the ``mesh`` part)."""
+    """Where the fields a core error names lie in a request.
+
+    Attributes
+    ----------
+    prefix : where the parameters are (``params.`` for a multipart form's JSON part)
+    parameters : the names of the parameters (a dotted field counts by its first part);
+        None: every field is one
+    data : the part every other field is about (the uploaded ``mesh``)
+    """
 
     prefix: str = ""
-    renamed: Mapping[str, str] = field(default_factory=dict)
+    parameters: frozenset[str] | None = None
+    data: str = ""
 
     def of(self, name: str) -> str:
-        return self.renamed.get(name) or f"{self.prefix}{name}"
+        if self.parameters is None or name.partition(".")[0] in self.parameters:
+            return f"{self.prefix}{name}"
+        return self.data
 
 
-#: A JSON body: the fields are the body's own.
+#: A JSON body: every field is the body's own.
 JSON_BODY = ErrorPlaces()
-#: A multipart mesh request: parameters in the ``params`` part, the mesh's data in ``mesh``.
-MESH_FORM = ErrorPlaces(
-    "params.", {name: "mesh" for name in ("vertices", "faces", "points", "directions")}
-)
 
 #: The kind of problem by core error type (the first that matches); others: invalid-input.
 _KINDS = ((EmptyRegionError, "empty-region"),)

@@ -21,6 +21,7 @@ from .allocator import release_free_memory
 from .capabilities import (
     JSON_CAPABILITIES,
     MESH_CAPABILITIES,
+    MESH_FORM,
     Capability,
     JsonCapability,
     MeshCapability,
@@ -32,7 +33,7 @@ from .meshio import READERS, format_of
 from .observability import metrics_response
 from .operations import sample_infos
 from .outputs import Output, choose_output
-from .problems import JSON_BODY, MESH_FORM, PROBLEMS, Problem, core_errors_as_problems
+from .problems import JSON_BODY, PROBLEMS, Problem, core_errors_as_problems
 from .samples import SAMPLES
 from .schemas import Health, SampleInfo
 from .settings import Settings
@@ -213,7 +214,8 @@ def answer_mesh(
             params, mesh = mesh_form(body, content_type, settings, capability.params)
             output = Output.JSON
             if len(capability.outputs) > 1:
-                output = choose_output(accept, params.output)
+                requested = getattr(params, "output", None)
+                output = choose_output(accept, requested, capability.outputs)
         data = capability.answer(mesh, params, settings, output, timings)
     headers = {"Server-Timing": timings.header()}
     if len(capability.outputs) > 1:

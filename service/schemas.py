@@ -13,7 +13,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, PrivateAttr
 
 from transforms import Layout, Method
 
@@ -25,6 +25,9 @@ if TYPE_CHECKING:
 
 class Answer(BaseModel):
     """A response model whose instances are built from arrays without validation."""
+
+    #: The fields given to :meth:`build`, in that order: the order they are encoded in.
+    _order: tuple[str, ...] = PrivateAttr(default=())
 
     @classmethod
     def build(cls, **values):
@@ -38,7 +41,9 @@ class Answer(BaseModel):
             client's fault.
         """
         cls._check_names(values.keys())
-        return cls.model_construct(**values)
+        answer = cls.model_construct(**values)
+        answer._order = tuple(values)
+        return answer
 
     @classmethod
     def rows(cls, present, **columns) -> list:
@@ -192,12 +197,11 @@ class FlattenResponse(Answer):
         vertices = {"ids": flat.vertex_ids, "theta": flat.theta, "phi": flat.phi, "r": flat.r}
         if flat.layout is not Layout.THETA_PHI:
             vertices |= {"x": flat.x, "y": flat.y}
+        # The small blocks first, so that a client reading the stream meets them early.
         return cls.build(
-            params=ResolvedParams.of_region(region),
+            **ValidateResponse.report(region),
             vertices=FlatVertices.build(**vertices),
             faces=FlatFaces.build(ids=region.faces, vertices=region.mesh.faces[region.faces]),
-            validation=Validation.of(region),
-            metrics=Metrics.of(region),
         )
 
 

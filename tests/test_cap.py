@@ -1,4 +1,4 @@
-"""Where the singular points and the seam go (MATH.md), for every method."""
+"""Where the singular points and the seam go (docs/math.md, section 4), for every method."""
 
 import math
 

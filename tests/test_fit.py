@@ -33,7 +33,7 @@ def test_auto_scalp_is_seam_free_and_star_shaped_with_the_margin(fsaverage_fit):
     assert e.margin_deg >= 2.0 and not e.kernel_empty and not e.notes
     assert e.energy_end <= e.energy_start
     assert e.center_depth >= 0.05 * e.kernel_inscribed_radius
-    # The optimum of MATH.md's "Distortion": better than either reported sigma.
+    # The optimum of docs/math.md's section 7: better than either reported sigma.
     assert all(e.energy_end <= energy + 1e-9 for energy in e.energy_at_sigma.values())
     assert fit.region.distortion.isometric.mean == pytest.approx(e.energy_end)
 

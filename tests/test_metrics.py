@@ -1,4 +1,4 @@
-"""Distortion metrics (MATH.md, "Distortion")."""
+"""Distortion metrics (docs/math.md, section 7)."""
 
 import numpy as np
 import pytest
@@ -100,8 +100,9 @@ def test_weighted_quantile_on_large_inputs(kind):
 
 
 def scalp_cap():
-    """MATH.md's example: fsaverage, centre at the bounding-box centre, pole opposite a
-    scalp cap of 1,558 faces (centroids within ~70.86 degrees of up, +Z in RAS)."""
+    """The brief's example (shared/spec/MATH.md): fsaverage, centre at the bounding-box
+    centre, pole opposite a scalp cap of 1,558 faces (centroids within ~70.86 degrees of up,
+    +Z in RAS)."""
     vertices, faces = load_sample("fsaverage-head.ply")
     centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
     directions = vertices[faces].mean(axis=1) - centre
@@ -119,7 +120,7 @@ def test_isometric_energy_has_an_interior_minimum_over_sigma():
         ).distortion
         for sigma in (0.05, 0.5, 1.0)
     }
-    assert d[0.05].isometric.mean == pytest.approx(1.080, abs=1e-3)  # MATH.md's figure
+    assert d[0.05].isometric.mean == pytest.approx(1.080, abs=1e-3)  # the brief's figure
     assert d[0.5].isometric.mean < d[0.05].isometric.mean
     assert d[0.5].isometric.mean < d[1.0].isometric.mean
     # Conformal distortion keeps falling as sigma shrinks while area distortion rises.

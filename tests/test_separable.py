@@ -1,4 +1,4 @@
-"""The separable method (MATH.md, "The alternative approach")."""
+"""The separable method (docs/math.md, section 5)."""
 
 import math
 
@@ -86,7 +86,8 @@ def test_at_90_degrees_it_is_eq1():
 
 
 def test_a_different_system_from_the_warp():
-    """MATH.md: at rho = 33.4 degrees the two differ by about 11 degrees (median) per angle."""
+    """docs/math.md, section 5: at rho = 33.4 degrees the two differ by about 11 degrees
+    (median) per angle."""
     rng = np.random.default_rng(9)
     u = rng.normal(size=(100_000, 3))
     u /= np.linalg.norm(u, axis=1, keepdims=True)

@@ -1,4 +1,4 @@
-"""Eq. 1 and its true inverse (MATH.md, Slip 1)."""
+"""Eq. 1 and its true inverse (docs/math.md, section 2, slip 1)."""
 
 import numpy as np
 import pytest

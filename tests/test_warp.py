@@ -1,4 +1,4 @@
-"""The pole warp W_sigma (paper eq. 3, MATH.md stable form) and distorted-pole coordinates."""
+"""The pole warp W_sigma (paper eq. 3, docs/math.md stable form) and distorted-pole coordinates."""
 
 import numpy as np
 import pytest

@@ -5,8 +5,8 @@ does not cover).
 Every facet of the convex hull of unit directions cuts off a cap that holds none of them
 (all lie on the facet's inner side), and the largest empty cap is one of these: its boundary
 circle passes through at least three directions. So the pole is the outward normal of the
-facet whose plane lies farthest out, and the cap's angular radius is ``acos`` of that
-plane's distance from the origin.
+facet whose plane lies nearest the origin (the smaller that distance, the larger the cap it
+cuts off), and the cap's angular radius is ``acos`` of that distance.
 """
 
 from __future__ import annotations
@@ -41,8 +41,9 @@ def largest_empty_cap(directions: np.ndarray) -> tuple[np.ndarray, float]:
         pole = -mean / norm if norm > 0 else np.array([0.0, 1.0, 0.0])
         return pole, cap_radius(units, pole)
     # Qhull's facets: normal . x + offset <= 0 inside, normals outward and unit.
-    farthest = int(np.argmin(-hull.equations[:, 3]))
-    pole = hull.equations[farthest, :3] / np.linalg.norm(hull.equations[farthest, :3])
+    # The plane nearest the origin cuts off the largest cap (radius acos of its distance).
+    nearest = int(np.argmin(-hull.equations[:, 3]))
+    pole = hull.equations[nearest, :3] / np.linalg.norm(hull.equations[nearest, :3])
     return pole, cap_radius(units, pole)
 
 

@@ -54,7 +54,9 @@ class Mesh:
     format: str = ""
 
     def group_faces(self, names: list[str]) -> np.ndarray:
-        """Ascending face ids in any of the groups ``names`` (each a key of ``groups``)."""
+        """Ascending face ids in any of the groups ``names``
+        (:func:`transforms.selection.faces_of_groups`: an unknown name is refused, naming
+        the groups the file has)."""
         return faces_of_groups(self.groups, names, len(self.faces))
 
 

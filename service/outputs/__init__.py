@@ -34,11 +34,13 @@ _MEDIA_TYPES = {
 }
 
 
-def choose_output(accept: str | None, requested: str | None) -> Output:
-    """The answer's form: ``params.output`` when given, else the one the ``Accept`` header
-    prefers (RFC 9110: each form takes the quality of the most specific range that matches
-    it; ties go to the range listed first, then to the order of :class:`Output`); JSON when
-    there is no header.
+def choose_output(
+    accept: str | None, requested: str | None, allowed: tuple[Output, ...] = tuple(Output)
+) -> Output:
+    """The answer's form among ``allowed``: ``params.output`` when given, else the one the
+    ``Accept`` header prefers (RFC 9110: each form takes the quality of the most specific
+    range that matches it; ties go to the range listed first, then to the order of
+    ``allowed``); JSON when there is no header.
 
     Raises
     ------
@@ -46,12 +48,15 @@ def choose_output(accept: str | None, requested: str | None) -> Output:
         406 when ``Accept`` allows none of the forms.
     """
     if requested is not None:
+        if Output(requested) not in allowed:
+            known = ", ".join(output.value for output in allowed)
+            raise Problem(422, f"params.output: one of {known}", "invalid-request", "params.output")
         return Output(requested)
     if accept is None or not accept.strip():
         return Output.JSON
     ranges = [_media_range(item) for item in accept.split(",") if item.strip()]
     scored = []
-    for order, output in enumerate(Output):
+    for order, output in enumerate(allowed):
         kind, subtype = output.media_type.split("/")
         matches = [
             (specificity, -position, quality)
@@ -63,7 +68,7 @@ def choose_output(accept: str | None, requested: str | None) -> Output:
             if quality > 0:
                 scored.append((quality, position, -order, output))
     if not scored:
-        produced = ", ".join(_MEDIA_TYPES.values())
+        produced = ", ".join(output.media_type for output in allowed)
         raise Problem(
             406,
             f"Accept: {accept.strip()!r} allows none of {produced} (or set params.output)",

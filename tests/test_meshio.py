@@ -465,3 +465,112 @@ def test_a_gltf_without_triangles_is_refused():
     }
     with pytest.raises(MeshFormatError, match="no triangles"):
         read_mesh(json.dumps(document).encode(), "gltf", LIMITS)
+
+
+# -- PLY triangle strips (range scanners and the Igea scan write them) ----------------------
+
+#: A 2 x 4 grid of vertices (x across, y up) as one strip: 0 4 1 5 2 6 3 7, every triangle
+#: counter-clockwise seen from +Z once the strip's alternation is undone.
+GRID = np.array([[x, y, 0.0] for y in (0, 1) for x in range(4)])
+STRIP = [4, 0, 5, 1, 6, 2, 7, 3]
+STRIP_TRIANGLES = [[4, 0, 5], [5, 0, 1], [5, 1, 6], [6, 1, 2], [6, 2, 7], [7, 2, 3]]
+
+
+def strips_ply(fmt: str, rows: list[list[int]], count: str = "int", index="vertex_indices"):
+    """A PLY of the grid with a ``tristrips`` element (colours and a confidence per vertex,
+    a material element in the way), in ``fmt``."""
+    header = [
+        "ply",
+        f"format {fmt} 1.0",
+        "element vertex 8",
+        "property float x",
+        "property float y",
+        "property float z",
+        "property uchar red",
+        "property uchar green",
+        "property uchar blue",
+        "property float confidence",
+        "element material 1",
+        "property uchar ambient_red",
+        "element tristrips " + str(len(rows)),
+        f"property list {count} int {index}",
+        "end_header",
+    ]
+    head = ("\n".join(header) + "\n").encode()
+    if fmt == "ascii":
+        lines = [f"{x:g} {y:g} {z:g} 10 20 30 0.5" for x, y, z in GRID] + ["7"]
+        lines += [f"{len(row)} " + " ".join(map(str, row)) for row in rows]
+        return head + ("\n".join(lines) + "\n").encode()
+    order = {"binary_little_endian": "<", "binary_big_endian": ">"}[fmt]
+    code = {"uchar": "B", "ushort": "H", "int": "i", "uint": "I"}[count]
+    body = b"".join(struct.pack(order + "fffBBBf", x, y, z, 10, 20, 30, 0.5) for x, y, z in GRID)
+    body += struct.pack(order + "B", 7)
+    for row in rows:
+        body += struct.pack(f"{order}{code}{len(row)}i", len(row), *row)
+    return head + body
+
+
+def normals_z(mesh) -> np.ndarray:
+    a, b, c = (mesh.vertices[mesh.faces[:, k]] for k in range(3))
+    return np.cross(b - a, c - a)[:, 2]
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian", "binary_big_endian"])
+@pytest.mark.parametrize("count", ["uchar", "ushort", "uint"])
+def test_ply_triangle_strips_keep_the_strips_winding(fmt, count):
+    mesh = read_mesh(strips_ply(fmt, [STRIP], count), "ply", LIMITS)
+    assert mesh.faces.tolist() == STRIP_TRIANGLES
+    assert (normals_z(mesh) > 0).all()  # one orientation: the alternation is undone
+    np.testing.assert_array_equal(mesh.vertices, GRID)
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+def test_ply_strips_restart_at_minus_one_and_skip_the_joins(fmt):
+    # Two strips in one row, split by -1; then a row whose strips are joined by repeating
+    # vertices (the old way): the repeating triangles are no triangles.
+    rows = [[4, 0, 5, 1, -1, 6, 2, 7, 3], [4, 0, 5, 1, 1, 6, 6, 2, 7, 3]]
+    mesh = read_mesh(strips_ply(fmt, rows, index="vertex_index"), "ply", LIMITS)
+    first = [[4, 0, 5], [5, 0, 1], [6, 2, 7], [7, 2, 3]]
+    assert mesh.faces.tolist()[:4] == first
+    assert all(len(set(face)) == 3 for face in mesh.faces.tolist())
+    assert (normals_z(mesh) > 0).all()
+
+
+def test_ply_faces_and_strips_come_in_the_headers_order():
+    header = VERTS.replace("vertex 3", "vertex 4")
+    body = "0 0 0\n1 0 0\n0 1 0\n1 1 0\n"
+    text = (
+        header
+        + "element face 1\nproperty list uchar int vertex_indices\n"
+        + "element tristrips 1\nproperty list int int vertex_indices\n"
+    )
+    mesh = read_mesh(ply_text(text, body + "3 0 1 2\n4 1 3 2 -1\n"), "ply", LIMITS)
+    assert mesh.faces.tolist() == [[0, 1, 2], [1, 3, 2]]
+
+
+def test_a_strip_that_names_a_missing_vertex_is_refused():
+    with pytest.raises(MeshFormatError, match=r"PLY tristrips row 0 refers to vertex 8"):
+        read_mesh(strips_ply("ascii", [[4, 0, 8]]), "ply", LIMITS)
+
+
+def test_a_file_without_triangle_elements_names_what_it_has():
+    text = VERTS + "element edge 1\nproperty int vertex1\nproperty int vertex2\n"
+    with pytest.raises(MeshFormatError, match="it has 'vertex', 'edge'"):
+        read_mesh(ply_text(text, TRIANGLE_ROWS + "0 1\n"), "ply", LIMITS)
+
+
+def test_a_real_scan_written_as_strips_reads_back_its_triangles():
+    """Lee Perry-Smith's scan as one tristrips row: each triangle a strip of its own, ended by
+    -1 (binary, as scanners write it)."""
+    mesh = read_mesh(SAMPLES["lee-perry-smith.obj"].path.read_bytes(), "obj", LIMITS)
+    items = np.hstack([mesh.faces, -np.ones((len(mesh.faces), 1), dtype=np.int64)]).ravel()
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        f"element vertex {len(mesh.vertices)}\nproperty double x\nproperty double y\n"
+        "property double z\nelement tristrips 1\nproperty list int int vertex_indices\n"
+        "end_header\n"
+    ).encode()
+    body = mesh.vertices.astype("<f8").tobytes() + struct.pack("<i", len(items))
+    strips = read_mesh(header + body + items.astype("<i4").tobytes(), "ply", LIMITS)
+    np.testing.assert_array_equal(strips.faces, mesh.faces)
+    np.testing.assert_array_equal(strips.vertices, mesh.vertices)

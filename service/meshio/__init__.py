@@ -56,8 +56,10 @@ READERS: dict[str, Reader] = {
             "PLY",
             read_ply,
             "application/octet-stream",
-            "PLY polygons are fan-triangulated like OBJ's; other elements and properties are "
-            "skipped.",
+            "PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, "
+            "``-1`` ending a strip) give their triangles with the strip's winding, joins that "
+            "repeat a vertex left out; faces and strips count in the header's order; other "
+            "elements and properties are skipped.",
         ),
         Reader(
             "stl",

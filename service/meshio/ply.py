@@ -5,7 +5,15 @@ Rules (the API documentation repeats them):
 * vertex ``i`` is the ``i``-th row of the ``vertex`` element (its ``x``, ``y``, ``z``);
 * a ``face`` row's ``vertex_indices`` (or ``vertex_index``) polygon ``a b c d ...`` becomes the
   triangles ``(a, b, c), (a, c, d), ...`` in that order, as in OBJ;
-* other elements and properties are skipped.
+* a ``tristrips`` row's ``vertex_indices`` (or ``vertex_index``) list is one or more strips
+  separated by ``-1``: strip ``s0 s1 s2 s3 ...`` becomes ``(s0, s1, s2), (s2, s1, s3),
+  (s2, s3, s4), ...`` (every other triangle swaps its first two corners, so all keep the
+  strip's winding); a triangle that repeats a vertex (a join between strips written without
+  ``-1``) is no triangle and is left out;
+* the file's faces are the triangles of its ``face`` and ``tristrips`` elements, element by
+  element in the order of the header, row by row;
+* other elements (edges, materials, ...) and properties (colours, normals, confidence) are
+  skipped; list counts may be of any integer type.
 
 Every count the header declares is checked against the limits and against the bytes that
 follow before anything is allocated for it. Rows of fixed size are read in one numpy pass;
@@ -16,7 +24,7 @@ with one pass per polygon size.
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -40,6 +48,8 @@ _TYPES = {
 _FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
 _INDEX_NAMES = ("vertex_indices", "vertex_index")
 _MAX_CORNERS = 255  # a polygon with more is surely a misread list
+#: The elements whose rows hold triangles.
+_TRIANGLE_ELEMENTS = ("face", "tristrips")
 
 
 @dataclass(frozen=True)
@@ -54,6 +64,7 @@ class _Element:
     name: str
     count: int
     properties: tuple[_Property, ...]
+    max_items: int = _MAX_CORNERS  # the longest list a row may hold
 
     @property
     def fixed(self) -> bool:
@@ -70,17 +81,32 @@ def read_ply(data: bytes, limits: Limits) -> Mesh:
         missing vertices, or counts beyond ``limits``.
     """
     order, elements, body = _header(data)
+    # A strip of n items holds up to n - 2 triangles: its lists may be as long as the limit.
+    elements = [
+        replace(e, max_items=limits.max_faces + 2) if e.name == "tristrips" else e for e in elements
+    ]
+    vertex, indices = _what_to_read(elements, limits)
+    return _read_body(data, body, elements, order, vertex, indices, limits)
+
+
+def _what_to_read(elements: list, limits: Limits) -> tuple:
+    """The vertex element and, by name, the list property of each triangle element;
+    refuses a file without them or with an element beyond the limits."""
     by_name = {element.name: element for element in elements}
-    if "vertex" not in by_name or "face" not in by_name:
-        raise MeshFormatError("the PLY file needs a 'vertex' and a 'face' element")
-    vertex, face = by_name["vertex"], by_name["face"]
+    triangles = [by_name[name] for name in _TRIANGLE_ELEMENTS if name in by_name]
+    if "vertex" not in by_name or not triangles:
+        present = ", ".join(repr(e.name) for e in elements) or "none"
+        raise MeshFormatError(
+            "the PLY file needs a 'vertex' and a 'face' or 'tristrips' element; it has "
+            f"{present} (no other element holds triangles that meshflat reads)"
+        )
+    vertex = by_name["vertex"]
     scalars = {p.name for p in vertex.properties if p.count_type is None}
     if not {"x", "y", "z"} <= scalars:
         raise MeshFormatError("the PLY vertex element needs scalar x, y and z properties")
-    index = next((p for p in face.properties if p.name in _INDEX_NAMES), None)
-    if index is None or index.count_type is None:
-        raise MeshFormatError("the PLY face element needs a list property 'vertex_indices'")
-    check_counts(vertex.count, face.count, limits)  # at least one triangle a face
+    indices = {element.name: _index_property(element) for element in triangles}
+    if "face" in by_name:  # at least one triangle a face (a strip may hold none)
+        check_counts(vertex.count, by_name["face"].count, limits)
     largest = max(limits.max_vertices, limits.max_faces)
     for element in elements:
         if element.count > largest:
@@ -88,20 +114,76 @@ def read_ply(data: bytes, limits: Limits) -> Mesh:
                 f"the PLY {element.name} element declares {element.count:,} rows; the limit "
                 f"is {largest:,}",
             )
+    return vertex, indices
 
+
+def _read_body(data, body, elements, order, vertex, indices, limits) -> Mesh:
+    """The mesh from the rows after the header (``body`` is where they start)."""
     rows = _binary_rows if order else _ascii_rows
-    vertices = faces = None
+    vertices, pieces = None, []
     position = body
     for element in elements:
         columns, position = rows(data, position, element, order)
         if element is vertex:
             vertices = np.stack([columns[k] for k in "xyz"], axis=1).astype(np.float64)
-        elif element is face:
-            items, corners = columns[index.name]
-            faces = _fan(_indices(items, corners), corners, vertex.count, limits)
+        elif element.name in indices:
+            items, sizes = columns[indices[element.name]]
+            items = _indices(items, sizes, element.name)
+            if element.name == "face":
+                pieces.append(_fan(items, sizes, vertex.count, limits))
+            else:
+                pieces.append(_strips(items, sizes, vertex.count))
+            check_counts(vertex.count, sum(len(piece) for piece in pieces), limits)
+    faces = np.concatenate(pieces) if pieces else np.empty((0, 3), dtype=np.int64)
     if not faces.size:
         raise MeshFormatError("the PLY file holds no triangles")
     return Mesh(vertices=checked_vertices(vertices), faces=faces, format="ply")
+
+
+def _index_property(element: _Element) -> str:
+    """The name of a triangle element's list of vertex ids."""
+    index = next((p for p in element.properties if p.name in _INDEX_NAMES), None)
+    if index is None or index.count_type is None:
+        raise MeshFormatError(
+            f"the PLY {element.name} element needs a list property 'vertex_indices'"
+        )
+    return index.name
+
+
+def _strips(items: np.ndarray, sizes: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(t, 3) int: the triangles of triangle strips, row by row, ``-1`` ending a strip
+    (module docstring); triangles that repeat a vertex are left out.
+
+    Parameters
+    ----------
+    items : (k,) int, the rows' lists, flat, in row order
+    sizes : (rows,) int, each row's list length
+    n_vertices : int
+    """
+    bad = np.flatnonzero((items < -1) | (items >= n_vertices))
+    if bad.size:
+        raise MeshFormatError(
+            f"PLY tristrips row {_face_of(int(bad[0]), sizes)} refers to vertex "
+            f"{int(items[bad[0]])}, but the file has {n_vertices:,} vertices (ids count from 0; "
+            "-1 ends a strip)"
+        )
+    # Every row ends its strips: a -1 after each row, then one sequence.
+    ends = np.cumsum(sizes)
+    sequence = np.insert(items, ends, -1)
+    n = len(sequence)
+    if n < 3:
+        return np.empty((0, 3), dtype=np.int64)
+    position = np.arange(n)
+    last_break = np.maximum.accumulate(np.where(sequence == -1, position, -1))
+    step = position - last_break - 1  # the item's place in its strip
+    first = np.arange(n - 2)
+    whole = (sequence[first] >= 0) & (sequence[first + 1] >= 0) & (sequence[first + 2] >= 0)
+    first = first[whole]
+    a, b, c = sequence[first], sequence[first + 1], sequence[first + 2]
+    odd = step[first] % 2 == 1
+    triangles = np.stack([np.where(odd, b, a), np.where(odd, a, b), c], axis=1)
+    proper = (a != b) & (b != c) & (a != c)
+    return triangles[proper]
 
 
 def _face_of(item: int, corners: np.ndarray) -> int:
@@ -109,14 +191,15 @@ def _face_of(item: int, corners: np.ndarray) -> int:
     return int(np.searchsorted(np.cumsum(corners), item, side="right"))
 
 
-def _indices(items: np.ndarray, corners: np.ndarray) -> np.ndarray:
+def _indices(items: np.ndarray, corners: np.ndarray, element: str = "face") -> np.ndarray:
     """Vertex references as int64; a float list must hold whole numbers."""
     if items.dtype.kind == "f":
         with np.errstate(invalid="ignore"):
             bad = np.flatnonzero(~(np.isfinite(items) & (items % 1 == 0) & (np.abs(items) < 2**62)))
         if bad.size:
+            row = "face" if element == "face" else f"{element} row"
             raise MeshFormatError(
-                f"PLY face {_face_of(int(bad[0]), corners)} lists {float(items[bad[0]])!r}, "
+                f"PLY {row} {_face_of(int(bad[0]), corners)} lists {float(items[bad[0]])!r}, "
                 "not a vertex index"
             )
     return items.astype(np.int64)
@@ -271,10 +354,10 @@ def _walk_rows(data: bytes, position: int, element: _Element, order: str, rows: 
             if offset + counter.size > end:
                 raise _short(element, end - position, offset + counter.size - position)
             (n,) = counter.unpack_from(data, offset)
-            if not 0 <= n <= _MAX_CORNERS:
+            if not 0 <= n <= element.max_items:
                 raise MeshFormatError(
                     f"PLY {element.name} row {row} lists {n} items in {name!r}; 0 to "
-                    f"{_MAX_CORNERS} are read"
+                    f"{element.max_items} are read"
                 )
             shape.append(n)
             offset += counter.size + n * item_size
@@ -372,11 +455,11 @@ def _ascii_rows(data: bytes, position: int, element: _Element, _order=None):
             at = at + 1
             continue
         sizes = values[at]
-        bad = np.flatnonzero((sizes < 0) | (sizes > _MAX_CORNERS) | (sizes % 1 != 0))
+        bad = np.flatnonzero((sizes < 0) | (sizes > element.max_items) | (sizes % 1 != 0))
         if bad.size:
             raise MeshFormatError(
                 f"PLY {element.name} row {int(bad[0])} gives {p.name!r} {float(sizes[bad[0]])!r} "
-                f"items; 0 to {_MAX_CORNERS} are read"
+                f"items; 0 to {element.max_items} are read"
             )
         sizes = sizes.astype(np.int64)
         _check_values(at + sizes, row_end, element)

@@ -49,7 +49,7 @@ from benchmarks.server import free_port, wait_ready
 from service.samples import SAMPLES
 
 FRAME = {"center": [0, 1.2, -0.3], "rotation": {"pole": [0, -1, 0], "up": [0, 0, 1]}}
-SCALP = {"region": {"cone": {"axis": [0, 1, 0], "half_angle_deg": 60}}}
+SCALP = {"region": {"cone": {"axis": [0, 1, 0], "half_angle_deg": 60, "apex": [0, 1.2, -0.3]}}}
 #: The request mix, cycled by each client from its own starting point.
 MIX = [
     FRAME | SCALP,

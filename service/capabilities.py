@@ -210,13 +210,11 @@ JSON_CAPABILITIES = (
     ),
 )
 
-#: Where a mesh route's fields lie: the parameters of every mesh route (and ``pole`` and
-#: ``up``, of the rotation) in the ``params`` part; whatever else the core names (vertices,
-#: faces, points it derived from them) is the uploaded mesh's.
+#: Where a mesh route's fields lie: the parameters of every mesh route in the ``params``
+#: part; whatever else the core names (vertices, faces, points it derived from them) is the
+#: uploaded mesh's.
 MESH_FORM = ErrorPlaces(
-    "params.",
-    frozenset(name for c in MESH_CAPABILITIES for name in c.params.model_fields) | {"pole", "up"},
-    "mesh",
+    "params.", frozenset(name for c in MESH_CAPABILITIES for name in c.params.model_fields), "mesh"
 )
 
 #: The mesh routes by command-line command.

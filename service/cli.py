@@ -2,7 +2,8 @@
 
     meshflat serve [--host H] [--port P] [--workers N]    (defaults: MESHFLAT_HOST, ...)
     meshflat health [--port P]                            (exit 0 when /healthz answers)
-    meshflat flatten MESH --region-cone AXIS:DEG [--sigma S | --pole-angle DEG | --auto]
+    meshflat flatten MESH --region-cone AXIS:DEG [--apex X,Y,Z]
+                          [--sigma S | --pole-angle DEG | --auto]
                           [--center X,Y,Z | bbox_center | centroid] [--pole X,Y,Z --up X,Y,Z]
                           [--layout theta_phi|mercator] [--params JSON] --out FILE
     meshflat validate MESH ... [--out FILE.json]
@@ -85,6 +86,8 @@ def params_of(args: argparse.Namespace) -> dict:
         raise Problem(422, "--params: must be a JSON object", field="--params")
     if args.region_cone:
         params["region"] = {"cone": _cone(args.region_cone)}
+        if args.apex:
+            params["region"]["cone"]["apex"] = _vector(args.apex, "--apex")
     if args.auto:
         params.update(center="auto", rotation="auto", sigma="auto")
     options = {"sigma": args.sigma, "pole_angle_deg": args.pole_angle, "layout": args.layout}
@@ -175,6 +178,9 @@ def parser() -> argparse.ArgumentParser:
         *most, last = (reader.title.split()[0] for reader in READERS.values())
         command.add_argument("mesh", metavar="MESH", help=f"{', '.join(most)} or {last} file")
         command.add_argument("--region-cone", metavar="AXIS:DEG", help="e.g. 0,1,0:60")
+        command.add_argument(
+            "--apex", metavar="X,Y,Z", help="where the cone starts (default: the box centre)"
+        )
         cap = command.add_mutually_exclusive_group()
         cap.add_argument("--sigma", type=float, help="the warp parameter (default 0.3)")
         cap.add_argument("--pole-angle", type=float, metavar="DEG", help="the cap's angle")

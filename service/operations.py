@@ -24,9 +24,11 @@ from transforms import (
     FlatRegion,
     Frame,
     Hits,
+    Layout,
     Method,
     PoleCap,
     angles_to_world,
+    default_choice,
     fit_region,
     flatten_region,
     locate,
@@ -65,8 +67,9 @@ def chart_of(params: ChartParams) -> Chart:
 
 
 def frame_of(params: ChartParams, center: np.ndarray) -> Frame:
-    """The frame at ``center`` with the parameters' rotation (identity when none)."""
-    if params.rotation is None:
+    """The frame at ``center`` with the parameters' rotation (identity when none: a mesh
+    request without one has it chosen by :func:`resolve` instead)."""
+    if params.rotation is None or params.rotation == "identity":
         return Frame.identity(center)
     if isinstance(params.rotation, PoleUp):
         return Frame.from_pole_up(params.rotation.pole, params.rotation.up, center)
@@ -75,11 +78,13 @@ def frame_of(params: ChartParams, center: np.ndarray) -> Frame:
 
 @dataclass(frozen=True)
 class Selection:
-    """The region a request names: its file face ids (ascending) and the centre the
-    parameters ask for (before any fit)."""
+    """The region a request names: its file face ids (ascending), the centre the
+    parameters ask for (before any fit), and the region as answers repeat it (a cone with
+    its apex resolved; None for the whole mesh), so that sent back it selects these faces."""
 
     faces: np.ndarray
     center: np.ndarray
+    region: dict | None
 
 
 def select_region(mesh: Mesh, params: MeshParams) -> Selection:
@@ -94,10 +99,16 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
     """
     region, n_faces = params.region, len(mesh.faces)
     if region is not None and region.cone is not None:
-        center = _center(mesh, mesh.faces, params.center)
         cone = region.cone
-        faces = select.cone_faces(mesh.vertices, mesh.faces, center, cone.axis, cone.half_angle_deg)
-        return Selection(select.nonempty(faces), center)
+        apex = (
+            select.bbox_center(mesh.vertices, mesh.faces)
+            if cone.apex is None
+            else np.asarray(cone.apex, dtype=np.float64)
+        )
+        faces = select.cone_faces(mesh.vertices, mesh.faces, apex, cone.axis, cone.half_angle_deg)
+        resolved = {"cone": {**cone.model_dump(), "apex": apex.tolist()}}
+        center = _center(mesh, mesh.faces, params.center)
+        return Selection(select.nonempty(faces), center, resolved)
     if region is None:
         faces = np.arange(n_faces)
     elif region.faces is not None:
@@ -107,7 +118,8 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
     else:
         faces = mesh.group_faces(region.groups)
     faces = select.nonempty(faces)
-    return Selection(faces, _center(mesh, mesh.faces[faces], params.center))
+    resolved = None if region is None else region.model_dump(exclude_unset=True)
+    return Selection(faces, _center(mesh, mesh.faces[faces], params.center), resolved)
 
 
 def _center(mesh: Mesh, faces: np.ndarray, center) -> np.ndarray:
@@ -119,17 +131,20 @@ def _center(mesh: Mesh, faces: np.ndarray, center) -> np.ndarray:
 
 
 def fixed_choices(params: MeshParams, center: np.ndarray) -> FitFixed:
-    """What the caller fixed for :func:`transforms.fit_region` (None: choose it)."""
+    """What the caller fixed for :func:`transforms.fit_region` and
+    :func:`transforms.default_choice` (None: choose it; no rotation or no cap given counts
+    as chosen)."""
     rotation, up = params.rotation, None
-    if rotation == "auto":
+    if rotation is None or rotation == "auto":
         rotation = None
     elif isinstance(rotation, AutoPole):
         rotation, up = None, rotation.up
     else:
         rotation = frame_of(params, np.zeros(3))
     sigma = None
-    if params.sigma != "auto" and params.method is not Method.STANDARD:
-        sigma = chart_of(params).cap.sigma  # given, or the default
+    given = params.sigma is not None or params.pole_angle_deg is not None
+    if given and params.sigma != "auto" and params.method is not Method.STANDARD:
+        sigma = chart_of(params).cap.sigma
     return FitFixed(
         center=None if params.center == "auto" else center,
         rotation=rotation,
@@ -153,27 +168,46 @@ class MeshRegion:
     Attributes
     ----------
     mesh : Mesh, as read
-    faces : (m,) int, the region's file face ids, ascending
+    selection : Selection, the region's file face ids and the region as answers repeat it
     chart, frame : what the region was flattened with
     flat : FlatRegion, positions in ``faces`` and ``flat.vertex_ids``
     fit : Fit or None
     """
 
     mesh: Mesh
-    faces: np.ndarray
+    selection: Selection
     chart: Chart
     frame: Frame
     flat: FlatRegion
     fit: Fit | None
 
+    @property
+    def faces(self) -> np.ndarray:
+        """(m,) int: the region's file face ids, ascending."""
+        return self.selection.faces
+
 
 def resolve(
     mesh: Mesh, selection: Selection, params: MeshParams, settings: Settings
 ) -> tuple[Chart, Frame, Fit | None]:
-    """The chart and frame the parameters name, or fitted (with the fit) where any is
-    ``"auto"`` (and always for /v1/fit's :class:`~service.params.FitParams`)."""
+    """The chart and frame the parameters name; fitted (with the fit) where any is ``"auto"``
+    (and always for /v1/fit's :class:`~service.params.FitParams`); the rotation and sigma not
+    given chosen by :func:`transforms.default_choice` (no search) otherwise."""
     if not params.auto:
-        return chart_of(params), frame_of(params, selection.center), None
+        fixed = fixed_choices(params, selection.center)
+        warped = params.method is not Method.STANDARD
+        if fixed.rotation is not None and (fixed.sigma is not None or not warped):
+            return chart_of(params), frame_of(params, selection.center), None
+        chosen = default_choice(
+            mesh.vertices,
+            mesh.faces[selection.faces],
+            fixed,
+            fit_bounds(params),
+            method=params.method,
+            layout=params.layout,
+            threads=settings.threads,
+        )
+        return chosen.chart, chosen.frame, chosen
     fit = fit_region(
         mesh.vertices,
         mesh.faces[selection.faces],
@@ -197,7 +231,7 @@ def flatten(mesh: Mesh, params: MeshParams, settings: Settings) -> MeshRegion:
         flat = flatten_region(
             mesh.vertices, faces, frame, chart, threads=settings.threads, layout=params.layout
         )
-    return MeshRegion(mesh, selection.faces, chart, frame, flat, fit)
+    return MeshRegion(mesh, selection, chart, frame, flat, fit)
 
 
 @dataclass(frozen=True)
@@ -207,14 +241,16 @@ class Located:
     Attributes
     ----------
     chart, frame : what the directions were read in
-    faces : (m,) int, the region's file face ids
-    hits : Hits, face positions in ``faces``, points in the local frame
+    selection : Selection, the region's file face ids and the region as answers repeat it
+    hits : Hits, face positions in ``selection.faces``, points in the local frame
+    layout : Layout, of the params (for the answer's params)
     """
 
     chart: Chart
     frame: Frame
-    faces: np.ndarray
+    selection: Selection
     hits: Hits
+    layout: Layout
 
     @property
     def found(self) -> np.ndarray:
@@ -231,7 +267,7 @@ def locate_directions(mesh: Mesh, params: LocateParams, settings: Settings) -> L
     directions = chart.inverse(params.theta, params.phi, 1.0)
     # Every vertex given, so that an error names the file's vertex ids.
     hits = locate(frame.to_local(mesh.vertices), mesh.faces[selection.faces], directions)
-    return Located(chart, frame, selection.faces, hits)
+    return Located(chart, frame, selection, hits, params.layout)
 
 
 # -- points --------------------------------------------------------------------------------

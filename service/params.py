@@ -164,6 +164,12 @@ class InverseRequest(ChartParams):
 class Cone(_Strict):
     axis: Vector3 = Field(description="World direction of the cone's axis (non-zero).")
     half_angle_deg: Number = Field(gt=0, le=180, description="Half-angle in degrees.")
+    apex: Vector3 | None = Field(
+        None,
+        description="Where the cone starts, world coordinates. Default: the bounding-box "
+        "centre of the whole mesh, whatever center is (so a fitted centre sent back selects "
+        "the same faces); answers give it resolved.",
+    )
 
 
 class Region(_Strict):
@@ -183,8 +189,7 @@ class Region(_Strict):
     )
     cone: Cone = Field(
         None,
-        description="Faces whose centroid, seen from the centre, lies within half_angle_deg of "
-        "axis.",
+        description="Faces whose centroid, seen from the apex, lies within half_angle_deg of axis.",
     )
 
     @model_validator(mode="after")
@@ -245,20 +250,27 @@ class MeshParams(ChartParams):
         description="The centre: world point, or the area-weighted centroid or bounding-box "
         "centre of the region (of the whole mesh when the region is a cone), or "
         + AUTO_DESCRIPTION
-        + " A cone region is then selected around the mesh's bounding-box centre.",
+        + " A cone region is taken around its apex, not the centre.",
     )
     sigma: PositiveNumber | Literal["auto"] | None = Field(
         None,
-        description="Warp parameter (> 0); the cap's angle is 2 atan(sigma). Default 0.3, or "
+        description="Warp parameter (> 0); the cap's angle is 2 atan(sigma), or "
         + AUTO_DESCRIPTION
-        + " At most one of sigma and pole_angle_deg; standard takes neither.",
+        + " Default (neither sigma nor pole_angle_deg): the sigma of least isometric energy "
+        "whose cap fits inside the largest cap free of region directions, min_margin_deg to "
+        "spare (the start of /v1/fit, with no search); the answer's params give it. At most "
+        "one of sigma and pole_angle_deg; standard takes neither.",
     )
-    rotation: Matrix3 | PoleUp | AutoPole | Literal["auto"] | None = Field(
+    rotation: Matrix3 | PoleUp | AutoPole | Literal["auto", "identity"] | None = Field(
         None,
         description="World-to-local rotation: a 3x3 matrix (rows), {pole, up}, "
-        '{"pole": "auto", "up": [x, y, z]} (the roll follows up), or '
+        '{"pole": "auto", "up": [x, y, z]} (the roll follows up), "identity" (the world '
+        "axes), or "
         + AUTO_DESCRIPTION
-        + " Default: identity.",
+        + ' Default: {"pole": "auto"} without the search: the pole in the middle of the '
+        "largest cap free of region directions seen from the centre, local +Z along the "
+        "direction in which the region spreads most about it (the sign from the third "
+        "moment); the answer's params give the matrix.",
     )
     layout: choice(Layout) = Field(
         Layout.THETA_PHI,
@@ -306,7 +318,7 @@ class FitParams(MeshParams):
     center: Vector3 | Literal[CENTERS] = Field(
         "auto", description=MeshParams.model_fields["center"].description
     )
-    rotation: Matrix3 | PoleUp | AutoPole | Literal["auto"] | None = Field(
+    rotation: Matrix3 | PoleUp | AutoPole | Literal["auto", "identity"] | None = Field(
         "auto", description=MeshParams.model_fields["rotation"].description
     )
 

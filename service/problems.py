@@ -128,9 +128,14 @@ class ErrorPlaces:
     data: str = ""
 
     def of(self, name: str) -> str:
+        name = _NESTED.get(name, name)
         if self.parameters is None or name.partition(".")[0] in self.parameters:
             return f"{self.prefix}{name}"
         return self.data
+
+
+#: The core's arguments that are parts of a request field: the pole and up of a rotation.
+_NESTED = {"pole": "rotation.pole", "up": "rotation.up"}
 
 
 #: A JSON body: every field is the body's own.

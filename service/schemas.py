@@ -17,7 +17,7 @@ from pydantic import BaseModel, Field, PrivateAttr
 
 from transforms import Layout, Method
 
-from .params import choice
+from .params import Region, choice
 
 if TYPE_CHECKING:
     from .operations import Angles, Located, MeshRegion
@@ -76,11 +76,17 @@ class ResolvedParams(Answer):
     center: list[float] = Field(description="The centre used, world coordinates.")
     rotation: list[list[float]] = Field(description="The world-to-local rotation used (rows).")
     layout: choice(Layout) | None = Field(None, description="The 2D layout of a mesh answer.")
+    region: Region | None = Field(
+        None,
+        description="The region of a mesh answer, as it was selected (a cone with its apex); "
+        "null: the whole mesh. Sent back with the same mesh, it selects the same faces.",
+    )
 
     @classmethod
-    def of(cls, chart, frame, layout: Layout | None = None) -> ResolvedParams:
+    def of(cls, chart, frame, layout: Layout | None = None, selection=None) -> ResolvedParams:
         """Everything as it was used, so that it can be sent back as it is (``standard``
-        has no cap: its sigma and pole angle are null); ``layout`` for mesh answers."""
+        has no cap: its sigma and pole angle are null); ``layout`` and the ``selection``'s
+        region for mesh answers."""
         standard = chart.method is Method.STANDARD
         values = {
             "method": chart.method,
@@ -91,11 +97,13 @@ class ResolvedParams(Answer):
         }
         if layout is not None:
             values["layout"] = layout
+        if selection is not None:
+            values["region"] = selection.region
         return cls.build(**values)
 
     @classmethod
     def of_region(cls, region: MeshRegion) -> ResolvedParams:
-        return cls.of(region.chart, region.frame, region.flat.layout)
+        return cls.of(region.chart, region.frame, region.flat.layout, region.selection)
 
 
 class FlatVertices(Answer):
@@ -162,26 +170,46 @@ class Summary(Answer):
     max: float
 
 
+def _summaries(d) -> dict:
+    """The three summaries of a :class:`transforms.Distortion`."""
+    return {
+        name: Summary.build(mean=s.mean, p95=s.p95, max=s.max)
+        for name, s in (("conformal", d.conformal), ("area", d.area), ("isometric", d.isometric))
+    }
+
+
+class TrustedMetrics(Answer):
+    conformal: Summary = Field(description="s1 / s2 over the trusted faces.")
+    area: Summary = Field(description="|log(s1 s2)| over the trusted faces.")
+    isometric: Summary = Field(description="The isometric energy over the trusted faces.")
+    faces: int = Field(description="The trusted faces: neither flagged nor degenerate.")
+    flagged_faces: int = Field(description="The faces left out: flagged by the validation.")
+
+
 class Metrics(Answer):
     conformal: Summary = Field(description="s1 / s2 (1: angles kept), area-weighted.")
     area: Summary = Field(description="|log(s1 s2)| (0: areas kept), area-weighted.")
     isometric: Summary = Field(
         description="(s1^2 + s2^2 + s1^-2 + s2^-2) / 4 (1: an isometry), area-weighted."
     )
+    trusted: TrustedMetrics | None = Field(
+        description="The same measures over the faces that are neither flagged (seam, "
+        "singular point, folded, back-facing) nor degenerate, with the same per-face values: "
+        "a few folded slivers, whose energy can be thousands, do not hide how the rest of "
+        "the map is. Null when no face is trusted."
+    )
 
     @classmethod
     def of(cls, region: MeshRegion) -> Metrics:
-        d = region.flat.distortion
-        return cls.build(
-            **{
-                name: Summary.build(mean=s.mean, p95=s.p95, max=s.max)
-                for name, s in (
-                    ("conformal", d.conformal),
-                    ("area", d.area),
-                    ("isometric", d.isometric),
-                )
-            }
-        )
+        flat = region.flat
+        trusted = None
+        if flat.trusted is not None:
+            trusted = TrustedMetrics.build(
+                **_summaries(flat.trusted),
+                faces=flat.trusted.measured_faces,
+                flagged_faces=flat.flagged_faces,
+            )
+        return cls.build(**_summaries(flat.distortion), trusted=trusted)
 
 
 class FlattenResponse(Answer):
@@ -235,6 +263,11 @@ class Explain(Answer):
         "deepest point, the empty cap's pole, the best sigma for it)."
     )
     energy_end: float = Field(description="The same for the answer.")
+    energy_end_trusted: float | None = Field(
+        description="The answer's isometric energy over its trusted faces (metrics.trusted); "
+        "null when none is trusted."
+    )
+    flagged_faces: int = Field(description="The answer's faces the validation flags.")
     kernel_inscribed_radius: float = Field(
         description="Radius of the largest ball inside the region's kernel, closed over its "
         "holes (0: the kernel is empty)."
@@ -262,6 +295,10 @@ class Explain(Answer):
         return cls.build(
             energy_start=e.energy_start,
             energy_end=e.energy_end,
+            energy_end_trusted=(
+                None if region.flat.trusted is None else region.flat.trusted.isometric.mean
+            ),
+            flagged_faces=region.flat.flagged_faces,
             kernel_inscribed_radius=e.kernel_inscribed_radius,
             kernel_empty=e.kernel_empty,
             center_depth=e.center_depth,
@@ -300,10 +337,11 @@ class LocateResponse(Answer):
     def of(cls, located: Located) -> LocateResponse:
         hits, found = located.hits, located.found
         world = located.frame.to_world(np.where(found[:, None], hits.points, 0.0))
-        ids = np.where(found, located.faces[np.maximum(hits.faces, 0)], -1).tolist()
+        ids = np.where(found, located.selection.faces[np.maximum(hits.faces, 0)], -1).tolist()
         weights = np.where(found[:, None], hits.barycentric, 0.0).tolist()
         answers = Hit.rows(found.tolist(), face=ids, barycentric=weights, point=world.tolist())
-        return cls.build(params=ResolvedParams.of(located.chart, located.frame), hits=answers)
+        params = ResolvedParams.of(located.chart, located.frame, located.layout, located.selection)
+        return cls.build(params=params, hits=answers)
 
 
 class PointsResponse(Answer):

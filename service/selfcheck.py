@@ -18,6 +18,7 @@ SAMPLE = "fsaverage-head.ply"
 #: The scalp: faces whose centroid is within 70 degrees of up (+Z in the sample's RAS axes)
 #: seen from the bounding-box centre; the cap around -Z (the neck).
 SCALP_PARAMS = {
+    "sigma": 0.3,
     "rotation": {"pole": [0.0, 0.0, -1.0], "up": [0.0, 1.0, 0.0]},
     "region": {"cone": {"axis": [0.0, 0.0, 1.0], "half_angle_deg": 70.0}},
 }
@@ -33,6 +34,7 @@ class SelfCheck:
     margin_deg: float
     isometric_mean: float
     seconds: float
+    flagged: int = 0
 
     @property
     def ok(self) -> bool:
@@ -43,7 +45,8 @@ class SelfCheck:
         return (
             f"self-check: scalp of {self.sample} ({self.faces:,} faces) flattened {verdict} "
             f"in {self.seconds * 1e3:.0f} ms, margin {self.margin_deg:.1f} deg, "
-            f"isometric distortion {self.isometric_mean:.3f}"
+            f"isometric distortion {self.isometric_mean:.3f} on the trusted faces "
+            f"({self.flagged:,} flagged)"
         )
 
 
@@ -63,6 +66,7 @@ def run_self_check() -> SelfCheck:
         faces=len(region.faces),
         seam_free=v.seam_free,
         margin_deg=min(v.margin_deg_seam, v.margin_deg_north, v.margin_deg_south),
-        isometric_mean=flat.distortion.isometric.mean,
+        isometric_mean=(flat.trusted or flat.distortion).isometric.mean,
         seconds=time.perf_counter() - start,
+        flagged=flat.flagged_faces,
     )

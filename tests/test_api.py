@@ -25,13 +25,16 @@ pytestmark = pytest.mark.anyio
 SCALP = {
     "fsaverage-head.ply": {
         "center": "bbox_center",
+        "sigma": 0.3,
         "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
         "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}},
     },
     "lee-perry-smith.glb": {
         "center": [0.0, 1.2, -0.3],
+        "sigma": 0.3,
         "rotation": {"pole": [0, -1, 0], "up": [0, 0, 1]},
-        "region": {"cone": {"axis": [0, 1, 0], "half_angle_deg": 60}},
+        # The box centre holds the shoulders: the cone starts inside the skull.
+        "region": {"cone": {"axis": [0, 1, 0], "half_angle_deg": 60, "apex": [0.0, 1.2, -0.3]}},
     },
 }
 
@@ -133,7 +136,7 @@ async def test_every_method_and_the_pole_angle(client, method):
         ({"points": [[1, 0]]}, "points.0"),
         ({"points": []}, "points"),
         ({"points": [[1, 0, 0]], "rotation": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}, "rotation"),
-        ({"points": [[1, 0, 0]], "rotation": {"pole": [0, 1, 0], "up": [0, 2, 0]}}, "up"),
+        ({"points": [[1, 0, 0]], "rotation": {"pole": [0, 1, 0], "up": [0, 2, 0]}}, "rotation.up"),
         ({"points": [[1, 0, 0]], "method": "conformal"}, "method"),
         ({"points": [[1, 0, 0]], "extra": 1}, "extra"),
     ],
@@ -573,8 +576,9 @@ async def test_fit_answers_params_that_flatten_reproduces(client):
     faces = flat.json()["faces"]["ids"]
     again = await post(client, "/v1/validate", {**body["params"], "region": {"faces": faces}})
     assert again.status_code == 200, again.text
-    for name, summary in body["metrics"].items():
-        assert again.json()["metrics"][name] == pytest.approx(summary, rel=1e-9)
+    for name in ("conformal", "area", "isometric"):
+        assert again.json()["metrics"][name] == pytest.approx(body["metrics"][name], rel=1e-9)
+    assert again.json()["metrics"]["trusted"]["faces"] == body["metrics"]["trusted"]["faces"]
     assert again.json()["validation"]["margin_deg"] == pytest.approx(
         body["validation"]["margin_deg"]
     )
@@ -604,7 +608,7 @@ async def test_auto_in_flatten_and_an_up_hint(client):
         ({"min_kernel_depth": -0.1}, "params.min_kernel_depth"),
         ({"method": "standard", "sigma": "auto"}, "params"),
         ({"sigma": "auto", "pole_angle_deg": 30}, "params"),
-        ({"rotation": {"pole": "auto", "up": [0, 0, 0]}}, "params.up"),
+        ({"rotation": {"pole": "auto", "up": [0, 0, 0]}}, "params.rotation.up"),
         ({"rotation": {"pole": "automatic"}}, "params.rotation"),
     ],
 )
@@ -688,3 +692,34 @@ async def test_locate_ignores_vertices_outside_the_region(client):
     )
     assert answer.status_code == 422 and answer.json()["indices"] == [0], answer.text
     assert "vertex 0" in answer.json()["detail"]
+
+
+async def test_trusted_metrics_leave_the_flagged_faces_out(client):
+    """Nefertiti whole, seen from its box centre: thousands of faces flagged; the trusted
+    measures cover the rest, with the same per-face values, and the caption quotes them."""
+    params = {"rotation": "identity", "sigma": 0.3}
+    body = (await post(client, "/v1/validate", params, "nefertiti-lowres.obj")).json()
+    metrics, v = body["metrics"], body["validation"]
+    flagged = set()
+    for key in ("singular_point_faces", "seam_faces", "folded_faces", "backfacing_faces"):
+        flagged |= set(v[key])
+    flagged |= set(v["degenerate_faces"])
+    trusted = metrics["trusted"]
+    assert trusted["flagged_faces"] == len(flagged) > 1000
+    assert trusted["faces"] + len(flagged) == 70_000
+    assert trusted["isometric"]["mean"] < metrics["isometric"]["mean"]
+    assert trusted["isometric"]["max"] <= metrics["isometric"]["max"]
+    svg = await post(client, "/v1/flatten", {**params, "output": "svg"}, "nefertiti-lowres.obj")
+    mean = trusted["isometric"]["mean"]
+    assert f"isometric energy {mean:.4f} on the trusted faces ({len(flagged):,} flagged)" in (
+        svg.text
+    )
+
+
+async def test_a_star_shaped_region_trusts_every_face(client):
+    body = (await post(client, "/v1/validate", {"region": SCALP_REGION, "sigma": 0.3})).json()
+    assert body["validation"]["star_shaped"] and body["validation"]["seam_free"]
+    trusted = body["metrics"]["trusted"]
+    assert trusted["flagged_faces"] == 0
+    for name in ("conformal", "area", "isometric"):
+        assert trusted[name] == body["metrics"][name]

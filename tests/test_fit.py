@@ -9,7 +9,19 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from transforms import Chart, FitBounds, FitFixed, Frame, PoleCap, fit_region, flatten_region
+from transforms import (
+    Chart,
+    FitBounds,
+    FitFixed,
+    Frame,
+    Layout,
+    Method,
+    PoleCap,
+    TransformInputError,
+    default_choice,
+    fit_region,
+    flatten_region,
+)
 from transforms.emptycap import largest_empty_cap
 from transforms.fit import SIGMA_SEARCH
 
@@ -159,3 +171,66 @@ def test_an_up_hint_along_the_chosen_pole_falls_back_to_the_rule(fsaverage_fit):
     pole, _ = largest_empty_cap(directions / np.linalg.norm(directions, axis=1)[:, None])
     hinted = fit_region(vertices, faces, FitFixed(center=fit.frame.center, up=pole))
     assert any("parallel" in note for note in hinted.explanation.notes)
+
+
+# -- the default choice (no search) and the robust objective --------------------------------
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_default_choice_is_seam_free_in_any_pose(seed):
+    """The scalp turned and moved at random, seen from its box centre, pole and sigma left to
+    the default rule: seam-free with the margin, the map turning with the mesh."""
+    vertices, faces = scalp()
+    base_centre = (vertices[faces].min(axis=(0, 1)) + vertices[faces].max(axis=(0, 1))) / 2
+    base = default_choice(vertices, faces, FitFixed(center=base_centre))
+    turn = Rotation.random(random_state=seed).as_matrix()
+    shift = np.random.default_rng(seed).normal(size=3) * 100.0
+    moved = vertices @ turn.T + shift
+    chosen = default_choice(moved, faces, FitFixed(center=turn @ base_centre + shift))
+    v = chosen.region.validation
+    assert v.seam_free and v.star_shaped
+    assert min(v.margin_deg_seam, v.margin_deg_north, v.margin_deg_south) >= 2.0 - 1e-9
+    assert chosen.explanation is None
+    np.testing.assert_allclose(chosen.region.theta, base.region.theta, atol=1e-6)
+    np.testing.assert_allclose(chosen.region.phi, base.region.phi, atol=1e-6)
+
+
+def test_the_default_choice_keeps_what_is_fixed():
+    vertices, faces = scalp()
+    centre = np.array([1.0, -12.0, -30.0])
+    frame = Frame.from_pole_up([0, 0, -1], [0, 1, 0])
+    kept = default_choice(vertices, faces, FitFixed(center=centre, rotation=frame))
+    np.testing.assert_array_equal(kept.frame.rotation, frame.rotation)
+    np.testing.assert_array_equal(kept.frame.center, centre)
+    sigma = default_choice(vertices, faces, FitFixed(center=centre, sigma=0.4))
+    assert sigma.chart.cap.sigma == 0.4
+    with pytest.raises(TransformInputError, match="needs a centre"):
+        default_choice(vertices, faces, FitFixed())
+
+
+def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest():
+    """Nefertiti's top seen from its box centre: some sampled faces are seen from behind.
+    The objective is their share of the sample's area (times the weight) plus the energy of
+    the faces seen from the front measured alone, so their own energies play no part."""
+    from transforms.fit import _BACKFACING_WEIGHT, _Candidate, _Problem
+
+    vertices, faces = load_sample("nefertiti-lowres.obj")
+    centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    directions = vertices[faces].mean(axis=1) - centre
+    top = faces[directions[:, 2] / np.linalg.norm(directions, axis=1) > math.cos(1.0)]
+    problem = _Problem(vertices, top, Method.DISTORTED, 1, Layout.THETA_PHI)
+    rotation = Frame.from_pole_up([0, 0, -1], [0, 1, 0]).rotation
+    candidate = _Candidate(centre, rotation, 0.5)
+    behind = problem.sample_offsets - problem.sample_normals @ centre <= 0.0
+    assert 0 < behind.sum() < len(behind)
+    hidden = problem.sample_areas[behind].sum() / problem.sample_areas.sum()
+    chart = Chart.distorted(PoleCap.from_sigma(0.5))
+    front = np.flatnonzero(~behind)
+    seen = flatten_region(
+        problem.sample_points,
+        problem.sample_faces[front],
+        Frame.from_matrix(rotation, centre),
+        chart,
+    )
+    expected = seen.distortion.isometric.mean + _BACKFACING_WEIGHT * hidden
+    assert problem.energy(candidate) == pytest.approx(expected, rel=1e-9)

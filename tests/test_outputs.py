@@ -23,7 +23,7 @@ from .tools import node_tool
 pytestmark = pytest.mark.anyio
 
 #: A region of every bundled sample: the scalps, and Nefertiti whole (flagged faces).
-REGIONS = {**SCALP, "nefertiti-lowres.obj": {}}
+REGIONS = {**SCALP, "nefertiti-lowres.obj": {"rotation": "identity", "sigma": 0.3}}
 SVG = "{http://www.w3.org/2000/svg}"
 
 

@@ -19,7 +19,7 @@ from .cap import RHO_MAX, RHO_MIN, SIGMA_MAX, SIGMA_MIN, PoleCap, check_rho, che
 from .chart import LAYOUT_ORIENTATION, Chart, Method, angles_to_world, world_to_angles
 from .errors import TransformInputError
 from .faces import DEGENERATE_RTOL, FaceMeasures, measure_faces
-from .fit import Fit, FitBounds, FitExplanation, FitFixed, fit_region
+from .fit import Fit, FitBounds, FitExplanation, FitFixed, default_choice, fit_region
 from .frames import Frame, check_rotation
 from .layouts import Layout, layout_xy
 from .locate import Hits, locate
@@ -76,6 +76,7 @@ __all__ = [
     "check_rho",
     "check_rotation",
     "check_sigma",
+    "default_choice",
     "distorted_forward",
     "distorted_inverse",
     "distortion",

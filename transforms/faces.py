@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -77,6 +77,26 @@ class FaceMeasures:
 
     def __len__(self) -> int:
         return len(self.faces)
+
+    def subset(self, keep: np.ndarray) -> FaceMeasures:
+        """The measures of the faces ``keep`` (a (m,) bool mask or positions) alone: what a
+        region of just those faces measures (its layout scale then comes from them)."""
+        per_face = {
+            name: getattr(self, name)[keep]
+            for name in (
+                "faces",
+                "orientation",
+                "double_area",
+                "layout_double_area",
+                "degenerate",
+                "crosses_seam",
+                "contains_north",
+                "contains_south",
+                "stretch_max",
+                "stretch_min",
+            )
+        }
+        return replace(self, **per_face)
 
 
 def measure_faces(

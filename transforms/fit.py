@@ -30,7 +30,7 @@ from .arrays import as_faces, as_points, as_vector, unit_rows
 from .cap import PoleCap
 from .chart import Chart, Method
 from .emptycap import cap_radius, largest_empty_cap
-from .errors import TransformInputError
+from .errors import TransformInputError, listed_rows
 from .faces import measure_checked
 from .frames import Frame
 from .kernel import Kernel, chebyshev_center, kernel_planes
@@ -60,6 +60,9 @@ _PARALLEL = 1e-6
 #: The refinement's cost where a candidate cannot be measured: finite, so that Nelder-Mead's
 #: convergence test (differences of costs) never meets inf - inf, and above any real cost.
 _INFEASIBLE = 1e100
+#: What a centre pays for each unit of the fraction of the region's area it sees from behind
+#: (1% costs 10, more than any energy difference the front-facing faces make).
+_BACKFACING_WEIGHT = 1000.0
 #: Sigmas whose energy the explanation reports.
 REPORTED_SIGMAS = (0.3, 1.0)
 
@@ -100,12 +103,13 @@ class FitExplanation:
 
 @dataclass(frozen=True)
 class Fit:
-    """The chosen frame and chart, the region flattened with them, and the explanation."""
+    """The chosen frame and chart, the region flattened with them, and the explanation (None
+    for :func:`default_choice`, which searches nothing)."""
 
     frame: Frame
     chart: Chart
     region: FlatRegion
-    explanation: FitExplanation
+    explanation: FitExplanation | None
 
 
 @dataclass(frozen=True)
@@ -216,7 +220,9 @@ def fit_region(
     refine = any(search.free) and not search.kernel.empty
     if refine:
         start = problem.refine(start, search.free, search.kernel, search.min_depth, search.margin)
-    best = _keep_margin(problem, search, start)
+    best = _keep_margin(
+        problem, start, search.choose_sigma, search.margin, search.bounds.min_margin_deg
+    )
     if any(search.free):
         best = _keep_the_better(problem, search, best)
     return _explain(problem, search, best)
@@ -265,12 +271,40 @@ def _start(problem: _Problem, fixed: FitFixed, bounds: FitBounds) -> _Search:
             )
     else:
         center = as_vector(fixed.center, "center")
+    choice = _frame_and_sigma(problem, center, fixed, bounds, notes)
+    return _Search(
+        kernel=kernel,
+        bounds=bounds,
+        min_depth=bounds.min_kernel_depth * kernel.inscribed_radius,
+        margin=choice.margin,
+        choose_sigma=choice.choose_sigma,
+        move_center=move_center,
+        free=[move_center, fixed.rotation is None, choice.choose_sigma],
+        initial=choice.candidate,
+        notes=notes,
+    )
+
+
+@dataclass(frozen=True)
+class _Choice:
+    """The start's frame and sigma at a centre, and the margin the search keeps (radians;
+    None for a closed region)."""
+
+    candidate: _Candidate
+    margin: float | None
+    choose_sigma: bool
+
+
+def _frame_and_sigma(
+    problem: _Problem, center: np.ndarray, fixed: FitFixed, bounds: FitBounds, notes: list[str]
+) -> _Choice:
+    """Seen from ``center``: the rotation of :func:`_start_rotation` unless fixed, and the
+    best sigma whose cap fits inside the empty cap less the margin unless fixed."""
     directions = problem.directions(center)
     if fixed.rotation is None:
-        start_rotation = _start_rotation(directions, fixed.up, notes)
+        rotation = _start_rotation(directions, fixed.up, notes)
     else:
-        start_rotation = fixed.rotation.rotation
-    pole = start_rotation[1]
+        rotation = fixed.rotation.rotation
     margin = math.radians(bounds.min_margin_deg)
     if problem.closed:
         # A closed region seen from inside covers every direction: no cap fits, no margin can
@@ -280,20 +314,59 @@ def _start(problem: _Problem, fixed: FitFixed, bounds: FitBounds) -> _Search:
             "so it cannot be seam-free, and sigma minimises the energy alone"
         )
         margin = None
-    room = math.pi if margin is None else cap_radius(directions, pole) - margin
+    room = math.pi if margin is None else cap_radius(directions, rotation[1]) - margin
     choose_sigma = fixed.sigma is None and problem.method is not Method.STANDARD
-    sigma = problem.best_sigma(center, start_rotation, room) if choose_sigma else fixed.sigma
-    return _Search(
-        kernel=kernel,
-        bounds=bounds,
-        min_depth=bounds.min_kernel_depth * kernel.inscribed_radius,
-        margin=margin,
-        choose_sigma=choose_sigma,
-        move_center=move_center,
-        free=[move_center, fixed.rotation is None, choose_sigma],
-        initial=_Candidate(center, start_rotation, sigma),
-        notes=notes,
+    sigma = problem.best_sigma(center, rotation, room) if choose_sigma else fixed.sigma
+    return _Choice(_Candidate(center, rotation, sigma), margin, choose_sigma)
+
+
+def default_choice(
+    vertices,
+    faces,
+    fixed: FitFixed,
+    bounds: FitBounds | None = None,
+    *,
+    method: str | Method = Method.DISTORTED,
+    layout: Layout | str = Layout.THETA_PHI,
+    threads: int = 1,
+) -> Fit:
+    """The rotation and sigma a request gets when it names neither, at a given centre: the
+    start of :func:`fit_region` with no search (docs/math.md, section 9, stage 1), its cap
+    narrowed until the margin holds on every face (stage 4). Cheap enough for every request.
+
+    Parameters
+    ----------
+    vertices, faces, bounds, method, layout, threads : as for :func:`fit_region`
+    fixed : FitFixed with ``center`` set; ``rotation`` and ``sigma`` left None are chosen
+
+    Returns
+    -------
+    Fit, with ``explanation`` None (nothing was searched)
+
+    Raises
+    ------
+    TransformInputError
+        As :func:`fit_region`.
+    """
+    if fixed.center is None:
+        raise TransformInputError("center", "the default choice needs a centre")
+    bounds = bounds or FitBounds()
+    method = Method(method)
+    points = as_points(vertices, "vertices")
+    faces = as_faces(faces, len(points))
+    if len(faces) == 0:
+        raise TransformInputError("faces", "the region has no faces")
+    if fixed.sigma is not None and method is Method.STANDARD:
+        raise TransformInputError("sigma", "method 'standard' has no warp, so it takes no sigma")
+    problem = _Problem(points, faces, method, threads, Layout(layout))
+    center = as_vector(fixed.center, "center")
+    choice = _frame_and_sigma(problem, center, fixed, bounds, [])
+    answer = _keep_margin(
+        problem, choice.candidate, choice.choose_sigma, choice.margin, bounds.min_margin_deg
     )
+    best = answer.candidate
+    frame = Frame.from_matrix(best.rotation, best.center)
+    return Fit(frame=frame, chart=problem.chart(best.sigma), region=answer.flat, explanation=None)
 
 
 def _start_rotation(directions: np.ndarray, up, notes: list[str]) -> np.ndarray:
@@ -320,16 +393,23 @@ def _flattened(problem: _Problem, candidate: _Candidate) -> _Flattened:
     return _Flattened(candidate, flat, _margin_deg(flat))
 
 
-def _keep_margin(problem: _Problem, search: _Search, best: _Candidate) -> _Flattened:
-    """``best`` on every face, its cap narrowed (when sigma is free) until the margin holds
-    there too: the search saw vertices, not edges."""
+def _keep_margin(
+    problem: _Problem,
+    best: _Candidate,
+    choose_sigma: bool,
+    margin: float | None,
+    min_margin_deg: float,
+) -> _Flattened:
+    """``best`` on every face, its cap narrowed (when sigma is free and the region has a
+    boundary, ``margin`` not None) until ``min_margin_deg`` holds there too: the search saw
+    vertices, not edges."""
     answer = _flattened(problem, best)
-    if not (search.choose_sigma and search.margin is not None):
+    if not (choose_sigma and margin is not None):
         return answer
     for _ in range(6):
-        if answer.margin_deg >= search.bounds.min_margin_deg:
+        if answer.margin_deg >= min_margin_deg:
             break
-        shortfall = math.radians(search.bounds.min_margin_deg - answer.margin_deg) + 1e-3
+        shortfall = math.radians(min_margin_deg - answer.margin_deg) + 1e-3
         rho = max(PoleCap.from_sigma(answer.candidate.sigma).rho - shortfall, 1e-4)
         c = answer.candidate
         tried = _flattened(problem, _Candidate(c.center, c.rotation, math.tan(rho / 2.0)))
@@ -468,12 +548,24 @@ class _Problem:
         self.used = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(points)))
         self.region_points = points[self.used]
         self.planes = kernel_planes(points, faces)
+        j = len(self.planes.faces)
         areas = np.zeros(len(faces))
-        areas[self.planes.faces] = self.planes.areas[: len(self.planes.faces)]
-        sample = faces[area_sample(areas, SAMPLE_FACES)]
+        areas[self.planes.faces] = self.planes.areas[:j]
+        picked = area_sample(areas, SAMPLE_FACES)
+        sample = faces[picked]
         sample_used, compact = np.unique(sample, return_inverse=True)
         self.sample_faces = compact.reshape(-1, 3)
         self.sample_points = points[sample_used]
+        # The sampled faces' planes, to tell which face the candidate's centre sees from
+        # behind; a face with no area (sampled when the sample is every face) has none and
+        # counts as seen from the front: 0 . c < 1.
+        plane_of = np.full(len(faces), -1)
+        plane_of[self.planes.faces] = np.arange(j)
+        rows = plane_of[picked]
+        flat = rows < 0
+        self.sample_normals = np.where(flat[:, None], 0.0, self.planes.normals[rows])
+        self.sample_offsets = np.where(flat, 1.0, self.planes.offsets[rows])
+        self.sample_areas = areas[picked]
 
     @property
     def closed(self) -> bool:
@@ -496,10 +588,15 @@ class _Problem:
         """(n, 3) unit directions from ``center`` to the region's vertices."""
         units, zero = unit_rows(self.region_points - center)
         if zero.any():
+            # Named as flatten_region names it: the vertices at the centre, by their rows.
+            at_centre = np.zeros(len(self.points), dtype=bool)
+            at_centre[self.used[zero]] = True
+            text, rows = listed_rows(at_centre, "vertex")
             raise TransformInputError(
-                "center",
-                "lies on a vertex of the region; the centre must be off the surface",
-                self.used[zero][:5],
+                "vertices",
+                f"{text}: at the centre, so no direction is defined; choose a centre that is "
+                "not on the surface",
+                rows,
             )
         return units
 
@@ -515,7 +612,14 @@ class _Problem:
         )
 
     def energy(self, candidate: _Candidate) -> float:
-        """Area-weighted isometric energy on the sample (inf where it cannot be measured)."""
+        """The robust objective on the sample (docs/math.md, section 9): the fraction of its
+        area seen from behind from the candidate's centre (such faces fold whatever the
+        pole and sigma), times ``_BACKFACING_WEIGHT``, plus the area-weighted isometric
+        energy of the faces seen from the front; inf where it cannot be measured.
+
+        So a few slivers seen from behind, whose energy can be thousands, do not steer the
+        choice: a centre is first judged by how much it cannot see, then by the rest.
+        """
         frame = Frame.from_matrix(candidate.rotation, candidate.center)
         chart = self.chart(candidate.sigma)
         try:
@@ -525,9 +629,13 @@ class _Problem:
             )
             second = measured_second(theta, self.layout)
             measures = measure_checked(rows, self.sample_faces, second, phi, chart.cap)
-            return float(distortion(measures).isometric.mean)
-        except TransformInputError:
+            behind = self.sample_offsets - self.sample_normals @ candidate.center <= 0.0
+            # The faces seen from the front measured alone: the layout's scale from them too.
+            energy = float(distortion(measures.subset(~behind)).isometric.mean)
+        except TransformInputError:  # every face seen from the front is degenerate
             return math.inf
+        hidden = float(self.sample_areas[behind].sum() / self.sample_areas.sum())
+        return energy + _BACKFACING_WEIGHT * hidden
 
     def best_sigma(self, center: np.ndarray, rotation: np.ndarray, largest_rho: float) -> float:
         """The sigma of least sample energy with the cap's angle at most ``largest_rho``.

@@ -3,7 +3,7 @@ and distortion metrics (docs/math.md end to end: frames, a method, validation, d
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -30,7 +30,9 @@ class FlatRegion:
     x, y : (k,) float, the vertices in that layout
     faces : (m, 3) int, the region's faces as positions in ``vertex_ids``, in input order
     validation : RegionValidation, face lists by position in the region's face list
-    distortion : Distortion
+    distortion : Distortion, over every measured face
+    trusted : Distortion or None, over the trusted faces only: neither flagged by the
+        validation nor degenerate (the same per-face values; None when no face is trusted)
     """
 
     vertex_ids: np.ndarray
@@ -43,6 +45,12 @@ class FlatRegion:
     faces: np.ndarray
     validation: RegionValidation
     distortion: Distortion
+    trusted: Distortion | None
+
+    @property
+    def flagged_faces(self) -> int:
+        """How many faces the validation flags (any reason, each face once)."""
+        return int(flagged_mask(self.validation, len(self.faces)).sum())
 
 
 def flatten_region(
@@ -97,7 +105,7 @@ def flatten_region(
     measures = measure_checked(
         rows, compact, measured_second(theta, layout), phi, chart.cap, threads
     )
-    validation, metrics = _judge(measures, winding, threads)
+    validation, metrics, trusted = _judge(measures, winding, threads)
     x, y = layout_xy(theta, phi, layout)
     return FlatRegion(
         vertex_ids=vertex_ids,
@@ -110,6 +118,7 @@ def flatten_region(
         faces=compact,
         validation=validation,
         distortion=metrics,
+        trusted=trusted,
     )
 
 
@@ -141,11 +150,35 @@ def assess_region(
     (RegionValidation, Distortion)
     """
     measures = measure_faces(vertices_local, faces, theta, phi, cap, threads, layout_theta)
-    return _judge(measures, winding, threads)
+    validation, metrics, _ = _judge(measures, winding, threads)
+    return validation, metrics
+
+
+def flagged_mask(validation: RegionValidation, n_faces: int) -> np.ndarray:
+    """(m,) bool: the faces any of the validation's lists holds."""
+    flagged = np.zeros(n_faces, dtype=bool)
+    for listed in (
+        validation.singular_point_faces,
+        validation.seam_faces,
+        validation.folded_faces,
+        validation.backfacing_faces,
+        validation.degenerate_faces,
+    ):
+        flagged[listed] = True
+    return flagged
 
 
 def _judge(
     measures: FaceMeasures, winding: int | None, threads: int
-) -> tuple[RegionValidation, Distortion]:
+) -> tuple[RegionValidation, Distortion, Distortion | None]:
     # One after the other: side by side on two threads they only compete for memory.
-    return validate(measures, winding, threads), distortion(measures)
+    validation = validate(measures, winding, threads)
+    metrics = distortion(measures)
+    flagged = flagged_mask(validation, len(measures))
+    if not flagged.any():
+        return validation, metrics, metrics
+    if flagged.all():
+        return validation, metrics, None
+    # The same per-face values (one layout scale for the whole region), over the rest.
+    trusted = distortion(replace(measures, degenerate=measures.degenerate | flagged))
+    return validation, metrics, trusted

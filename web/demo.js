@@ -6,11 +6,12 @@ import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
 // Regions and frames that suit each bundled scan (its scalp, the cap at the neck).
+// Lee Perry-Smith's box holds the shoulders: the cone starts inside the skull instead.
 const PRESETS = {
-  'fsaverage-head.ply': { axis: [0, 0, 1], angle: 70, center: 'bbox_center', pole: [0, 0, -1], up: [0, 1, 0] },
-  'lee-perry-smith.glb': { axis: [0, 1, 0], angle: 60, center: [0, 1.2, -0.3], pole: [0, -1, 0], up: [0, 0, 1] },
-  'lee-perry-smith.obj': { axis: [0, 1, 0], angle: 60, center: [0, 1.2, -0.3], pole: [0, -1, 0], up: [0, 0, 1] },
-  'nefertiti-lowres.obj': { axis: [0, 0, 1], angle: 60, center: 'bbox_center', pole: [0, 0, -1], up: [0, 1, 0] },
+  'fsaverage-head.ply': { axis: [0, 0, 1], angle: 70, apex: null, center: 'bbox_center', pole: [0, 0, -1], up: [0, 1, 0] },
+  'lee-perry-smith.glb': { axis: [0, 1, 0], angle: 60, apex: [0, 1.2, -0.3], center: [0, 1.2, -0.3], pole: [0, -1, 0], up: [0, 0, 1] },
+  'lee-perry-smith.obj': { axis: [0, 1, 0], angle: 60, apex: [0, 1.2, -0.3], center: [0, 1.2, -0.3], pole: [0, -1, 0], up: [0, 0, 1] },
+  'nefertiti-lowres.obj': { axis: [0, 0, 1], angle: 60, apex: null, center: 'bbox_center', pole: [0, 0, -1], up: [0, 1, 0] },
 };
 
 const $ = (id) => document.getElementById(id);
@@ -52,6 +53,7 @@ function applyPreset() {
   if (!preset) return;
   $('axis').value = preset.axis.join(', ');
   $('angle').value = preset.angle;
+  $('apex').value = preset.apex ? preset.apex.join(', ') : '';
   $('center').value = Array.isArray(preset.center) ? preset.center.join(', ') : preset.center;
   $('pole').value = preset.pole.join(', ');
   $('up').value = preset.up.join(', ');
@@ -59,10 +61,9 @@ function applyPreset() {
 
 function params() {
   const center = $('center').value.trim();
-  const p = {
-    region: { cone: { axis: vector('axis'), half_angle_deg: Number($('angle').value) } },
-    layout: $('layout').value,
-  };
+  const cone = { axis: vector('axis'), half_angle_deg: Number($('angle').value) };
+  if ($('apex').value.trim()) cone.apex = vector('apex');
+  const p = { region: { cone }, layout: $('layout').value };
   if ($('auto').checked) {
     Object.assign(p, { center: 'auto', rotation: { pole: 'auto', up: vector('up') }, sigma: 'auto' });
   } else {

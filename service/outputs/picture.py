@@ -171,11 +171,16 @@ def describe(
     wrapping[validation.seam_faces] = True
     wrapping[validation.singular_point_faces] = True
     legend = [(FILL, COLOURS[FILL], f"region: {face_count:,} triangles")]
+    # A triangle with several flags is drawn in the colour of the last (the most serious);
+    # the legend counts it under each and says where the colours hide one.
+    both = np.intersect1d(validation.backfacing_faces, validation.folded_faces).size
     for label, colour, text, field in FLAGS:
         flagged = getattr(validation, field)
         labels[flagged] = label
         if len(flagged):
             shown = "" if len(flagged) <= MARKED_TRIANGLES else f", {MARKED_TRIANGLES:,} marked"
+            if field == "backfacing_faces" and both:
+                shown += f" ({both:,} drawn as folded)"
             legend.append((label, colour, f"{text}: {len(flagged):,}{shown}"))
     if len(validation.boundary_edges):
         legend.append((BOUNDARY, COLOURS[BOUNDARY], "boundary"))
@@ -271,8 +276,21 @@ def _caption(flat: FlatRegion, params: dict, face_count: int) -> tuple[str, ...]
         f"margins: seam {v.margin_deg_seam:.1f} deg, north {v.margin_deg_north:.1f} deg, "
         f"south {v.margin_deg_south:.1f} deg"
     )
-    energy = flat.distortion.isometric.mean
     return (
         f"meshflat: {method}; layout {flat.layout.value}; {face_count:,} triangles",
-        f"{', '.join(status)}; {margins}; isometric energy {energy:.4f}",
+        f"{', '.join(status)}; {margins}; {energy_text(flat)}",
+    )
+
+
+def energy_text(flat: FlatRegion) -> str:
+    """The isometric energy as a caption says it: over the trusted faces, with the flagged
+    count beside it when any face is flagged."""
+    flagged = flat.flagged_faces
+    if not flagged:
+        return f"isometric energy {flat.distortion.isometric.mean:.4f}"
+    if flat.trusted is None:
+        return f"isometric energy: no trusted face ({flagged:,} flagged)"
+    return (
+        f"isometric energy {flat.trusted.isometric.mean:.4f} on the trusted faces "
+        f"({flagged:,} flagged)"
     )

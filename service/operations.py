@@ -17,6 +17,7 @@ from functools import cache
 import numpy as np
 
 from transforms import (
+    LAYOUT_ORIENTATION,
     Chart,
     Fit,
     FitBounds,
@@ -27,11 +28,13 @@ from transforms import (
     Layout,
     Method,
     PoleCap,
+    Untangled,
     angles_to_world,
     default_choice,
     fit_region,
     flatten_region,
     locate,
+    untangle,
     world_to_angles,
 )
 from transforms import selection as select
@@ -172,6 +175,7 @@ class MeshRegion:
     chart, frame : what the region was flattened with
     flat : FlatRegion, positions in ``faces`` and ``flat.vertex_ids``
     fit : Fit or None
+    untangled : Untangled or None, the layout made fold-free (``params.untangle``)
     """
 
     mesh: Mesh
@@ -180,6 +184,14 @@ class MeshRegion:
     frame: Frame
     flat: FlatRegion
     fit: Fit | None
+    untangled: Untangled | None = None
+
+    @property
+    def layout(self) -> tuple[np.ndarray, np.ndarray]:
+        """(k,) float each: the layout answered, repaired when untangled."""
+        if self.untangled is None:
+            return self.flat.x, self.flat.y
+        return self.untangled.x, self.untangled.y
 
     @property
     def faces(self) -> np.ndarray:
@@ -231,7 +243,17 @@ def flatten(mesh: Mesh, params: MeshParams, settings: Settings) -> MeshRegion:
         flat = flatten_region(
             mesh.vertices, faces, frame, chart, threads=settings.threads, layout=params.layout
         )
-    return MeshRegion(mesh, selection, chart, frame, flat, fit)
+    untangled = untangle_layout(mesh, flat) if params.untangle else None
+    return MeshRegion(mesh, selection, chart, frame, flat, fit, untangled)
+
+
+def untangle_layout(mesh: Mesh, flat: FlatRegion) -> Untangled:
+    """The region's layout made fold-free (:func:`transforms.untangle`), in the returned
+    ``(x, y)`` plane, whose second axis runs against theta for Mercator."""
+    s_sign = 1 if flat.layout is Layout.THETA_PHI else -1
+    orientation = LAYOUT_ORIENTATION * flat.validation.winding * s_sign
+    shapes = mesh.vertices[flat.vertex_ids]
+    return untangle(flat.x, flat.y, flat.faces, shapes, orientation)
 
 
 @dataclass(frozen=True)

@@ -294,6 +294,15 @@ class MeshParams(ChartParams):
         "the singular points.",
     )
     region: Region | None = Field(None, description="Which faces; null: the whole mesh.")
+    untangle: bool = Field(
+        False,
+        description="Make the answer's layout fold-free: the vertices of flipped triangles "
+        "and as few neighbours as needed move in 2D (Garanzha et al., Foldover-free maps in "
+        "50 lines of code, 2021) until every region triangle has the map's orientation; all "
+        "other vertices keep the transform's coordinates. vertices.x and vertices.y (and the "
+        "GLB's UVs and the pictures) then hold the repaired layout, theta and phi the "
+        "transform's, and the answer has an untangle block.",
+    )
     format: Literal[FORMATS] | None = Field(
         None, description="The file's format; default: from the file name's extension."
     )

@@ -111,9 +111,12 @@ class FlatVertices(Answer):
     theta: list[float] = Field(description="Polar angle from local +Z, radians, per id.")
     phi: list[float] = Field(description="Azimuth from +X towards +Y, radians, per id.")
     r: list[float] = Field(description="Distance from the centre, per id.")
-    x: list[float] | None = Field(None, description="Layout x per id (mercator only: phi).")
-    y: list[float] | None = Field(
-        None, description="Layout y per id (mercator only: ln tan((pi - theta) / 2))."
+    x: list[float] = Field(
+        description="Layout x per id: phi (both layouts); with untangle, the repaired layout."
+    )
+    y: list[float] = Field(
+        description="Layout y per id: theta (theta_phi) or ln tan((pi - theta) / 2) (mercator); "
+        "with untangle, the repaired layout."
     )
 
 
@@ -218,13 +221,16 @@ class FlattenResponse(Answer):
     faces: FlatFaces
     validation: Validation
     metrics: Metrics
+    untangle: UntangleReport | None = Field(
+        None, description="With params.untangle: what untangling moved and what it could not."
+    )
 
     @classmethod
     def of(cls, region: MeshRegion) -> FlattenResponse:
         flat = region.flat
+        x, y = region.layout
         vertices = {"ids": flat.vertex_ids, "theta": flat.theta, "phi": flat.phi, "r": flat.r}
-        if flat.layout is not Layout.THETA_PHI:
-            vertices |= {"x": flat.x, "y": flat.y}
+        vertices |= {"x": x, "y": y}
         # The small blocks first, so that a client reading the stream meets them early.
         return cls.build(
             **ValidateResponse.report(region),
@@ -233,10 +239,44 @@ class FlattenResponse(Answer):
         )
 
 
+class UntangleReport(Answer):
+    moved_vertices: list[int] = Field(
+        description="The file's vertex ids whose layout coordinates moved, ascending."
+    )
+    largest_shift: float = Field(description="The farthest a vertex moved, in layout units.")
+    folded_before: int = Field(description="Triangles flipped (or flat) in the transform's map.")
+    folded_after: list[int] = Field(
+        description="Triangles still flipped or flat after untangling (file ids): empty unless "
+        "the region's own boundary folds over itself."
+    )
+    notes: list[str] = Field(description="What could not be done, in words.")
+
+    @classmethod
+    def of(cls, region: MeshRegion) -> UntangleReport:
+        u, flat = region.untangled, region.flat
+        after = region.faces[u.flipped_after]
+        notes = [] if u.note is None else [u.note]
+        if len(after) and u.note is None:
+            notes.append(
+                f"{len(after):,} triangles could not be untangled: the region's boundary folds "
+                "over itself there (they are listed in folded_after)"
+            )
+        return cls.build(
+            moved_vertices=flat.vertex_ids[u.moved],
+            largest_shift=u.largest_shift,
+            folded_before=len(u.flipped_before),
+            folded_after=after,
+            notes=notes,
+        )
+
+
 class ValidateResponse(Answer):
     params: ResolvedParams
     validation: Validation
     metrics: Metrics
+    untangle: UntangleReport | None = Field(
+        None, description="With params.untangle: what untangling moved and what it could not."
+    )
 
     @classmethod
     def of(cls, region: MeshRegion) -> ValidateResponse:
@@ -244,12 +284,16 @@ class ValidateResponse(Answer):
 
     @staticmethod
     def report(region: MeshRegion) -> dict:
-        """The fields of a report on a region: params, validation and metrics."""
-        return {
+        """The fields of a report on a region: params, validation and metrics, and the
+        untangling when it was asked for."""
+        report = {
             "params": ResolvedParams.of_region(region),
             "validation": Validation.of(region),
             "metrics": Metrics.of(region),
         }
+        if region.untangled is not None:
+            report["untangle"] = UntangleReport.of(region)
+        return report
 
 
 class SigmaEnergy(Answer):

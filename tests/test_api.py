@@ -674,7 +674,9 @@ async def test_mercator_through_the_api(client):
         vertices["y"], np.log(np.tan((np.pi - np.array(vertices["theta"])) / 2))
     )
     paper = (await post(client, "/v1/flatten", {**params, "layout": "theta_phi"})).json()
-    assert "x" not in paper["vertices"]
+    # Every layout gives x and y: for theta_phi, phi and theta themselves.
+    assert paper["vertices"]["x"] == paper["vertices"]["phi"]
+    assert paper["vertices"]["y"] == paper["vertices"]["theta"]
     assert body["metrics"]["conformal"]["mean"] < paper["metrics"]["conformal"]["mean"]
 
 
@@ -723,3 +725,36 @@ async def test_a_star_shaped_region_trusts_every_face(client):
     assert trusted["flagged_faces"] == 0
     for name in ("conformal", "area", "isometric"):
         assert trusted[name] == body["metrics"][name]
+
+
+# -- untangle ----------------------------------------------------------------------------------
+
+
+async def test_untangle_makes_the_answered_layout_fold_free(client):
+    """Nefertiti's top, centre fitted: its crown faces away from every centre, so the map
+    folds there. With untangle the answered layout has every triangle the map's way round,
+    only the vertices listed moved, and theta and phi stay the transform's."""
+    from transforms import LAYOUT_ORIENTATION
+    from transforms.untangle import orientation_signs
+
+    name = "nefertiti-lowres.obj"
+    region = {"cone": {"axis": [0, 0, 1], "half_angle_deg": math.degrees(1.0)}}
+    params = {"region": region, "center": "auto", "untangle": True}
+    body = (await post(client, "/v1/flatten", params, name)).json()
+    report, vertices = body["untangle"], body["vertices"]
+    assert report["folded_before"] > 100
+    assert report["folded_after"] == [] and report["notes"] == []
+    x, y = np.array(vertices["x"]), np.array(vertices["y"])
+    kept = ~np.isin(vertices["ids"], report["moved_vertices"])
+    assert np.array_equal(x[kept], np.array(vertices["phi"])[kept])
+    assert np.array_equal(y[kept], np.array(vertices["theta"])[kept])
+    position = {vid: i for i, vid in enumerate(vertices["ids"])}
+    faces = np.vectorize(position.get)(np.array(body["faces"]["vertices"]))
+    winding = 1 if body["validation"]["winding"] == "outward" else -1
+    assert (orientation_signs(x, y, faces) == LAYOUT_ORIENTATION * winding).all()
+    # The transform's own validation is kept; validate and fit answer the same block.
+    assert len(body["validation"]["folded_faces"]) > 0
+    again = (await post(client, "/v1/validate", {**body["params"], "untangle": True}, name)).json()
+    assert again["untangle"] == report
+    plain = (await post(client, "/v1/validate", body["params"], name)).json()
+    assert "untangle" not in plain

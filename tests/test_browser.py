@@ -1,6 +1,7 @@
 """End to end in a real browser: headless Chromium opens the demo page served by a real
-uvicorn that requires an API key, enters the key, flattens a bundled scan, and the test checks
-what the page shows. The screenshot is kept in ``artifacts/demo.png``."""
+uvicorn that requires an API key, enters the key, flattens a bundled scan, then the default
+sample in automatic mode, and the test checks what the page shows. The screenshots are kept
+in ``artifacts/demo.png`` and ``artifacts/demo-auto.png``."""
 
 from __future__ import annotations
 
@@ -110,6 +111,20 @@ def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
                 }"""
             )
             assert drawn > 0.02, drawn
+            # The centre field shows the centre used, three numbers.
+            assert len(page.locator("#center").input_value().split(",")) == 3
+
+            # Automatic mode on the default sample (the first listed): chosen, untangled,
+            # one piece and fold-free.
+            default = page.locator("#sample option").first.get_attribute("value")
+            page.select_option("#sample", default)
+            page.check("#auto")
+            page.click("#go")
+            page.wait_for_selector("body[data-state=shown]", timeout=120_000)
+            automatic = page.locator("#summary").inner_text()
+            assert automatic.startswith("seam-free"), automatic
+            assert "0 folded after" in automatic, automatic
+            page.screenshot(path=str(ARTIFACTS / "demo-auto.png"), full_page=True)
         finally:
             browser.close()
     assert not problems, problems

@@ -38,6 +38,7 @@ from .selection import EmptyRegionError
 from .separable import separable_forward, separable_inverse, separable_residual
 from .spherical import cartesian_to_spherical, spherical_to_cartesian
 from .topology import RegionEdges, region_edges
+from .untangle import Untangled, untangle
 from .validation import RegionValidation, validate
 from .warp import distorted_forward, distorted_inverse, pole_warp
 
@@ -68,6 +69,7 @@ __all__ = [
     "RegionValidation",
     "Summary",
     "TransformInputError",
+    "Untangled",
     "angles_to_world",
     "arcs_to_point",
     "arcs_to_seam",
@@ -93,6 +95,7 @@ __all__ = [
     "separable_inverse",
     "separable_residual",
     "spherical_to_cartesian",
+    "untangle",
     "validate",
     "weighted_quantile",
     "world_to_angles",

@@ -65,11 +65,14 @@ function params() {
   if ($('apex').value.trim()) cone.apex = vector('apex');
   const p = { region: { cone }, layout: $('layout').value };
   if ($('auto').checked) {
-    Object.assign(p, { center: 'auto', rotation: { pole: 'auto', up: vector('up') }, sigma: 'auto' });
+    // Chosen by the service, and the map untangled: one piece, every triangle the right way.
+    const rotation = $('up').value.trim() ? { pole: 'auto', up: vector('up') } : 'auto';
+    Object.assign(p, { center: 'auto', rotation, sigma: 'auto', untangle: true });
   } else {
     p.center = /^[a-z_]+$/.test(center) ? center : center.split(',').map(Number);
-    p.rotation = { pole: vector('pole'), up: vector('up') };
-    p.sigma = Number($('sigma').value);
+    // Left blank, the pole and sigma are chosen by the service's default rule.
+    if ($('pole').value.trim() && $('up').value.trim()) p.rotation = { pole: vector('pole'), up: vector('up') };
+    if ($('sigma').value.trim()) p.sigma = Number($('sigma').value);
   }
   return p;
 }
@@ -140,23 +143,34 @@ function show(gltf) {
 
 // -- the page -----------------------------------------------------------------------------
 
+function clearPresets() {
+  // A file of one's own: the sample's region and frame do not fit it; the service chooses.
+  $('apex').value = '';
+  $('center').value = 'bbox_center';
+  for (const id of ['pole', 'up', 'sigma']) $(id).value = '';
+}
+
 function summary(extras) {
   const v = extras.validation;
   const m = v.margin_deg;
   const p = extras.params;
   const cap = p.sigma === null ? 'no warp' : `sigma ${p.sigma.toFixed(3)}`;
+  const u = extras.untangle;
+  const untangled = u ? [`untangled: ${u.moved_vertices} vertices moved, ${u.folded_after} folded after`] : [];
   return [
     `${v.seam_free ? 'seam-free' : 'NOT seam-free'}, ${v.star_shaped ? 'star-shaped' : 'NOT star-shaped'}`,
     `${p.method}, ${cap}, layout ${p.layout}`,
     `margins: seam ${m.seam.toFixed(1)}°, north ${m.north.toFixed(1)}°, south ${m.south.toFixed(1)}°`,
     `isometric energy ${extras.metrics.isometric.mean.toFixed(4)}`,
     `flagged faces: back-facing ${v.backfacing_faces}, folded ${v.folded_faces}, seam ${v.seam_faces}, singular ${v.singular_point_faces}`,
+    ...untangled,
   ].join('\n');
 }
 
 async function flatten(event) {
   event?.preventDefault();
   $('go').disabled = true;
+  document.body.dataset.state = 'flattening';
   setStatus('flattening…');
   const started = performance.now();
   try {
@@ -174,6 +188,8 @@ async function flatten(event) {
     const extras = gltf.parser.json.asset.extras.meshflat;
     $('vertices').textContent = vertices.toLocaleString('en');
     $('summary').textContent = summary(extras);
+    // The centre actually used (fitted, or the box centre the name stood for).
+    $('center').value = extras.params.center.map((c) => Number(c.toPrecision(6))).join(', ');
     document.body.dataset.vertices = String(vertices);
     document.body.dataset.state = 'shown';
     setStatus(`done in ${Math.round(performance.now() - started)} ms`);
@@ -186,6 +202,7 @@ async function flatten(event) {
 }
 
 $('sample').addEventListener('change', applyPreset);
+$('file').addEventListener('change', clearPresets);
 $('apikey').addEventListener('change', loadSamples);
 $('auto').addEventListener('change', () => {
   for (const id of ['center', 'pole', 'sigma']) $(id).disabled = $('auto').checked;

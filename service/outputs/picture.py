@@ -20,7 +20,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from transforms import FlatRegion, Layout
-from transforms.layouts import measured_second
 from transforms.raster import paint_points, paint_segments, paint_triangles
 
 #: Triangles drawn one by one (with outlines) up to this many.
@@ -145,7 +144,8 @@ def describe(
     width, height : int, the canvas in pixels
     """
     x = flat.x
-    s = measured_second(flat.theta, flat.layout)  # grows with theta: downwards
+    # Grows with theta, downwards: the layout's y, against theta for Mercator.
+    s = flat.y if flat.layout is Layout.THETA_PHI else -flat.y
     margin_left, margin_top, margin_right = 70, 48, 270
     margin_bottom = 96
     box = (margin_left, margin_top, width - margin_right, height - margin_bottom)

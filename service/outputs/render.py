@@ -4,6 +4,7 @@ validation, metrics) comes from the same response models as the JSON answer."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -46,7 +47,8 @@ def glb(region: MeshRegion, params: FlattenParams) -> bytes:
             [largest],
         )
     s_sign = 1.0 if flat.layout is Layout.THETA_PHI else -1.0  # s grows with theta
-    uv, affine = layout_uv(flat.x, s_sign * flat.y)
+    x, y = region.layout  # repaired when untangled
+    uv, affine = layout_uv(x, s_sign * y)
     validation = plain(Validation.of(region))
     summary = {
         key: value if not isinstance(value, np.ndarray) else len(value)
@@ -58,6 +60,12 @@ def glb(region: MeshRegion, params: FlattenParams) -> bytes:
         "metrics": plain(Metrics.of(region)),
         "uv": affine | {"s_sign": s_sign, "layout": flat.layout.value},
     }
+    if region.untangled is not None:
+        u = region.untangled
+        extras["untangle"] = {
+            "moved_vertices": len(u.moved),
+            "folded_after": len(u.flipped_after),
+        }
     positions = region.mesh.vertices[flat.vertex_ids]
     return region_glb(positions, uv, flat.vertex_ids, flat.faces, region.faces, extras)
 
@@ -74,9 +82,9 @@ def png(region: MeshRegion, params: FlattenParams) -> bytes:
 
 def _picture(region: MeshRegion, params: FlattenParams):
     resolved = plain(ResolvedParams.of_region(region))
-    return describe(
-        region.flat, resolved, len(region.faces), params.image_width, params.image_height
-    )
+    x, y = region.layout  # repaired when untangled
+    flat = replace(region.flat, x=x, y=y)
+    return describe(flat, resolved, len(region.faces), params.image_width, params.image_height)
 
 
 #: The forms of a flattened region besides JSON, by :class:`Output`.

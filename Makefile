@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-service soak openapi clean
+.PHONY: serve test bench bench-fit bench-service bench-zoo soak openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -40,6 +40,11 @@ bench-fit: $(VENV)/.installed-bench
 # Needs curl (the end-to-end client) besides the bench extra.
 bench-service: $(VENV)/.installed-bench
 	$(BIN)/python -m benchmarks.service_bench $(BENCH_ARGS)
+
+# The scan zoo: every scan the project can cite and variants of them (../shared beside it
+# adds the shared meshes); exits 1 when a case is not seam-free, fold-free or identical.
+bench-zoo: $(VENV)/.installed-bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.zoo $(BENCH_ARGS)
 
 # Load and soak through a real two-worker server (the test extra suffices); CI runs --short.
 soak: $(VENV)/.installed-test

@@ -730,6 +730,12 @@ async def test_a_star_shaped_region_trusts_every_face(client):
 # -- untangle ----------------------------------------------------------------------------------
 
 
+async def test_a_pole_parallel_to_up_names_the_rotations_up(client):
+    rotation = {"pole": [0, 0, -1], "up": [0, 0, 2]}
+    body = problem(await post(client, "/v1/flatten", {"rotation": rotation}), 422)
+    assert body["field"] == "params.rotation.up", body
+
+
 async def test_untangle_makes_the_answered_layout_fold_free(client):
     """Nefertiti's top, centre fitted: its crown faces away from every centre, so the map
     folds there. With untangle the answered layout has every triangle the map's way round,

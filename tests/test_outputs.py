@@ -123,6 +123,11 @@ async def test_svg_is_a_well_formed_map_with_a_legend(client, name):
     if backfacing:
         assert f"back-facing: {backfacing:,}" in text
         assert root.find(f".//{SVG}path[@class='marks label-4']") is not None
+        # A triangle both back-facing and folded is drawn as folded, and the legend says so.
+        v = as_json["validation"]
+        doubly = len(set(v["backfacing_faces"]) & set(v["folded_faces"]))
+        if doubly:
+            assert f"back-facing: {backfacing:,} ({doubly:,} drawn as folded)" in text
     has_boundary = root.find(f".//{SVG}path[@class='boundary']") is not None
     assert has_boundary == (as_json["validation"]["boundary_loops"] > 0)
 

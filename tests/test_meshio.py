@@ -561,16 +561,10 @@ def test_a_file_without_triangle_elements_names_what_it_has():
 
 def test_a_real_scan_written_as_strips_reads_back_its_triangles():
     """Lee Perry-Smith's scan as one tristrips row: each triangle a strip of its own, ended by
-    -1 (binary, as scanners write it)."""
+    -1 (binary, as scanners write it; the zoo's writer)."""
+    from benchmarks.zoo import strips_ply
+
     mesh = read_mesh(SAMPLES["lee-perry-smith.obj"].path.read_bytes(), "obj", LIMITS)
-    items = np.hstack([mesh.faces, -np.ones((len(mesh.faces), 1), dtype=np.int64)]).ravel()
-    header = (
-        "ply\nformat binary_little_endian 1.0\n"
-        f"element vertex {len(mesh.vertices)}\nproperty double x\nproperty double y\n"
-        "property double z\nelement tristrips 1\nproperty list int int vertex_indices\n"
-        "end_header\n"
-    ).encode()
-    body = mesh.vertices.astype("<f8").tobytes() + struct.pack("<i", len(items))
-    strips = read_mesh(header + body + items.astype("<i4").tobytes(), "ply", LIMITS)
+    strips = read_mesh(strips_ply(mesh), "ply", LIMITS)
     np.testing.assert_array_equal(strips.faces, mesh.faces)
     np.testing.assert_array_equal(strips.vertices, mesh.vertices)

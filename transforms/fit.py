@@ -199,14 +199,7 @@ def fit_region(
     """
     fixed = fixed or FitFixed()
     bounds = bounds or FitBounds()
-    method = Method(method)
-    points = as_points(vertices, "vertices")
-    faces = as_faces(faces, len(points))
-    if len(faces) == 0:
-        raise TransformInputError("faces", "the region has no faces")
-    if fixed.sigma is not None and method is Method.STANDARD:
-        raise TransformInputError("sigma", "method 'standard' has no warp, so it takes no sigma")
-    problem = _Problem(points, faces, method, threads, Layout(layout))
+    problem = _Problem.checked(vertices, faces, fixed, method, threads, layout)
     search = _start(problem, fixed, bounds)
     start = search.initial
     if search.move_center:
@@ -351,14 +344,7 @@ def default_choice(
     if fixed.center is None:
         raise TransformInputError("center", "the default choice needs a centre")
     bounds = bounds or FitBounds()
-    method = Method(method)
-    points = as_points(vertices, "vertices")
-    faces = as_faces(faces, len(points))
-    if len(faces) == 0:
-        raise TransformInputError("faces", "the region has no faces")
-    if fixed.sigma is not None and method is Method.STANDARD:
-        raise TransformInputError("sigma", "method 'standard' has no warp, so it takes no sigma")
-    problem = _Problem(points, faces, method, threads, Layout(layout))
+    problem = _Problem.checked(vertices, faces, fixed, method, threads, layout)
     center = as_vector(fixed.center, "center")
     choice = _frame_and_sigma(problem, center, fixed, bounds, [])
     answer = _keep_margin(
@@ -566,6 +552,20 @@ class _Problem:
         self.sample_normals = np.where(flat[:, None], 0.0, self.planes.normals[rows])
         self.sample_offsets = np.where(flat, 1.0, self.planes.offsets[rows])
         self.sample_areas = areas[picked]
+
+    @classmethod
+    def checked(cls, vertices, faces, fixed: FitFixed, method, threads: int, layout) -> _Problem:
+        """The problem of a caller's region, its input checked (as :func:`fit_region`)."""
+        method = Method(method)
+        points = as_points(vertices, "vertices")
+        faces = as_faces(faces, len(points))
+        if len(faces) == 0:
+            raise TransformInputError("faces", "the region has no faces")
+        if fixed.sigma is not None and method is Method.STANDARD:
+            raise TransformInputError(
+                "sigma", "method 'standard' has no warp, so it takes no sigma"
+            )
+        return cls(points, faces, method, threads, Layout(layout))
 
     @property
     def closed(self) -> bool:

@@ -182,11 +182,15 @@ def parser() -> argparse.ArgumentParser:
             "--apex", metavar="X,Y,Z", help="where the cone starts (default: the box centre)"
         )
         cap = command.add_mutually_exclusive_group()
-        cap.add_argument("--sigma", type=float, help="the warp parameter (default 0.3)")
+        cap.add_argument(
+            "--sigma", type=float, help="the warp parameter (default: the largest-cap rule)"
+        )
         cap.add_argument("--pole-angle", type=float, metavar="DEG", help="the cap's angle")
         cap.add_argument("--auto", action="store_true", help="choose centre, pole and sigma")
         command.add_argument("--center", help=f"X,Y,Z or one of {', '.join(CENTERS)}")
-        command.add_argument("--pole", metavar="X,Y,Z", help="world direction of local +Y")
+        command.add_argument(
+            "--pole", metavar="X,Y,Z", help="world direction of local +Y (default: chosen)"
+        )
         command.add_argument("--up", metavar="X,Y,Z", help="world direction towards local +Z")
         command.add_argument("--layout", choices=[layout.value for layout in Layout])
         command.add_argument("--params", metavar="JSON", help="any of the API's params")

@@ -266,6 +266,7 @@ class Located:
     selection : Selection, the region's file face ids and the region as answers repeat it
     hits : Hits, face positions in ``selection.faces``, points in the local frame
     layout : Layout, of the params (for the answer's params)
+    format : str, the format the mesh was read as
     """
 
     chart: Chart
@@ -273,6 +274,7 @@ class Located:
     selection: Selection
     hits: Hits
     layout: Layout
+    format: str
 
     @property
     def found(self) -> np.ndarray:
@@ -289,7 +291,7 @@ def locate_directions(mesh: Mesh, params: LocateParams, settings: Settings) -> L
     directions = chart.inverse(params.theta, params.phi, 1.0)
     # Every vertex given, so that an error names the file's vertex ids.
     hits = locate(frame.to_local(mesh.vertices), mesh.faces[selection.faces], directions)
-    return Located(chart, frame, selection, hits, params.layout)
+    return Located(chart, frame, selection, hits, params.layout, mesh.format)
 
 
 # -- points --------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ from pydantic import BaseModel, Field, PrivateAttr
 
 from transforms import Layout, Method
 
+from .meshio import FORMATS
 from .params import Region, choice
 
 if TYPE_CHECKING:
@@ -82,11 +83,20 @@ class ResolvedParams(Answer):
         "null: the whole mesh. Sent back with the same mesh, it selects the same faces.",
     )
 
+    format: Literal[FORMATS] | None = Field(
+        None, description="The format the mesh was read as (mesh answers)."
+    )
+    untangle: bool | None = Field(
+        None, description="Whether the layout was untangled (flatten, validate and fit)."
+    )
+
     @classmethod
-    def of(cls, chart, frame, layout: Layout | None = None, selection=None) -> ResolvedParams:
+    def of(
+        cls, chart, frame, layout: Layout | None = None, selection=None, **mesh
+    ) -> ResolvedParams:
         """Everything as it was used, so that it can be sent back as it is (``standard``
-        has no cap: its sigma and pole angle are null); ``layout`` and the ``selection``'s
-        region for mesh answers."""
+        has no cap: its sigma and pole angle are null); for mesh answers ``layout``, the
+        ``selection``'s region and ``mesh`` (``format``, ``untangle``)."""
         standard = chart.method is Method.STANDARD
         values = {
             "method": chart.method,
@@ -99,11 +109,18 @@ class ResolvedParams(Answer):
             values["layout"] = layout
         if selection is not None:
             values["region"] = selection.region
-        return cls.build(**values)
+        return cls.build(**values, **mesh)
 
     @classmethod
     def of_region(cls, region: MeshRegion) -> ResolvedParams:
-        return cls.of(region.chart, region.frame, region.flat.layout, region.selection)
+        return cls.of(
+            region.chart,
+            region.frame,
+            region.flat.layout,
+            region.selection,
+            format=region.mesh.format,
+            untangle=region.untangled is not None,
+        )
 
 
 class FlatVertices(Answer):
@@ -246,8 +263,8 @@ class UntangleReport(Answer):
     largest_shift: float = Field(description="The farthest a vertex moved, in layout units.")
     folded_before: int = Field(description="Triangles flipped (or flat) in the transform's map.")
     folded_after: list[int] = Field(
-        description="Triangles still flipped or flat after untangling (file ids): empty unless "
-        "the region's own boundary folds over itself."
+        description="Triangles still flipped or flat after untangling (file ids); notes say "
+        "why when any are."
     )
     notes: list[str] = Field(description="What could not be done, in words.")
 
@@ -258,8 +275,8 @@ class UntangleReport(Answer):
         notes = [] if u.note is None else [u.note]
         if len(after) and u.note is None:
             notes.append(
-                f"{len(after):,} triangles could not be untangled: the region's boundary folds "
-                "over itself there (they are listed in folded_after)"
+                f"{len(after):,} triangles could not be untangled within eight rings of "
+                "neighbours (they are listed in folded_after)"
             )
         return cls.build(
             moved_vertices=flat.vertex_ids[u.moved],
@@ -384,7 +401,9 @@ class LocateResponse(Answer):
         ids = np.where(found, located.selection.faces[np.maximum(hits.faces, 0)], -1).tolist()
         weights = np.where(found[:, None], hits.barycentric, 0.0).tolist()
         answers = Hit.rows(found.tolist(), face=ids, barycentric=weights, point=world.tolist())
-        params = ResolvedParams.of(located.chart, located.frame, located.layout, located.selection)
+        params = ResolvedParams.of(
+            located.chart, located.frame, located.layout, located.selection, format=located.format
+        )
         return cls.build(params=params, hits=answers)
 
 

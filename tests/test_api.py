@@ -762,5 +762,5 @@ async def test_untangle_makes_the_answered_layout_fold_free(client):
     assert len(body["validation"]["folded_faces"]) > 0
     again = (await post(client, "/v1/validate", {**body["params"], "untangle": True}, name)).json()
     assert again["untangle"] == report
-    plain = (await post(client, "/v1/validate", body["params"], name)).json()
-    assert "untangle" not in plain
+    plain = (await post(client, "/v1/validate", {**body["params"], "untangle": False}, name)).json()
+    assert "untangle" not in plain and plain["params"]["untangle"] is False

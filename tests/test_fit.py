@@ -209,9 +209,10 @@ def test_the_default_choice_keeps_what_is_fixed():
 
 
 def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest():
-    """Nefertiti's top seen from its box centre: some sampled faces are seen from behind.
-    The objective is their share of the sample's area (times the weight) plus the energy of
-    the faces seen from the front measured alone, so their own energies play no part."""
+    """Nefertiti's top seen from its box centre: some sampled faces are seen from behind (as
+    validation judges it). The objective is their share of the sample's area (times the
+    weight) plus the energy of the faces seen from the front measured alone, so their own
+    energies play no part."""
     from transforms.fit import _BACKFACING_WEIGHT, _Candidate, _Problem
 
     vertices, faces = load_sample("nefertiti-lowres.obj")
@@ -220,17 +221,12 @@ def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest
     top = faces[directions[:, 2] / np.linalg.norm(directions, axis=1) > math.cos(1.0)]
     problem = _Problem(vertices, top, Method.DISTORTED, 1, Layout.THETA_PHI)
     rotation = Frame.from_pole_up([0, 0, -1], [0, 1, 0]).rotation
-    candidate = _Candidate(centre, rotation, 0.5)
-    behind = problem.sample_offsets - problem.sample_normals @ centre <= 0.0
+    frame, chart = Frame.from_matrix(rotation, centre), Chart.distorted(PoleCap.from_sigma(0.5))
+    sample = flatten_region(problem.sample_points, problem.sample_faces, frame, chart)
+    behind = np.zeros(len(problem.sample_faces), dtype=bool)
+    behind[sample.validation.backfacing_faces] = True
     assert 0 < behind.sum() < len(behind)
     hidden = problem.sample_areas[behind].sum() / problem.sample_areas.sum()
-    chart = Chart.distorted(PoleCap.from_sigma(0.5))
-    front = np.flatnonzero(~behind)
-    seen = flatten_region(
-        problem.sample_points,
-        problem.sample_faces[front],
-        Frame.from_matrix(rotation, centre),
-        chart,
-    )
+    seen = flatten_region(problem.sample_points, problem.sample_faces[~behind], frame, chart)
     expected = seen.distortion.isometric.mean + _BACKFACING_WEIGHT * hidden
-    assert problem.energy(candidate) == pytest.approx(expected, rel=1e-9)
+    assert problem.energy(_Candidate(centre, rotation, 0.5)) == pytest.approx(expected, rel=1e-9)

@@ -568,3 +568,17 @@ def test_a_real_scan_written_as_strips_reads_back_its_triangles():
     strips = read_mesh(strips_ply(mesh), "ply", LIMITS)
     np.testing.assert_array_equal(strips.faces, mesh.faces)
     np.testing.assert_array_equal(strips.vertices, mesh.vertices)
+
+
+def test_an_unsigned_strip_list_ends_its_strips_with_its_largest_value():
+    """A strip list of uint items writes -1 as 4294967295."""
+    header = (
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 8\nproperty float x\n"
+        b"property float y\nproperty float z\nelement tristrips 1\n"
+        b"property list uchar uint vertex_indices\nend_header\n"
+    )
+    body = b"".join(struct.pack("<fff", *p) for p in GRID)
+    items = [4, 0, 5, 1, 0xFFFFFFFF, 6, 2, 7, 3]
+    body += struct.pack(f"<B{len(items)}I", len(items), *items)
+    mesh = read_mesh(header + body, "ply", LIMITS)
+    assert mesh.faces.tolist() == [[4, 0, 5], [5, 0, 1], [6, 2, 7], [7, 2, 3]]

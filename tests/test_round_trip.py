@@ -30,9 +30,9 @@ ROUTES = ("/v1/flatten", "/v1/validate", "/v1/fit", "/v1/locate")
 QUERIES = {"theta": [math.pi / 2, 1.2, 0.0], "phi": [-math.pi / 2, -1.0, 0.0]}
 #: What an answer's numbers are, by route.
 NUMBERS = {
-    "/v1/flatten": ("vertices", "faces", "validation", "metrics"),
-    "/v1/validate": ("validation", "metrics"),
-    "/v1/fit": ("validation", "metrics"),
+    "/v1/flatten": ("vertices", "faces", "validation", "metrics", "untangle"),
+    "/v1/validate": ("validation", "metrics", "untangle"),
+    "/v1/fit": ("validation", "metrics", "untangle"),
     "/v1/locate": ("hits",),
 }
 
@@ -82,6 +82,8 @@ async def regions(client, name: str) -> dict[str, dict | None]:
 async def test_sent_back_params_select_the_same_faces_and_give_the_same_numbers(client, name):
     for kind, region in (await regions(client, name)).items():
         first = {"region": region, "center": "auto"}  # the fit moves the centre
+        if kind == "cone":
+            first["untangle"] = True  # and a layout repaired comes back repaired
         expected_faces = None
         for route in ROUTES:
             answer = await post(client, route, name, first)
@@ -89,7 +91,7 @@ async def test_sent_back_params_select_the_same_faces_and_give_the_same_numbers(
             where = (name, kind, route)
             assert again["params"] == answer["params"], where
             for key in NUMBERS[route]:
-                assert again[key] == answer[key], (*where, key)
+                assert again.get(key) == answer.get(key), (*where, key)
             # The same faces, whichever route the params came from.
             faces = (await post(client, "/v1/flatten", name, answer["params"]))["faces"]["ids"]
             expected_faces = faces if expected_faces is None else expected_faces

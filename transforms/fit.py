@@ -542,15 +542,6 @@ class _Problem:
         sample_used, compact = np.unique(sample, return_inverse=True)
         self.sample_faces = compact.reshape(-1, 3)
         self.sample_points = points[sample_used]
-        # The sampled faces' planes, to tell which face the candidate's centre sees from
-        # behind; a face with no area (sampled when the sample is every face) has none and
-        # counts as seen from the front: 0 . c < 1.
-        plane_of = np.full(len(faces), -1)
-        plane_of[self.planes.faces] = np.arange(j)
-        rows = plane_of[picked]
-        flat = rows < 0
-        self.sample_normals = np.where(flat[:, None], 0.0, self.planes.normals[rows])
-        self.sample_offsets = np.where(flat, 1.0, self.planes.offsets[rows])
         self.sample_areas = areas[picked]
 
     @classmethod
@@ -629,12 +620,16 @@ class _Problem:
             )
             second = measured_second(theta, self.layout)
             measures = measure_checked(rows, self.sample_faces, second, phi, chart.cap)
-            behind = self.sample_offsets - self.sample_normals @ candidate.center <= 0.0
+            # Seen from behind as validation judges it: against the sample's own winding.
+            orientation = measures.orientation
+            winding = -1 if int(orientation.sum(dtype=np.int64)) < 0 else 1
+            behind = orientation != winding
             # The faces seen from the front measured alone: the layout's scale from them too.
             energy = float(distortion(measures.subset(~behind)).isometric.mean)
         except TransformInputError:  # every face seen from the front is degenerate
             return math.inf
-        hidden = float(self.sample_areas[behind].sum() / self.sample_areas.sum())
+        total = float(self.sample_areas.sum())
+        hidden = float(self.sample_areas[behind].sum()) / total if total > 0 else 0.0
         return energy + _BACKFACING_WEIGHT * hidden
 
     def best_sigma(self, center: np.ndarray, rotation: np.ndarray, largest_rho: float) -> float:

@@ -37,6 +37,8 @@ MAX_FLIPPED_SHARE = 0.1
 #: The energy's area weight ``t`` (the paper's value) and its outer iterations.
 _AREA_WEIGHT = 1.0 / 128.0
 _OUTER = 20
+#: eps never goes below this: at 0 a flipped triangle's energy would be infinite.
+_SMALLEST_EPS = 1e-12
 
 
 @dataclass(frozen=True)
@@ -248,17 +250,27 @@ def _minimise(
             energy, current, args=(eps,), jac=True, method="L-BFGS-B",
             options={"maxiter": 60, "gtol": 1e-7},
         )  # fmt: skip
+        if not np.isfinite(found.x).all():
+            break  # keep the last finite layout
         current = found.x
         value = energy(current, eps)[0]
         least = smallest_det(current)
-        sigma = max(1.0 - value / previous, 0.1) if previous > 0 else 0.1
-        mu = (1.0 - sigma) * 0.5 * (least + math.sqrt(eps * eps + least * least))
-        eps = 2.0 * math.sqrt(mu * (mu - least)) if least < mu else 1e-10
+        eps = _next_eps(eps, least, value, previous)
         if least > 0 and abs(previous - value) <= 1e-5 * abs(value):
             break
-        previous = value
+        previous = energy(current, eps)[0]  # the energy the next step starts from
     result[ids] = current.reshape(-1, 2)
     return result
+
+
+def _next_eps(eps: float, least: float, value: float, previous: float) -> float:
+    """The paper's rule for the next eps, from the smallest determinant ``least`` and the
+    energy's relative decrease; chi(least, eps) evaluated without cancellation."""
+    sigma = max(1.0 - value / previous, 0.1) if previous > 0 else 0.1
+    root = math.sqrt(eps * eps + least * least)
+    chi = 0.5 * eps * eps / (root - least) if least < 0 else 0.5 * (least + root)
+    mu = (1.0 - sigma) * chi
+    return max(2.0 * math.sqrt(mu * (mu - least)) if least < mu else 0.0, _SMALLEST_EPS)
 
 
 class _Rings:

@@ -128,6 +128,9 @@ def _read_body(data, body, elements, order, vertex, indices, limits) -> Mesh:
             vertices = np.stack([columns[k] for k in "xyz"], axis=1).astype(np.float64)
         elif element.name in indices:
             items, sizes = columns[indices[element.name]]
+            if element.name == "tristrips" and items.dtype.kind == "u":
+                # An unsigned list writes the -1 that ends a strip as its largest value.
+                items = np.where(items == np.iinfo(items.dtype).max, -1, items.astype(np.int64))
             items = _indices(items, sizes, element.name)
             if element.name == "face":
                 pieces.append(_fan(items, sizes, vertex.count, limits))

@@ -27,12 +27,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import orjson
 import trimesh
 from scipy.spatial.transform import Rotation
 
 from benchmarks.docs import record
 from benchmarks.transforms_bench import machine
 from service.capabilities import MESH_COMMANDS
+from service.encoding import encode
 from service.inputs import mesh_params
 from service.meshio import Mesh, format_of, read_mesh
 from service.samples import SAMPLES
@@ -162,9 +164,8 @@ def answer(mesh: Mesh, params: dict, command: str = "validate"):
 
 
 def plain(model) -> dict:
-    from service.encoding import plain as to_plain
-
-    return json.loads(json.dumps(to_plain(model), default=lambda a: np.asarray(a).tolist()))
+    """The answer as the API's JSON holds it."""
+    return orjson.loads(encode(model))
 
 
 def run_case(case: Case) -> dict:

@@ -103,14 +103,15 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
     region, n_faces = params.region, len(mesh.faces)
     if region is not None and region.cone is not None:
         cone = region.cone
-        apex = (
-            select.bbox_center(mesh.vertices, mesh.faces)
-            if cone.apex is None
-            else np.asarray(cone.apex, dtype=np.float64)
-        )
+        center = _center(mesh, mesh.faces, params.center)
+        if cone.apex is not None:
+            apex = np.asarray(cone.apex, dtype=np.float64)
+        elif params.center in ("bbox_center", "auto"):
+            apex = center  # the same box centre, of the whole mesh: found once
+        else:
+            apex = select.bbox_center(mesh.vertices, mesh.faces)
         faces = select.cone_faces(mesh.vertices, mesh.faces, apex, cone.axis, cone.half_angle_deg)
         resolved = {"cone": {**cone.model_dump(), "apex": apex.tolist()}}
-        center = _center(mesh, mesh.faces, params.center)
         return Selection(select.nonempty(faces), center, resolved)
     if region is None:
         faces = np.arange(n_faces)

@@ -33,6 +33,7 @@ class FlatRegion:
     distortion : Distortion, over every measured face
     trusted : Distortion or None, over the trusted faces only: neither flagged by the
         validation nor degenerate (the same per-face values; None when no face is trusted)
+    flagged_faces : int, how many faces the validation flags (any reason, each face once)
     """
 
     vertex_ids: np.ndarray
@@ -46,11 +47,7 @@ class FlatRegion:
     validation: RegionValidation
     distortion: Distortion
     trusted: Distortion | None
-
-    @property
-    def flagged_faces(self) -> int:
-        """How many faces the validation flags (any reason, each face once)."""
-        return int(flagged_mask(self.validation, len(self.faces)).sum())
+    flagged_faces: int
 
 
 def flatten_region(
@@ -105,7 +102,7 @@ def flatten_region(
     measures = measure_checked(
         rows, compact, measured_second(theta, layout), phi, chart.cap, threads
     )
-    validation, metrics, trusted = _judge(measures, winding, threads)
+    validation, metrics, trusted, flagged = _judge(measures, winding, threads)
     x, y = layout_xy(theta, phi, layout)
     return FlatRegion(
         vertex_ids=vertex_ids,
@@ -119,6 +116,7 @@ def flatten_region(
         validation=validation,
         distortion=metrics,
         trusted=trusted,
+        flagged_faces=flagged,
     )
 
 
@@ -150,7 +148,7 @@ def assess_region(
     (RegionValidation, Distortion)
     """
     measures = measure_faces(vertices_local, faces, theta, phi, cap, threads, layout_theta)
-    validation, metrics, _ = _judge(measures, winding, threads)
+    validation, metrics, _, _ = _judge(measures, winding, threads)
     return validation, metrics
 
 
@@ -170,15 +168,18 @@ def flagged_mask(validation: RegionValidation, n_faces: int) -> np.ndarray:
 
 def _judge(
     measures: FaceMeasures, winding: int | None, threads: int
-) -> tuple[RegionValidation, Distortion, Distortion | None]:
+) -> tuple[RegionValidation, Distortion, Distortion | None, int]:
+    """Validation, distortion over every face and over the trusted ones, and the count of
+    flagged faces."""
     # One after the other: side by side on two threads they only compete for memory.
     validation = validate(measures, winding, threads)
     metrics = distortion(measures)
     flagged = flagged_mask(validation, len(measures))
-    if not flagged.any():
-        return validation, metrics, metrics
-    if flagged.all():
-        return validation, metrics, None
+    count = int(flagged.sum())
+    if count == 0:
+        return validation, metrics, metrics, 0
+    if count == len(measures):
+        return validation, metrics, None, count
     # The same per-face values (one layout scale for the whole region), over the rest.
     trusted = distortion(replace(measures, degenerate=measures.degenerate | flagged))
-    return validation, metrics, trusted
+    return validation, metrics, trusted, count

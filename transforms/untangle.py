@@ -190,10 +190,22 @@ def _minimise(
     points: np.ndarray, faces: np.ndarray, inverse: np.ndarray, areas: np.ndarray, free
 ) -> np.ndarray:
     """The layout with the ``free`` vertices moved to minimise the regularised energy of
-    the triangles ``faces`` (the paper's outer loop over ``eps``)."""
+    the triangles ``faces``, worked on the patch's own vertices only (renumbered), so that
+    each evaluation costs the patch, not the region."""
+    used = np.unique(faces.ravel())
+    result = points.copy()
+    result[used] = _minimise_patch(
+        points[used], np.searchsorted(used, faces), inverse, areas, free[used]
+    )
+    return result
+
+
+def _minimise_patch(
+    points: np.ndarray, faces: np.ndarray, inverse: np.ndarray, areas: np.ndarray, free
+) -> np.ndarray:
+    """As :func:`_minimise`, on a patch whose ``faces`` use every one of its ``points``
+    (the paper's outer loop over ``eps``)."""
     ids = np.flatnonzero(free)
-    position = np.full(len(points), -1)
-    position[ids] = np.arange(ids.size)
     result = points.copy()
     weights = areas / areas.sum() if areas.sum() > 0 else np.full(len(areas), 1.0 / len(areas))
 

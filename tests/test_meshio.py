@@ -7,6 +7,7 @@ import io
 import json
 import re
 import struct
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -14,7 +15,7 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from service.meshio import Limits, MeshFormatError, MeshTooLargeError, read_mesh
+from service.meshio import Limits, MeshFormatError, MeshTooLargeError, ply, read_mesh, text
 from service.samples import SAMPLES
 
 from .corpus import glb as container
@@ -582,3 +583,353 @@ def test_an_unsigned_strip_list_ends_its_strips_with_its_largest_value():
     body += struct.pack(f"<B{len(items)}I", len(items), *items)
     mesh = read_mesh(header + body, "ply", LIMITS)
     assert mesh.faces.tolist() == [[4, 0, 5], [5, 0, 1], [6, 2, 7], [7, 2, 3]]
+
+
+# -- memory: a reader needs at most 8 bytes a byte of the file, plus a constant --------------
+
+#: The constant: a few chunks' worth of temporaries (text.CHUNK_BYTES) and small arrays.
+MEMORY_CONSTANT = 16 * 2**20
+SIZE = 4 * 2**20
+TRIANGLE = b"v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+
+
+def repeated(unit: bytes, head: bytes = b"", tail: bytes = b"", size: int = SIZE) -> bytes:
+    return head + unit * ((size - len(head) - len(tail)) // len(unit)) + tail
+
+
+def ply_head(fmt: str, vertices: int, rows: int, item: str = "int", element="face") -> bytes:
+    return (
+        f"ply\nformat {fmt} 1.0\nelement vertex {vertices}\nproperty float x\n"
+        f"property float y\nproperty float z\nelement {element} {rows}\n"
+        f"property list uchar {item} vertex_indices\nend_header\n"
+    ).encode()
+
+
+def binary_ply_of_mixed_polygons(size: int = SIZE) -> bytes:
+    """Triangles and quads in turn: rows of two shapes, walked."""
+    pair = struct.pack("<B3i", 3, 0, 1, 2) + struct.pack("<B4i", 4, 0, 1, 2, 3)
+    pairs = size // len(pair)
+    square = SQUARE.astype("<f4").tobytes()
+    return ply_head("binary_little_endian", 4, 2 * pairs) + square + pair * pairs
+
+
+def ascii_stl(space: bytes = b" ", size: int = SIZE) -> bytes:
+    facet = (
+        b"facet" + space + b"normal 0 0 1\n outer loop\n  vertex 0 0 0\n  vertex 1 0 0\n"
+        b"  vertex 0 1 0\n endloop\nendfacet\n"
+    )
+    return repeated(facet, b"solid x\n", b"endsolid x\n", size)
+
+
+ADVERSARIAL = {
+    "obj of line feeds": ("obj", repeated(b"\n", TRIANGLE + b"f 1 2 3\n")),
+    "obj of comments": ("obj", repeated(b"#\n", TRIANGLE + b"f 1 2 3\n")),
+    "obj of comments with words": ("obj", repeated(b"# f 1 2 3 / v\n", TRIANGLE + b"f 1 2 3\n")),
+    "obj of v lines": ("obj", repeated(b"v 0 0 0\n", tail=b"f 1 2 3\n")),
+    "obj of f lines": ("obj", repeated(b"f 1 1 1\n", TRIANGLE)),
+    "obj of f lines with tails": ("obj", repeated(b"f 1/1/1 1/1/1 1/1/1\n", TRIANGLE)),
+    "obj of relative f lines": ("obj", repeated(b"f -1 -1 -1\n", TRIANGLE)),
+    "obj of g lines": ("obj", repeated(b"g a\n", TRIANGLE, b"f 1 2 3\n")),
+    "obj of one long face": ("obj", repeated(b" -1", TRIANGLE + b"f", b"\n")),
+    "obj of one long vertex": ("obj", repeated(b" 0", b"v", b"\n" + TRIANGLE + b"f 1 2 3\n")),
+    "obj of one long comment": ("obj", repeated(b"x", TRIANGLE + b"f 1 2 3\n#", b"\n")),
+    "ascii stl": ("stl", ascii_stl()),
+    "ascii stl with 'facet  normal'": ("stl", ascii_stl(b"  ")),
+    "binary stl": ("stl", b"\0" * 80 + struct.pack("<I", SIZE // 50) + bytes(SIZE // 50 * 50)),
+    "ascii ply of triangles": (
+        "ply",
+        ply_head("ascii", 3, SIZE // 8) + b"0 0 0\n1 0 0\n0 1 0\n" + b"3 0 1 2\n" * (SIZE // 8),
+    ),
+    "ascii ply of vertices": (
+        "ply",
+        ply_head("ascii", SIZE // 6, 1) + b"0 0 0\n" * (SIZE // 6) + b"3 0 1 2\n",
+    ),
+    "binary ply of mixed polygons": ("ply", binary_ply_of_mixed_polygons(6 * 2**20)),
+    "binary ply of one long strip": (
+        "ply",
+        ply_head("binary_little_endian", 3, 1, element="tristrips").replace(b"uchar", b"int")
+        + SQUARE[:3].astype("<f4").tobytes()
+        + struct.pack("<i", SIZE // 4)
+        + (np.arange(SIZE // 4) % 3).astype("<i4").tobytes(),
+    ),
+}
+
+
+def peak_of_reading(data: bytes, fmt: str) -> tuple[int, int]:
+    """The peak of memory allocations (numpy's too) while reading ``data``, and the bytes of
+    the mesh's arrays."""
+    tracemalloc.start()
+    try:
+        mesh = read_mesh(data, fmt, Limits(max_vertices=10**8, max_faces=10**8))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    return peak, mesh.vertices.nbytes + mesh.faces.nbytes
+
+
+@pytest.mark.parametrize("name", sorted(ADVERSARIAL))
+def test_reading_needs_at_most_8_bytes_a_byte_plus_a_constant(name):
+    fmt, data = ADVERSARIAL[name]
+    peak, _ = peak_of_reading(data, fmt)
+    assert peak <= 8 * len(data) + MEMORY_CONSTANT, f"{peak / len(data):.1f} bytes a byte"
+
+
+@pytest.mark.parametrize(
+    "data",
+    [repeated(b"f" + b" 1" * 1000 + b"\n", TRIANGLE), repeated(b" 1", TRIANGLE + b"f", b"\n")],
+    ids=["many long polygons", "one polygon"],
+)
+def test_polygons_of_one_digit_corners_need_their_triangles_plus_a_constant(data):
+    """The one case beyond 8 bytes a byte (obj.py's docstring): each 2-byte corner past the
+    second is a 24-byte triangle; the read needs those and a constant, nothing in between."""
+    peak, arrays = peak_of_reading(data, "obj")
+    assert arrays > 8 * len(data)
+    assert peak <= arrays + MEMORY_CONSTANT
+
+
+def test_an_ascii_stl_beyond_the_limits_is_refused_by_its_count_whatever_its_spacing():
+    """The count is of 'vertex' lines, not of a spelling of 'facet normal'; it comes before
+    any number is parsed (the file's last number is no number, and that is not what is
+    said)."""
+    data = ascii_stl(b"  ", size=20_000).replace(b"endsolid", b"facet normal 0 0 1\nvertex 0 x 0\n")
+    facets = data.count(b"endfacet")
+    with pytest.raises(MeshTooLargeError, match=f"{facets:,} triangles; the limit is 10"):
+        read_mesh(data, "stl", Limits(max_faces=10))
+    with pytest.raises(MeshTooLargeError, match="vertices; the limit is 10"):
+        read_mesh(data, "stl", Limits(max_vertices=10))
+
+
+def test_counts_are_checked_before_anything_is_made_for_them():
+    """A file whose counts pass the limits only by a little and whose arrays would cost far
+    more than the file is refused before they are made."""
+    many = repeated(b"f" + b" 1" * 1000 + b"\n", TRIANGLE, size=300_000)
+    tracemalloc.start()
+    try:
+        with pytest.raises(MeshTooLargeError):
+            read_mesh(many, "obj", Limits(max_faces=1000))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < MEMORY_CONSTANT  # its 150,000 triangles would take 3.6 MB
+
+
+# -- chunks: what a reader reads does not depend on where the chunks end ---------------------
+
+
+def read_in_chunks(data, fmt: str, monkeypatch, chunk: int, rows: int = 3):
+    """``data`` read with chunks of ``chunk`` bytes (and PLY batches of ``rows`` rows)."""
+    monkeypatch.setattr(text, "CHUNK_BYTES", chunk)
+    monkeypatch.setattr(ply, "_BATCH_ROWS", rows)
+    monkeypatch.setattr(ply, "_STRIP_ITEMS", rows + 2)
+    try:
+        return read_mesh(data, fmt, LIMITS)
+    finally:
+        monkeypatch.undo()
+
+
+def assert_same_mesh(mesh, other):
+    np.testing.assert_array_equal(mesh.vertices, other.vertices)
+    np.testing.assert_array_equal(mesh.faces, other.faces)
+    assert mesh.faces.dtype == np.int64 and mesh.vertices.dtype == np.float64
+    assert {name: mesh.group_faces([name]).tolist() for name in mesh.groups} == {
+        name: other.group_faces([name]).tolist() for name in other.groups
+    }
+
+
+#: Lines that cross chunk edges however small the chunks: comments, tails, relative
+#: references, groups, a long polygon, blank and indented lines, CRLF.
+EDGY_OBJ = (
+    b"# a comment: v 9 9 9 / f 1 2 3\r\n"
+    b"v 0 0 0 # trailing\nv 1 0 0\r\n  v 1 1 0 1.0\n\tv 0 1 0\nv 0 2 0\n\n\n"
+    b"vt 0.5 0.5\nvn 0 0 1\ng  scalp   left # not a group\n"
+    b"f 1/1/1 2/1/1 3/1/1 4/1/1   # a quad\n"
+    b"o   the head  \nusemtl skin/dark\n"
+    b"f 1//1 3//1 5//1\n   \nf 2/1 3/1 4/1 5/1 1/1\ng face\n"
+    b"f " + b" ".join(b"-%d" % (1 + k % 5) for k in range(40)) + b"\n"
+    b"v 5 5 5\nf -1 -3 -4#c\ng\nf 1 2 3"
+)
+
+
+@pytest.mark.parametrize("chunk", [1, 2, 3, 5, 8, 13, 64, 4096])
+def test_obj_reads_the_same_however_its_text_is_cut_into_chunks(monkeypatch, chunk):
+    whole = read_mesh(EDGY_OBJ, "obj", LIMITS)
+    assert whole.faces.tolist()[:7] == [
+        [0, 1, 2], [0, 2, 3], [0, 2, 4], [1, 2, 3], [1, 3, 4], [1, 4, 0], [4, 3, 2]
+    ]  # fmt: skip
+    assert whole.groups["the head"].tolist() == [[2, len(whole.faces)]]
+    assert whole.group_faces(["scalp"]).tolist() == [0, 1, 2, 3, 4, 5]
+    assert "not" not in whole.groups and whole.faces.tolist()[-2:] == [[5, 3, 2], [0, 1, 2]]
+    assert whole.groups["face"].tolist() == [[6, len(whole.faces) - 1]]  # "g" ends it
+    assert_same_mesh(read_in_chunks(EDGY_OBJ, "obj", monkeypatch, chunk), whole)
+
+
+@pytest.mark.parametrize("chunk", [1, 4, 16, 1000])
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", "face on line 4 has 2 corners"),
+        ("v 0 0 0\nv 1 0 0\n\nv 0 1 0 # x\nf 1 2 4\n", "line 5 refers to vertex 4"),
+        ("v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n", "vertex on line 2 has 2 numbers"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\n\n\nf 1 2 3.5\n", "unreadable face references on line 6"),
+        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 /2 3\n", "unreadable face references on line 4"),
+        ("v 0 0 0\n# v\nv 1 x 0\nv 0 1 0\nf 1 2 3\n", "unreadable vertex coordinates on line 3"),
+        ("v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\n", r"vertex 2 \(line 3\)"),
+    ],
+)
+def test_obj_errors_name_the_line_however_the_text_is_cut(monkeypatch, chunk, text, says):
+    monkeypatch.setattr("service.meshio.text.CHUNK_BYTES", chunk)
+    with pytest.raises(MeshFormatError, match=says):
+        read_mesh(obj(text), "obj", LIMITS)
+
+
+def _random_obj(rng: np.random.Generator) -> bytes:
+    lines = ["v 0 0 0", "v 1 0 0", "v 0 1 0"]
+    for _ in range(int(rng.integers(5, 60))):
+        kind = rng.choice(["v", "f", "g", "o", "#", "vt", ""])
+        if kind == "v":
+            lines.append(" v " + " ".join(map(str, rng.integers(-9, 9, int(rng.integers(3, 6))))))
+        elif kind == "f":
+            refs = [str(int(rng.integers(1, 4))) + rng.choice(["", "/1", "//1"])
+                    for _ in range(int(rng.integers(3, 12)))]  # fmt: skip
+            lines.append("f\t" + "  ".join(refs) + rng.choice(["", " # c", "\r"]))
+        elif kind in ("g", "o"):
+            lines.append(
+                f"{kind} " + " ".join(rng.choice(["a", "b", "c d"], int(rng.integers(0, 3))))
+            )
+        else:
+            lines.append(f"{kind} 0 1")
+    return "\n".join([*lines, "f 1 2 3"]).encode()
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_random_obj_files_read_the_same_in_any_chunks(monkeypatch, seed):
+    rng = np.random.default_rng(seed)
+    data = _random_obj(rng)
+    whole = read_mesh(data, "obj", LIMITS)
+    for chunk in rng.integers(1, 40, 3).tolist():
+        assert_same_mesh(read_in_chunks(data, "obj", monkeypatch, chunk), whole)
+
+
+PLY_FILES = {
+    "ascii": ply_ascii(extra_element=True),
+    "little": ply_binary("<", extra_element=True),
+    "big": ply_binary(">", extra_element=True),
+    "strips": strips_ply("binary_little_endian", [STRIP, [4, 0, 5, 1, -1, 6, 2, 7, 3]]),
+    "ascii strips": strips_ply("ascii", [STRIP, [4, 0, 5, 1, 1, 6, 6, 2, 7, 3]]),
+    "mixed": binary_ply_of_mixed_polygons(2000),
+}
+
+
+@pytest.mark.parametrize("name", sorted(PLY_FILES))
+@pytest.mark.parametrize(("chunk", "rows"), [(1, 1), (7, 2), (64, 5)])
+def test_ply_reads_the_same_in_any_chunks_and_batches(monkeypatch, name, chunk, rows):
+    data = PLY_FILES[name]
+    assert_same_mesh(
+        read_in_chunks(data, "ply", monkeypatch, chunk, rows), read_mesh(data, "ply", LIMITS)
+    )
+
+
+def test_binary_ply_of_mixed_sizes_keeps_every_polygon_in_order(monkeypatch):
+    """Runs of one shape and rows walked one by one, with a property after the list."""
+    rng = np.random.default_rng(1)
+    sizes = np.concatenate([rng.integers(3, 7, 50), np.full(40, 3), rng.integers(3, 5, 30)])
+    polygons = [rng.integers(0, 5, size).tolist() for size in sizes]
+    header = ply_header("binary_big_endian").replace(b"face 4", b"face %d" % len(polygons))
+    header = header.replace(b"vertex_indices\n", b"vertex_indices\nproperty uchar tag\n")
+    body = b"".join(struct.pack(">ffdB", x, y, z, 7) for x, y, z in PENTAGON)
+    body += b"".join(struct.pack(f">iB{len(p)}iB", 0, len(p), *p, 9) for p in polygons)
+    fanned = [[p[0], p[k], p[k + 1]] for p in polygons for k in range(1, len(p) - 1)]
+    assert read_mesh(header + body, "ply", LIMITS).faces.tolist() == fanned
+    assert read_in_chunks(header + body, "ply", monkeypatch, 16, 7).faces.tolist() == fanned
+
+
+@pytest.mark.parametrize("chunk", [1, 9, 100])
+def test_ascii_stl_reads_the_same_in_any_chunks(monkeypatch, chunk):
+    data = trimesh.Trimesh(PENTAGON, FANNED, process=False).export(file_type="stl_ascii").encode()
+    data = data.replace(b"facet normal", b"facet  normal").replace(b"vertex", b"VERTEX")
+    mesh = read_in_chunks(data, "stl", monkeypatch, chunk)
+    np.testing.assert_array_equal(mesh.vertices, PENTAGON[np.ravel(FANNED)])
+    np.testing.assert_array_equal(mesh.faces, np.arange(3 * len(FANNED)).reshape(-1, 3))
+
+
+# -- STL without trimesh ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("file_type", ["stl", "stl_ascii"])
+def test_stl_keeps_every_corner_of_every_triangle_as_trimesh_does(file_type):
+    sample = read_mesh(SAMPLES["lee-perry-smith.glb"].path.read_bytes(), "glb", LIMITS)
+    data = trimesh.Trimesh(sample.vertices, sample.faces, process=False).export(file_type=file_type)
+    data = data.encode() if isinstance(data, str) else data
+    ours = read_mesh(data, "stl", LIMITS)
+    peer = trimesh.load(io.BytesIO(data), file_type="stl", process=False, force="mesh")
+    np.testing.assert_array_equal(ours.vertices, peer.vertices)
+    np.testing.assert_array_equal(ours.faces, peer.faces)
+    np.testing.assert_allclose(ours.vertices, sample.vertices[sample.faces.ravel()], rtol=1e-6)
+
+
+def test_binary_stl_ignores_normals_and_attributes():
+    corners = [((0, 0, 0), (1, 0, 0), (0, 1, 0)), ((5, 5, 5), (6, 5, 5), (5, 6, 5))]
+    body = b"".join(struct.pack("<12fH", 9, 9, 9, *np.ravel(t), 77) for t in corners)
+    mesh = read_mesh(b"solid-looking header".ljust(80) + struct.pack("<I", 2) + body, "stl", LIMITS)
+    np.testing.assert_array_equal(mesh.vertices, np.reshape(corners, (-1, 3)))
+    assert mesh.faces.tolist() == [[0, 1, 2], [3, 4, 5]]
+
+
+@pytest.mark.parametrize(
+    ("body", "says"),
+    [
+        ("facet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nendloop\n", "2 'vertex'"),
+        ("outer loop\nvertex 0 0 0\nvertex 1 0\nvertex 0 1 0\n", "line 4 of the STL file has 2"),
+        (
+            "outer loop\nvertex 0 0 0\nvertex 1 0 0 0\nvertex 0 1 0\n",
+            "line 4 of the STL file has 4",
+        ),
+        ("outer loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 one 0\n", "numbers on line 5"),
+        ("facet normal 0 0 1\nendfacet\n", "holds no triangles"),
+    ],
+)
+@pytest.mark.parametrize("chunk", [3, 1 << 18])
+def test_ascii_stl_mistakes_name_the_line(monkeypatch, body, says, chunk):
+    monkeypatch.setattr(text, "CHUNK_BYTES", chunk)  # 3: every line read in pieces
+    with pytest.raises(MeshFormatError, match=says):
+        read_mesh(f"solid x\n{body}endsolid x\n".encode(), "stl", LIMITS)
+
+
+def test_an_ascii_stl_cut_short_is_refused():
+    data = ascii_stl(size=2000)
+    cut = data[: data.rindex(b"endfacet")]
+    with pytest.raises(MeshFormatError, match="no 'endsolid' line after its last 'vertex'"):
+        read_mesh(cut, "stl", LIMITS)
+
+
+# -- memoryview: every reader reads in place -------------------------------------------------
+
+
+@pytest.mark.parametrize("name", sorted(SMALL_FILES))
+def test_every_reader_reads_a_memoryview_inside_a_larger_buffer(name):
+    """The caller passes a view into the request body: what follows the file (here digits,
+    which a number running past the end would take in) is not read."""
+    data = SMALL_FILES[name]
+    if name == "obj":
+        data = data.rstrip(b"\n")  # the file ends in a number
+    body = b"123" + data + b"456789"
+    view = memoryview(body)[3 : 3 + len(data)]
+    fmt = name.split("-")[0]
+    assert_same_mesh(read_mesh(view, fmt, LIMITS), read_mesh(data, fmt, LIMITS))
+
+
+def test_a_memoryview_of_an_ascii_ply_ending_in_a_number_is_read_to_its_end():
+    data = ply_ascii()  # no final line feed: the last index ends the file
+    view = memoryview(data + b"7777")[: len(data)]
+    assert read_mesh(view, "ply", LIMITS).faces.tolist() == FANNED
+
+
+# -- groups ----------------------------------------------------------------------------------
+
+
+def test_obj_group_ranges_are_merged_and_names_without_faces_kept():
+    data = obj("v 0 0 0\nv 1 0 0\nv 0 1 0\ng a\ng a\nf 1 2 3\ng a b\nf 1 2 3\ng c\ng a\n")
+    mesh = read_mesh(data, "obj", LIMITS)
+    assert mesh.groups["a"].tolist() == [[0, 2]]  # two touching ranges, one range
+    assert mesh.groups["b"].tolist() == [[1, 2]]
+    assert mesh.groups["c"].shape == (0, 2) and mesh.group_faces(["c"]).tolist() == []

@@ -26,7 +26,7 @@ class Reader:
 
     name: str
     title: str
-    read: Callable[[bytes, Limits], Mesh]
+    read: Callable[[bytes | memoryview, Limits], Mesh]
     media_type: str
     rules: str
 
@@ -126,8 +126,9 @@ def format_of(filename: str | None, declared: str | None) -> str:
     return extension
 
 
-def read_mesh(data: bytes, fmt: str, limits: Limits) -> Mesh:
-    """Read a mesh of a known format from bytes.
+def read_mesh(data: bytes | memoryview, fmt: str, limits: Limits) -> Mesh:
+    """Read a mesh of a known format from bytes (or a memoryview of them, which is read in
+    place: no reader copies the whole of it).
 
     Raises
     ------

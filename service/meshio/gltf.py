@@ -16,6 +16,16 @@ Rules (the API documentation repeats them):
 
 Every value of the JSON is type-checked where it is read, and every count is checked against
 the limits and against the bytes that hold it before anything is allocated for it.
+
+Memory: the buffers are read in place (a GLB's binary chunk is a view of the upload), and the
+(n, 3) float64 vertices and (m, 3) int64 faces are made once, from the declared counts, and
+filled a block of elements at a time, so a read needs them plus a constant (a few MiB) and
+the JSON document. They are at most 8 bytes a byte of the file except where the file says
+little and means much: a strip or fan's index of 1 or 2 bytes is a 24-byte triangle (24 or
+12 bytes a byte), and a mesh that many nodes use, or an accessor that many primitives share,
+is read once for each, bounded only by the limits (``MESHFLAT_MAX_VERTICES`` and
+``MESHFLAT_MAX_FACES``: 240 MB at most). ``json`` makes Python objects of the JSON: some 20
+bytes a byte of JSON made of empty lists, a few of a usual document's.
 """
 
 from __future__ import annotations
@@ -48,7 +58,7 @@ _NOT_TRIANGLES = {0: "points", 1: "lines", 2: "line loops", 3: "line strips"}
 _MAX_DEPTH = 64
 
 
-def read_glb(data: bytes, limits: Limits) -> Mesh:
+def read_glb(data: bytes | memoryview, limits: Limits) -> Mesh:
     """Parse a GLB container: header, JSON chunk, optional BIN chunk."""
     if len(data) < 12:
         raise MeshFormatError(f"the file has {len(data)} bytes; a GLB header alone has 12")
@@ -77,17 +87,19 @@ def read_glb(data: bytes, limits: Limits) -> Mesh:
     if not chunks or chunks[0][0] != _JSON_CHUNK:
         raise MeshFormatError("the first GLB chunk must be the JSON chunk")
     binary = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == _BIN_CHUNK else None
-    return _read_document(_parse_json(bytes(chunks[0][1])), binary, limits, "glb")
+    return _read_document(_parse_json(chunks[0][1]), binary, limits, "glb")
 
 
-def read_gltf(data: bytes, limits: Limits) -> Mesh:
+def read_gltf(data: bytes | memoryview, limits: Limits) -> Mesh:
     """Parse a ``.gltf`` JSON document whose buffers are embedded ``data:`` URIs."""
     return _read_document(_parse_json(data), None, limits, "gltf")
 
 
-def _parse_json(text: bytes) -> dict:
+def _parse_json(text: bytes | memoryview) -> dict:
     try:
-        document = json.loads(text)
+        # As json.loads decodes bytes (UTF-8, or UTF-16/32 by their BOM), without first
+        # copying a memoryview to bytes.
+        document = json.loads(str(text, json.detect_encoding(bytes(text[:4])), "surrogatepass"))
     except RecursionError:
         raise MeshFormatError("the glTF JSON nests too deeply to be a glTF document") from None
     except (UnicodeDecodeError, ValueError) as exc:  # ValueError: also over-long integers
@@ -260,7 +272,7 @@ class _Document:
 
 @dataclass(frozen=True)
 class _Accessor:
-    """Where an accessor's elements lie; :meth:`read` copies them out."""
+    """Where an accessor's elements lie; :meth:`view` shows them."""
 
     buffer: memoryview
     view_offset: int
@@ -271,8 +283,8 @@ class _Accessor:
     dtype: np.dtype
     stride: int
 
-    def read(self) -> np.ndarray:
-        """(count, width) array of the elements."""
+    def view(self) -> np.ndarray:
+        """(count, width) array of the elements: a view of the buffer (no copy)."""
         if self.count == 0:
             return np.zeros((0, self.width), dtype=self.dtype)
         raw = np.frombuffer(
@@ -284,7 +296,7 @@ class _Accessor:
             buffer=raw,
             offset=self.offset,
             strides=(self.stride, self.dtype.itemsize),
-        ).copy()
+        )
 
 
 @dataclass(frozen=True)
@@ -318,51 +330,74 @@ def _read_document(document: dict, binary, limits: Limits, fmt: str) -> Mesh:
         for primitive in _primitives(doc, node_index, mesh_index, transform)
     ]
     # The limits, from the declared counts, before any array is allocated.
-    check_counts(
-        sum(p.positions.count for p in primitives),
-        sum(p.triangle_count for p in primitives),
-        limits,
-    )
-    vertices, faces, groups, offset, face_offset = [], [], {}, 0, 0
+    n_vertices = sum(p.positions.count for p in primitives)
+    n_faces = sum(p.triangle_count for p in primitives)
+    check_counts(n_vertices, n_faces, limits)
+    vertices = np.empty((n_vertices, 3), dtype=np.float64)
+    faces = np.empty((n_faces, 3), dtype=np.int64)
+    groups: dict[str, list] = {}
+    offset = face_offset = 0
     for primitive in primitives:
-        positions = primitive.positions.read()
-        if primitive.indices is not None:
-            indices = primitive.indices.read().ravel().astype(np.int64)
-        else:
-            indices = np.arange(len(positions), dtype=np.int64)
-        triangles = _triangles(indices, primitive.mode)
-        if triangles.size and int(triangles.max()) >= len(positions):
-            raise MeshFormatError(
-                f"{primitive.where} indices refer to vertex {int(triangles.max())} but its "
-                f"POSITION holds {len(positions)}"
-            )
-        transform = primitive.transform
-        if not np.isfinite(transform).all():
-            raise MeshFormatError(f"the world transform of {primitive.where} overflows")
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            # checked_vertices refuses an overflow; slogdet: the sign, never overflowing
-            points = positions.astype(np.float64) @ transform[:3, :3].T + transform[:3, 3]
-            mirrored = np.linalg.slogdet(transform[:3, :3])[0] < 0
-        if mirrored:
-            triangles = triangles[:, ::-1]
-        vertices.append(points)
-        faces.append(triangles + offset)
-        span = (face_offset, face_offset + len(triangles))
+        count, triangles = primitive.positions.count, primitive.triangle_count
+        _read_triangles(primitive, faces[face_offset : face_offset + triangles], offset)
+        _read_positions(primitive, vertices[offset : offset + count])
+        span = (face_offset, face_offset + triangles)
         names = {_name(document, "meshes", primitive.mesh_index)}
         if primitive.node_index >= 0:
             names.add(_name(document, "nodes", primitive.node_index))
         for name in names - {None}:  # a set: a node often shares its mesh's name
             groups.setdefault(name, []).append(span)
-        offset += len(points)
-        face_offset += len(triangles)
+        offset += count
+        face_offset += triangles
     if face_offset == 0:
         raise MeshFormatError("the glTF file holds no triangles")
     return Mesh(
-        vertices=checked_vertices(np.concatenate(vertices)),
-        faces=np.ascontiguousarray(np.concatenate(faces)),
+        vertices=checked_vertices(vertices),
+        faces=faces,
         groups={name: np.array(spans, dtype=np.int64) for name, spans in groups.items()},
         format=fmt,
     )
+
+
+#: Elements of an accessor converted at a time (the temporaries stay this small).
+_BLOCK = 1 << 16
+
+
+def _read_positions(primitive: _Primitive, out: np.ndarray) -> None:
+    """Write a primitive's POSITION elements, world-transformed, into ``out`` ((n, 3)
+    float), a block at a time."""
+    transform = primitive.transform
+    if not np.isfinite(transform).all():
+        raise MeshFormatError(f"the world transform of {primitive.where} overflows")
+    positions = primitive.positions.view()
+    for start in range(0, len(positions), _BLOCK):
+        block = out[start : start + _BLOCK]
+        block[...] = positions[start : start + _BLOCK]
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            # checked_vertices refuses an overflow
+            np.matmul(block, transform[:3, :3].T, out=block)
+            block += transform[:3, 3]
+
+
+def _read_triangles(primitive: _Primitive, out: np.ndarray, offset: int) -> None:
+    """Write a primitive's (t, 3) triangles, as ids into the mesh's vertices from
+    ``offset``, into ``out``, a block of triangles at a time."""
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        # slogdet: the sign, never overflowing; a mirroring transform reverses the winding
+        mirrored = np.linalg.slogdet(primitive.transform[:3, :3])[0] < 0
+    indices = primitive.indices.view()[:, 0] if primitive.indices is not None else None
+    largest, count = -1, primitive.positions.count
+    for start in range(0, len(out), _BLOCK):
+        block = out[start : start + _BLOCK]
+        block[...] = _triangles(indices, primitive.mode, start, len(block))
+        largest = max(largest, int(block.max()))
+        if mirrored:
+            block[...] = block[:, ::-1]
+        block += offset
+    if largest >= count:
+        raise MeshFormatError(
+            f"{primitive.where} indices refer to vertex {largest} but its POSITION holds {count}"
+        )
 
 
 def _primitives(doc: _Document, node_index: int, mesh_index, transform) -> list[_Primitive]:
@@ -397,19 +432,24 @@ def _primitives(doc: _Document, node_index: int, mesh_index, transform) -> list[
     return primitives
 
 
-def _triangles(indices: np.ndarray, mode: int) -> np.ndarray:
-    """(t, 3) int triangles of a triangle list, strip or fan (counts already checked)."""
+def _triangles(indices: np.ndarray | None, mode: int, first: int, count: int) -> np.ndarray:
+    """(count, 3) int: triangles ``first`` to ``first + count`` of a triangle list, strip or
+    fan (counts already checked) of ``indices`` (None: the vertices in order)."""
     if mode == _TRIANGLES:
-        return indices.reshape(-1, 3)
-    if len(indices) < 3:
-        return np.zeros((0, 3), dtype=np.int64)
-    k = np.arange(len(indices) - 2)
+        corners = np.arange(3 * first, 3 * (first + count))
+    else:
+        corners = np.arange(first, first + count + 2)
+    ids = corners if indices is None else indices[corners].astype(np.int64)
+    if mode == _TRIANGLES:
+        return ids.reshape(-1, 3)
+    k = np.arange(count)
     if mode == _STRIP:  # every other triangle swaps two corners to keep the winding
-        odd = k % 2 == 1
-        a = np.where(odd, indices[k + 1], indices[k])
-        b = np.where(odd, indices[k], indices[k + 1])
-        return np.stack([a, b, indices[k + 2]], axis=1)
-    return np.stack([np.full_like(k, indices[0]), indices[k + 1], indices[k + 2]], axis=1)
+        odd = (first + k) % 2 == 1
+        a = np.where(odd, ids[k + 1], ids[k])
+        b = np.where(odd, ids[k], ids[k + 1])
+        return np.stack([a, b, ids[k + 2]], axis=1)
+    lead = int(indices[0]) if indices is not None else 0
+    return np.stack([np.full(count, lead), ids[k + 1], ids[k + 2]], axis=1)
 
 
 def _name(document: dict, key: str, index: int) -> str | None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,11 +28,15 @@ class Limits:
     ----------
     max_vertices, max_faces : int
     max_bytes : int, the largest file (and largest decoded buffer) accepted
+    on_counts : called with the vertex and face counts once they pass the limits, before the
+        arrays are built (the service charges its memory budget there); may be called again
+        with larger counts, and may raise to refuse the mesh
     """
 
     max_vertices: int = 5_000_000
     max_faces: int = 5_000_000
     max_bytes: int = 256 * 2**20
+    on_counts: Callable[[int, int], None] | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True)
@@ -60,42 +65,73 @@ class Mesh:
         return faces_of_groups(self.groups, names, len(self.faces))
 
 
+#: Rows of vertices checked at a time (the check's temporaries stay this small).
+_CHECK_ROWS = 1 << 16
+
+
+def out_of_range(vertices: np.ndarray) -> np.ndarray:
+    """(n,) bool: the rows of (n, 3) ``vertices`` with a NaN, an Inf or a coordinate beyond
+    ``MAX_ABS_COORDINATE``."""
+    return ~(np.abs(vertices) <= MAX_ABS_COORDINATE).all(axis=1)  # NaN fails the test too
+
+
+def vertex_error(first: int, position, count: int, line: int | None = None) -> MeshFormatError:
+    """The refusal of ``count`` vertices out of range, the first of them vertex ``first``
+    at ``position`` (on 0-based ``line`` of a text file)."""
+    where = f" (line {line + 1})" if line is not None else ""
+    return MeshFormatError(
+        f"vertex {first}{where} has the position {np.asarray(position).tolist()}; coordinates "
+        f"must be finite and within +-{MAX_ABS_COORDINATE:g} ({count} vertices are not)"
+    )
+
+
 def checked_vertices(vertices: np.ndarray, file_lines: np.ndarray | None = None) -> np.ndarray:
     """``vertices`` as a contiguous (n, 3) float64 array, refusing a NaN, an Inf or a
     coordinate beyond ``MAX_ABS_COORDINATE``, named by its vertex id (and its line in the
-    file, 0-based ``file_lines``, for text formats)."""
+    file, 0-based ``file_lines``, for text formats). Checked a block of rows at a time, so
+    the check needs no array as long as ``vertices``."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float64)
-    bad = ~(np.abs(vertices) <= MAX_ABS_COORDINATE).all(axis=1)  # NaN fails the test too
-    if bad.any():
-        first = int(np.flatnonzero(bad)[0])
-        where = f" (line {file_lines[first] + 1})" if file_lines is not None else ""
-        raise MeshFormatError(
-            f"vertex {first}{where} has the position {vertices[first].tolist()}; coordinates "
-            f"must be finite and within +-{MAX_ABS_COORDINATE:g} ({int(bad.sum())} vertices "
-            "are not)"
-        )
+    first, count = -1, 0
+    for start in range(0, len(vertices), _CHECK_ROWS):
+        bad = np.flatnonzero(out_of_range(vertices[start : start + _CHECK_ROWS]))
+        if bad.size and first < 0:
+            first = start + int(bad[0])
+        count += len(bad)
+    if count:
+        line = int(file_lines[first]) if file_lines is not None else None
+        raise vertex_error(first, vertices[first], count, line)
     return vertices
 
 
-def fan_triangles(items: np.ndarray, corners: np.ndarray) -> np.ndarray:
-    """(sum(corners) - 2 * len(corners), 3) int: polygon ``(a, b, c, d, ...)`` becomes
-    ``(a, b, c), (a, c, d), ...``, polygon after polygon.
+def fan_into(out: np.ndarray, items: np.ndarray, corners: np.ndarray) -> None:
+    """Write into ``out`` ((sum(corners) - 2 * len(corners), 3) int) the fan triangles of
+    polygons ``(a, b, c, d, ...)``: ``(a, b, c), (a, c, d), ...``, polygon after polygon.
 
     Parameters
     ----------
     items : (sum(corners),) int, the polygons' vertex ids, flat, in order
     corners : (polygons,) int, each polygon's corner count, at least 3
     """
-    triangles = corners - 2
-    first_corner = np.concatenate(([0], np.cumsum(corners)[:-1]))
-    polygon = np.repeat(np.arange(len(corners)), triangles)
-    step = np.arange(len(polygon)) - np.repeat(np.cumsum(triangles) - triangles, triangles)
-    base = first_corner[polygon]
-    return np.stack([items[base], items[base + step + 1], items[base + step + 2]], axis=1)
+    first = np.cumsum(corners) - corners  # each polygon's first item
+    # Column 0 holds each polygon's first corner on all its triangles: a running sum of
+    # the changes at the polygons' first triangles, computed in place.
+    lead = out[:, 0]
+    lead[:] = 0
+    lead[np.cumsum(corners - 2) - (corners - 2)] = np.diff(items[first], prepend=0)
+    np.cumsum(lead, out=lead)
+    # Columns 1 and 2 are the items less each polygon's first and last (first two).
+    keep = np.ones(len(items), dtype=bool)
+    keep[first] = False
+    keep[first + corners - 1] = False
+    np.compress(keep, items, out=out[:, 1])
+    keep[first + corners - 1] = True
+    keep[first + 1] = False
+    np.compress(keep, items, out=out[:, 2])
 
 
 def check_counts(n_vertices: int, n_faces: int, limits: Limits) -> None:
-    """Refuse a mesh beyond the vertex or face limit (413), before reading it all."""
+    """Refuse a mesh beyond the vertex or face limit (413), before reading it all; then tell
+    ``limits.on_counts``."""
     if n_vertices > limits.max_vertices:
         raise MeshTooLargeError(
             f"the file has {n_vertices:,} vertices; the limit is {limits.max_vertices:,} "
@@ -106,3 +142,5 @@ def check_counts(n_vertices: int, n_faces: int, limits: Limits) -> None:
             f"the file has {n_faces:,} triangles; the limit is {limits.max_faces:,} "
             "(MESHFLAT_MAX_FACES)"
         )
+    if limits.on_counts is not None:
+        limits.on_counts(n_vertices, n_faces)

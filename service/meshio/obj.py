@@ -1,5 +1,6 @@
 """Wavefront OBJ: vertices, polygons (fan-triangulated in order) and group names, read from
-bytes with whole-file numpy passes (no loop over vertices or faces).
+bytes with numpy passes over one chunk of text at a time (no loop over lines, vertices or
+faces).
 
 Rules (the API documentation repeats them):
 
@@ -10,19 +11,66 @@ Rules (the API documentation repeats them):
 * negative references count back from the last vertex defined so far (OBJ's rule);
 * a face belongs to the names of the ``g`` line (each name), the ``o`` line and the
   ``usemtl`` line in force where it appears.
+
+Memory. The file is read twice, chunk by chunk (:data:`text.CHUNK_BYTES` of text each): a
+first pass counts the ``v`` lines and the triangles the ``f`` lines fan out into and checks
+them against the limits before anything is allocated for them; the second parses each chunk
+into the arrays made for them, (n, 3) float64 vertices and (m, 3) int64 faces. Besides those
+a read needs a constant (one chunk's per-line and per-token arrays, a few MiB) and the
+group ranges. A line longer than a chunk is read in pieces cut between tokens, so no line,
+however long, costs more than a chunk.
+
+The arrays are 24 bytes a vertex (a ``v`` line takes at least 8 bytes) and 24 bytes a
+triangle (int64 ids, as the rest of the service computes with), and a group's ranges 16
+bytes for each naming line followed by a face (its name takes at least 2 bytes), so a read
+needs at most 8 bytes a byte of the file plus the constant, with two exceptions:
+
+* a polygon's corner past the second is a triangle, and costs as little as 2 bytes
+  (``f 1 1 1 1 ...``): a file of long polygons whose corners are written with one digit
+  (1 to 9) yields up to 12 bytes of faces a byte. An int64 triangle cannot be held in less,
+  so there the read needs the faces, at most 24 bytes times ``MESHFLAT_MAX_FACES`` (120 MB),
+  plus the constant, and nothing in between;
+* each distinct group name is a Python string and array in ``Mesh.groups``, some 300 bytes
+  a name (names with no face share one empty array): a file of short distinct names costs
+  up to some 45 bytes a byte.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
-from .mesh import Limits, Mesh, MeshFormatError, check_counts, checked_vertices, fan_triangles
-from .text import SPACE, TextLines, is_blank, parse_numbers
+from .mesh import (
+    Limits,
+    Mesh,
+    MeshFormatError,
+    check_counts,
+    fan_into,
+    out_of_range,
+    vertex_error,
+)
+from .text import (
+    LF,
+    Lines,
+    Tokens,
+    as_bytes_array,
+    blank_spans,
+    chunks,
+    count_lines,
+    first_line_feed,
+    numbers_text,
+    parse_numbers,
+    parse_spans,
+    positions,
+    spans_text,
+)
 
 _HASH, _SLASH = 35, 47
+_OTHER, _VERTEX, _FACE, _GROUP, _OBJECT, _MATERIAL = range(6)
 
 
-def read_obj(data: bytes, limits: Limits) -> Mesh:
+def read_obj(data: bytes | memoryview, limits: Limits) -> Mesh:
     """Parse an OBJ file held in memory.
 
     Raises
@@ -31,193 +79,492 @@ def read_obj(data: bytes, limits: Limits) -> Mesh:
         No vertices or faces, unreadable numbers, references outside the vertex list,
         polygons with fewer than three corners, or counts beyond ``limits``.
     """
-    lines = _Lines(data)
-    data = lines.data  # comments blanked out
-    kind = lines.keywords()
-    vertex_lines = np.flatnonzero(kind == _VERTEX)
-    face_lines = np.flatnonzero(kind == _FACE)
-    if vertex_lines.size == 0:
+    buffer = as_bytes_array(data)
+    counted = _Pass(buffer, kept={}).run()
+    if counted.vertices == 0:
         raise MeshFormatError("no vertex ('v') lines: is this an OBJ file?")
-    if face_lines.size == 0:
+    if counted.face_lines == 0:
         raise MeshFormatError("no face ('f') lines: the file holds no polygons")
-    corners = lines.tokens[face_lines] - 1
-    check_counts(len(vertex_lines), int(np.maximum(corners - 2, 0).sum()), limits)
+    check_counts(counted.vertices, counted.triangles, limits)
+    out = _Output(
+        np.empty((counted.vertices, 3), dtype=np.float64),
+        np.empty((counted.triangles, 3), dtype=np.int64),
+    )
+    filled = _Pass(buffer, out, kept=counted.kept).run()
+    if out.bad_vertices:
+        first, line = out.first_bad
+        raise vertex_error(first, out.vertices[first], out.bad_vertices, line)
+    groups = out.names.ranges(filled.triangles)
+    return Mesh(vertices=out.vertices, faces=out.faces, groups=groups, format="obj")
 
-    numbers = lines.numbers_only(vertex_lines, face_lines)
-    vertices = _read_vertices(numbers, lines, vertex_lines)
-    faces = _read_faces(numbers, lines, face_lines, vertex_lines)
-    groups = _read_groups(data, lines, kind, face_lines)
-    return Mesh(vertices=vertices, faces=faces, groups=groups, format="obj")
+
+@dataclass
+class _Output:
+    """The arrays the filling pass writes: (n, 3) float vertices, (m, 3) int faces, the
+    group names, and the first vertex out of range (id, 0-based line) with their count."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    names: _Names = field(default_factory=lambda: _Names())
+    bad_vertices: int = 0
+    first_bad: tuple[int, int] = (0, 0)
+
+    def check(self, start: int, count: int, line_of) -> None:
+        """Note those of the ``count`` vertices from ``start`` that are out of range
+        (``line_of(k)``: the 0-based line of the ``k``-th)."""
+        bad = np.flatnonzero(out_of_range(self.vertices[start : start + count]))
+        if bad.size:
+            if not self.bad_vertices:
+                self.first_bad = (start + int(bad[0]), line_of(int(bad[0])))
+            self.bad_vertices += len(bad)
 
 
-_OTHER, _VERTEX, _FACE, _GROUP, _OBJECT, _MATERIAL = range(6)
+@dataclass
+class _Open:
+    """A line that goes on into the next chunk: its 0-based number, its kind (None before
+    its first token), whether a comment has begun, and what its pieces gave so far."""
+
+    line: int
+    kind: int | None = None
+    in_comment: bool = False
+    count: int = 0  # numbers (a vertex) or corners (a face) so far
+    vertex: int = 0  # a vertex line's vertex id
+    numbers: list = field(default_factory=list)  # a vertex's first three numbers
+    prefix: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    text: tuple[int, int] | None = None  # an o/usemtl name's bytes in the file
 
 
-class _Lines:
-    """Line boundaries, first non-blank columns and token counts of an OBJ text.
+#: Bytes of the first chunks' token tables the counting pass keeps for the filling pass (a
+#: small file is then cut into tokens once).
+_KEPT_BYTES = 4 << 20
 
-    Comments (``#`` to the end of the line) are blanked out first, in a copy, so every later
-    step can read whole runs of lines as one slice of ``data``.
+
+class _Pass:
+    """One pass over the file, chunk by chunk: counting (``out`` None) or filling ``out``.
+
+    The counters say what the file held before the chunk in hand: ``line`` line feeds,
+    ``vertices`` v lines, ``triangles`` triangles, ``face_lines`` f lines. ``kept`` holds the
+    first chunks' lines (by where they begin) for the next pass, up to :data:`_KEPT_BYTES`.
     """
 
-    def __init__(self, data: bytes) -> None:
-        buffer = np.frombuffer(data, dtype=np.uint8)
-        lines = TextLines.of(buffer)
-        hashes = np.flatnonzero(buffer == _HASH)
-        if hashes.size:
-            line = np.searchsorted(lines.starts, hashes, side="right") - 1
-            first_of_line = np.concatenate(([True], line[1:] != line[:-1]))
-            buffer = _blanked(buffer, hashes[first_of_line], lines.ends[line[first_of_line]])
-            data = buffer.tobytes()
-            lines = TextLines.of(buffer)  # the same lines, fewer tokens
-        self.data, self.buffer = data, buffer
-        #: (lines,) int: where each line starts, ends, and has its first non-blank byte
-        self.starts, self.ends, self.first = lines.starts, lines.ends, lines.first
-        #: (lines,) int: whitespace-separated tokens per line, keyword included
-        self.tokens = lines.tokens
+    def __init__(self, buffer: np.ndarray, out: _Output | None = None, kept=None) -> None:
+        self.buffer, self.out, self.kept = buffer, out, {} if kept is None else kept
+        self.line = self.vertices = self.triangles = self.face_lines = 0
+        self.open: _Open | None = None
+        self.room = _KEPT_BYTES  # for lines kept
 
-    def numbers_only(self, vertex_lines: np.ndarray, face_lines: np.ndarray) -> bytes:
-        """The text with the ``v`` and ``f`` keywords and the ``/vt/vn`` tails of face
-        references blanked out, so runs of those lines parse as plain numbers."""
-        buffer = self.buffer.copy()
-        keyword_lines = np.concatenate((vertex_lines, face_lines))
-        buffer[self.first[keyword_lines]] = SPACE
-        slashes = np.flatnonzero(buffer == _SLASH)
-        on_face_line = np.zeros(len(self.starts), dtype=bool)
-        on_face_line[face_lines] = True
-        # Only on face lines: a slash elsewhere (a vertex, a name) is not a reference tail.
-        slashes = slashes[on_face_line[np.searchsorted(self.starts, slashes, "right") - 1]]
-        if slashes.size:
-            blanks = np.append(np.flatnonzero(is_blank(buffer)), len(buffer))
-            tail_ends = blanks[np.searchsorted(blanks, slashes)]
-            first_of_tail = np.concatenate(([True], tail_ends[1:] != tail_ends[:-1]))
-            buffer = _blanked(buffer, slashes[first_of_tail], tail_ends[first_of_tail])
-        return buffer.tobytes()
+    def run(self) -> _Pass:
+        buffer, begin = self.buffer, 0
+        ends = self.kept.pop("ends", None)  # the counting pass's chunks, for the filling one
+        if ends is None:
+            ends = self.kept["ends"] = list(chunks(buffer))
+        for end in ends:
+            if self.open is not None:  # the chunk begins with the rest of a long line
+                rest = first_line_feed(buffer[begin:end])
+                stop = begin + rest if rest >= 0 else end
+                self._piece(begin, stop, ends_line=rest >= 0 or end == len(buffer))
+                if rest < 0:
+                    begin = end
+                    continue
+                self.line, begin = self.line + 1, stop + 1
+            if begin < end and end < len(buffer) and buffer[end - 1] != LF:
+                self._piece(begin, end, ends_line=False)  # a line longer than a chunk
+            elif begin < end:
+                self._lines(begin, end)
+                self.line += count_lines(buffer[begin:end])
+            begin = end
+        return self
 
-    def keywords(self) -> np.ndarray:
-        """(lines,) int: the kind of each line from its first token."""
-        buffer, first, ends = self.buffer, self.first, self.ends
-        kind = np.full(len(first), _OTHER, dtype=np.int8)
+    # -- whole lines ------------------------------------------------------------------------
 
-        def char(offset: int) -> np.ndarray:
-            at = first + offset
-            out = np.zeros(len(first), dtype=np.uint8)
-            inside = at < ends
-            out[inside] = buffer[at[inside]]
-            return out
+    def _lines(self, begin: int, end: int) -> None:
+        """Read the whole lines of ``buffer[begin:end]``."""
+        lines, kind = self.kept.pop(begin, (None, None)) if self.out is not None else (None, None)
+        if lines is None:
+            lines = Lines.of(self.buffer[begin:end], self.line, comment=_HASH)
+            kind = _kinds(lines)
+            if self.out is None and lines.nbytes + kind.nbytes <= self.room:
+                self.kept[begin] = lines, kind
+                self.room -= lines.nbytes + kind.nbytes
+        if not len(lines):
+            return
+        numbers = lines.numbers
+        vertex_lines, face_lines = kind == _VERTEX, kind == _FACE
+        triangles = np.maximum(numbers - 2, 0, where=face_lines, out=np.zeros_like(numbers))
+        if self.out is not None:
+            self._fill_lines(lines, kind, triangles)
+        self.vertices += int(np.count_nonzero(vertex_lines))
+        self.face_lines += int(np.count_nonzero(face_lines))
+        self.triangles += int(triangles.sum())
 
-        c0, c1 = char(0), char(1)
-        separated = is_blank(c1) | (c1 == 0)
-        kind[(c0 == ord("v")) & separated] = _VERTEX
-        kind[(c0 == ord("f")) & separated] = _FACE
-        kind[(c0 == ord("g")) & separated] = _GROUP
-        kind[(c0 == ord("o")) & separated] = _OBJECT
-        word = np.ones(len(first), dtype=bool)
-        for offset, letter in enumerate(b"usemtl"):
-            word &= char(offset) == letter
-        word &= is_blank(char(6)) | (char(6) == 0)
-        kind[word] = _MATERIAL
-        return kind
-
-
-def _blanked(buffer: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
-    """A copy of ``buffer`` with the disjoint ranges ``[starts, ends)`` set to spaces."""
-    edges = np.zeros(len(buffer) + 1, dtype=np.int8)
-    edges[starts] += 1
-    edges[ends] -= 1  # the ranges never overlap, so +-1 marks suffice
-    blanked = buffer.copy()
-    blanked[np.cumsum(edges[:-1], dtype=np.int8) > 0] = SPACE
-    return blanked
-
-
-def _runs(line_ids: np.ndarray) -> list[tuple[int, int]]:
-    """Index ranges ``[i, j)`` into ``line_ids`` of consecutive line numbers."""
-    breaks = np.flatnonzero(np.diff(line_ids) != 1) + 1
-    bounds = np.concatenate(([0], breaks, [len(line_ids)]))
-    return list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
-
-
-def _numbers(data: bytes, lines: _Lines, line_ids: np.ndarray, dtype, what: str) -> np.ndarray:
-    """The numbers after the keyword on each of ``line_ids`` (their token counts minus one),
-    concatenated, from ``data`` as :meth:`_Lines.numbers_only` leaves it. Runs of consecutive
-    lines are parsed as one block of text."""
-    parts = []
-    for i, j in _runs(line_ids):
-        first, last = line_ids[i], line_ids[j - 1]
-        text = data[lines.starts[first] : lines.ends[last]]
-        expected = int(lines.tokens[line_ids[i:j]].sum()) - (j - i)  # less the keywords
-        values = parse_numbers(text, dtype, expected)
-        if values is None:
-            raise MeshFormatError(
-                f"unreadable {what} between lines {first + 1} and {last + 1}: every token "
-                "after the keyword must be a number"
+    def _fill_lines(self, lines: Lines, kind: np.ndarray, triangles: np.ndarray) -> None:
+        out = self.out
+        vertex_lines = kind == _VERTEX
+        if vertex_lines.any():
+            at = np.flatnonzero(vertex_lines)
+            start = self.vertices
+            out.vertices[start : start + len(at)] = _vertices(lines, at)
+            out.check(start, len(at), lambda k: lines.line(at[k]))
+        at = np.flatnonzero(kind == _FACE)
+        if at.size:
+            refs = _references(lines, at)
+            defined = self.vertices + np.cumsum(vertex_lines)[at]  # vertices before each line
+            resolved = _resolve(
+                refs, lines.numbers[at], defined, len(out.vertices), _Lazy(lines, at)
             )
-        parts.append(values)
-    return np.concatenate(parts)
+            start = self.triangles
+            fan_into(out.faces[start : start + int(triangles.sum())], resolved, lines.numbers[at])
+        naming = np.flatnonzero(kind >= _GROUP)
+        if naming.size:
+            before = self.triangles + np.cumsum(triangles) - triangles
+            for code in (_GROUP, _OBJECT, _MATERIAL):
+                at = naming[kind[naming] == code]
+                if at.size:
+                    starts, ends, on = _names(lines, at, code)
+                    out.names.add(code, lines.chunk, before[at], on, starts, ends)
+
+    # -- a piece of a line longer than a chunk --------------------------------------------
+
+    def _piece(self, begin: int, end: int, ends_line: bool) -> None:
+        """Read ``buffer[begin:end]``, a piece of the line :attr:`open` (a new one when
+        None) that holds no line feed; ``ends_line`` when the line ends there."""
+        chunk = self.buffer[begin:end]
+        state = self.open or _Open(self.line)
+        tokens = Tokens.of(chunk, comment=_HASH)
+        starts, ends = tokens.starts, tokens.ends
+        if state.in_comment:
+            starts = ends = starts[:0]
+        if state.kind is None and len(starts):
+            state.kind = int(_kind_of(chunk, starts[0], ends[0]))
+            starts, ends = starts[1:], ends[1:]
+            self._begin_line(state)
+        state.in_comment |= bool((chunk == _HASH).any())
+        if state.kind == _VERTEX:
+            self._vertex_piece(state, chunk, starts, ends)
+        elif state.kind == _FACE:
+            self._face_piece(state, chunk, starts, ends)
+        elif state.kind is not None and state.kind >= _GROUP and self.out is not None:
+            self._name_piece(state, begin, starts, ends)
+        if ends_line:
+            self._end_line(state)
+        self.open = None if ends_line else state
+
+    def _begin_line(self, state: _Open) -> None:
+        if state.kind == _VERTEX:
+            state.vertex, self.vertices = self.vertices, self.vertices + 1
+        elif state.kind == _FACE:
+            self.face_lines += 1
+        elif state.kind >= _GROUP and self.out is not None:
+            self.out.names.add(state.kind, self.buffer, np.array([self.triangles]))
+
+    def _vertex_piece(self, state: _Open, chunk, starts, ends) -> None:
+        state.count += len(starts)
+        if self.out is None or not len(starts):
+            return
+        values = parse_numbers(spans_text(chunk, starts, ends), np.float64, len(starts))
+        if values is None:
+            raise _unreadable("vertex coordinates", state.line)
+        had = len(state.numbers)
+        state.numbers += values[: 3 - had].tolist()
+        if had < 3 <= len(state.numbers):
+            self.out.vertices[state.vertex] = state.numbers
+            self.out.check(state.vertex, 1, lambda _: state.line)
+
+    def _face_piece(self, state: _Open, chunk, starts, ends) -> None:
+        corners = min(state.count, 2) + len(starts)  # the carried corners lead the piece
+        state.count += len(starts)
+        triangles = max(corners - 2, 0)
+        if self.out is not None and len(starts):
+            origin = int(starts[0])
+            text = spans_text(chunk[origin : ends[-1]], starts - origin, ends - origin)
+            bad = _without_tails(text, origin, Tokens(starts, ends, starts > 0))
+            refs = None if bad >= 0 else parse_numbers(text, np.int64, len(starts))
+            if refs is None:
+                raise _unreadable("face references", state.line)
+            one = np.array([len(refs)])
+            ids = _resolve(refs, one, self.vertices, len(self.out.vertices), [state.line])
+            items = np.concatenate((state.prefix, ids))
+            if triangles:
+                start = self.triangles
+                fan_into(self.out.faces[start : start + triangles], items, np.array([corners]))
+            state.prefix = items[[0, -1]] if len(items) >= 2 else items
+        self.triangles += triangles
+
+    def _name_piece(self, state: _Open, begin: int, starts, ends) -> None:
+        if not len(starts):
+            return
+        at = np.int64(begin)
+        if state.kind == _GROUP:  # each token a name of the line in force
+            on = np.full(len(starts), -1)
+            self.out.names.add(_GROUP, self.buffer, [], on, starts + at, ends + at)
+            return
+        first = state.text[0] if state.text else int(starts[0] + at)
+        state.text = (first, int(ends[-1] + at))  # the name runs on, blanks and all
+
+    def _end_line(self, state: _Open) -> None:
+        if self.out is None:
+            return
+        if state.kind == _VERTEX:
+            _refuse_short(np.array([state.count]), lambda _: state.line, "vertex", _XYZ)
+        if state.kind == _FACE:
+            _refuse_short(np.array([state.count]), lambda _: state.line, "face", _CORNERS)
+        if state.kind in (_OBJECT, _MATERIAL) and state.text:
+            (start, end), on = state.text, np.full(1, -1)
+            self.out.names.add(state.kind, self.buffer, [], on, [start], [end])
 
 
-def _refuse_short(line_ids: np.ndarray, counts: np.ndarray, noun: str, needs: str) -> None:
-    """Refuse the first of ``line_ids`` with fewer than three numbers after its keyword."""
+_XYZ = "numbers; a vertex needs x, y and z"
+_CORNERS = "corners; a face needs at least 3"
+
+
+#: The kind of a line by its keyword's one letter (0: not one of these).
+_LETTERS = np.zeros(256, dtype=np.int8)
+_LETTERS[[ord("v"), ord("f"), ord("g"), ord("o")]] = _VERTEX, _FACE, _GROUP, _OBJECT
+
+
+def _kinds(lines: Lines) -> np.ndarray:
+    """(lines,) int8: the kind of each line from its keyword."""
+    tokens, key = lines.tokens, lines.key
+    starts = tokens.starts[key]
+    kind = _LETTERS[lines.chunk[starts]]
+    kind[tokens.ends[key] - starts != 1] = _OTHER  # "vt", "vn", "fo", ...
+    kind[lines.keyword(b"usemtl")] = _MATERIAL
+    return kind
+
+
+def _kind_of(chunk: np.ndarray, start: int, end: int) -> int:
+    """The kind of a line whose keyword is ``chunk[start:end]``."""
+    word = bytes(chunk[start : min(end, start + 7)])  # a keyword is short; a token may not be
+    return {b"v": _VERTEX, b"f": _FACE, b"g": _GROUP, b"o": _OBJECT, b"usemtl": _MATERIAL}.get(
+        word, _OTHER
+    )
+
+
+@dataclass(frozen=True)
+class _Lazy:
+    """The 0-based file lines of lines ``at``, each counted when asked."""
+
+    lines: Lines
+    at: np.ndarray
+
+    def __getitem__(self, k) -> int:
+        return self.lines.line(self.at[int(k)])
+
+
+def _unreadable(what: str, line: int) -> MeshFormatError:
+    return MeshFormatError(
+        f"unreadable {what} on line {line + 1}: every token after the keyword must be a number"
+    )
+
+
+def _refuse_short(counts: np.ndarray, line_of, noun: str, needs: str) -> None:
+    """Refuse the first of some lines with fewer than three numbers after the keyword
+    (``counts`` each; ``line_of(k)`` is the 0-based line of the ``k``-th)."""
     short = np.flatnonzero(counts < 3)
     if short.size:
-        line, count = line_ids[short[0]] + 1, counts[short[0]]
+        line, count = line_of(int(short[0])) + 1, int(counts[short[0]])
         raise MeshFormatError(f"{noun} on line {line} has {count} {needs}")
 
 
-def _read_vertices(data: bytes, lines: _Lines, vertex_lines: np.ndarray) -> np.ndarray:
-    """(n, 3) float: x, y, z of each ``v`` line (a 4th or more numbers are ignored)."""
-    per_line = lines.tokens[vertex_lines] - 1
-    _refuse_short(vertex_lines, per_line, "vertex", "numbers; a vertex needs x, y and z")
-    values = _numbers(data, lines, vertex_lines, np.float64, "vertex coordinates")
-    if np.all(per_line == 3):
-        vertices = values.reshape(-1, 3)
+def _vertices(lines: Lines, at: np.ndarray) -> np.ndarray:
+    """(len(at), 3) float: x, y, z of the vertex lines ``at`` (a 4th or more numbers are
+    ignored)."""
+    counts = lines.numbers[at]
+    _refuse_short(counts, lambda k: lines.line(at[k]), "vertex", _XYZ)
+    values, bad = parse_spans(*numbers_text(lines, at), counts, np.float64)
+    if values is None:
+        raise _unreadable("vertex coordinates", lines.line(at[bad]))
+    if np.all(counts == 3):
+        return values.reshape(-1, 3)
+    offsets = np.cumsum(counts) - counts
+    return values[offsets[:, None] + np.arange(3)]
+
+
+def _without_tails(text: np.ndarray, origin: int, tokens: Tokens) -> int:
+    """Blank out, in ``text`` (the chunk's bytes from ``origin`` on), the ``/vt/vn`` tails of
+    the face references among ``tokens``; return the first token that is only a tail (``/2``,
+    no vertex number), or -1."""
+    slashes = positions(text == _SLASH)
+    if not slashes.size:
+        return -1
+    slashes += origin
+    holder = np.searchsorted(tokens.starts, slashes, side="right") - 1
+    holder, first = np.unique(holder, return_index=True)  # each token's first slash
+    tails = slashes[first]
+    blank_spans(text, tails - origin, tokens.ends[holder] - origin)
+    empty = np.flatnonzero(tails == tokens.starts[holder])
+    return int(holder[empty[0]]) if empty.size else -1
+
+
+def _references(lines: Lines, at: np.ndarray) -> np.ndarray:
+    """(corners,) int64: the references of the face lines ``at``, in order."""
+    counts = lines.numbers[at]
+    _refuse_short(counts, lambda k: lines.line(at[k]), "face", _CORNERS)
+    text, starts, ends = numbers_text(lines, at)
+    origin = int(lines.tokens.starts[lines.key[at[0]] + 1])
+    tail = _without_tails(text, origin, lines.tokens)
+    if tail >= 0:
+        line = np.searchsorted(lines.key, tail, side="right") - 1
+        raise _unreadable("face references", lines.line(line))
+    refs, bad = parse_spans(text, starts, ends, counts, np.int64)
+    if refs is None:
+        raise _unreadable("face references", lines.line(at[bad]))
+    return refs
+
+
+def _resolve(refs, corners, defined, n_vertices: int, lines) -> np.ndarray:
+    """(corners.sum(),) int64 0-based vertex ids of 1-based or negative (relative)
+    references ``refs``, in place; ``defined`` vertices precede each polygon (``lines``:
+    their 0-based lines, for the message)."""
+    negative = refs < 0
+    before = None
+    if negative.any():
+        before = np.repeat(defined, corners)
+        bad = (refs == 0) | (refs > n_vertices) | (refs < -before)
     else:
-        offsets = np.concatenate(([0], np.cumsum(per_line)[:-1]))
-        vertices = values[offsets[:, None] + np.arange(3)]
-    return checked_vertices(vertices, vertex_lines)
-
-
-def _read_faces(
-    data: bytes, lines: _Lines, face_lines: np.ndarray, vertex_lines: np.ndarray
-) -> np.ndarray:
-    """(m, 3) int triangles in file order."""
-    corners = lines.tokens[face_lines] - 1
-    _refuse_short(face_lines, corners, "face", "corners; a face needs at least 3")
-    references = _numbers(data, lines, face_lines, np.int64, "face references")
-    # Resolve 1-based and negative (relative) references to 0-based vertex ids.
-    defined = np.searchsorted(vertex_lines, face_lines)  # vertices before each face line
-    line_of_reference = np.repeat(np.arange(len(face_lines)), corners)
-    ids = np.where(references > 0, references - 1, references + defined[line_of_reference])
-    bad = (references == 0) | (ids < 0) | (ids >= len(vertex_lines))
+        bad = (refs == 0) | (refs > n_vertices)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        line = face_lines[line_of_reference[k]] + 1
+        line = lines[int(np.searchsorted(np.cumsum(corners), k, side="right"))] + 1
         raise MeshFormatError(
-            f"face on line {line} refers to vertex {int(references[k])}, but the file has "
-            f"{len(vertex_lines)} vertices (references count from 1, or back from -1)"
+            f"face on line {line} refers to vertex {int(refs[k])}, but the file has "
+            f"{n_vertices} vertices (references count from 1, or back from -1)"
         )
-    return fan_triangles(ids, corners).astype(np.int64)
+    refs -= 1
+    if before is not None:
+        refs[negative] += before[negative] + 1
+    return refs
 
 
-def _read_groups(
-    data: bytes, lines: _Lines, kind: np.ndarray, face_lines: np.ndarray
-) -> dict[str, np.ndarray]:
-    """Group name -> (k, 2) ranges of face ids, from the g (each name), o and usemtl lines in
-    force. Faces come in file order, so a naming line covers one range: the triangles from it
-    to the next line of its kind."""
-    # Triangles before each line of the file: fan triangulation gives corners - 2 per face.
-    triangles_before = np.concatenate(([0], np.cumsum(lines.tokens[face_lines] - 3)))
-    ranges: dict[str, list[tuple[int, int]]] = {}
-    for code, split_names in ((_GROUP, True), (_OBJECT, False), (_MATERIAL, False)):
-        naming = np.flatnonzero(kind == code)
-        if naming.size == 0:
-            continue
-        bounds = triangles_before[np.searchsorted(face_lines, np.append(naming, len(kind)))]
-        for j, line in enumerate(naming.tolist()):
-            text = data[lines.first[line] : lines.ends[line]].decode("utf-8", "replace")
-            words = text.split(None, 1)
-            rest = words[1].strip() if len(words) > 1 else ""
-            names = rest.split() if split_names else ([rest] if rest else [])
+def _names(lines: Lines, at: np.ndarray, code: int):
+    """The name spans ``(starts, ends)`` of the naming lines ``at`` (all of kind ``code``)
+    and the index into ``at`` of each one's line."""
+    tokens, counts = lines.tokens, lines.numbers[at]
+    if code == _GROUP:  # each token a name: the tokens after each line's keyword
+        on = np.repeat(np.arange(len(at), dtype=np.int32), counts)
+        mine = np.repeat(lines.key[at] + 1 - (np.cumsum(counts, dtype=np.int32) - counts), counts)
+        mine += np.arange(len(mine), dtype=np.int32)
+        return tokens.starts[mine], tokens.ends[mine], on
+    # The rest of the line is the one name (blanks inside it kept).
+    named = np.flatnonzero(counts > 0)
+    starts, ends = lines.spans(at[named])
+    return starts, ends, named
+
+
+class _Names:
+    """Group names and the face ranges they cover, gathered chunk by chunk.
+
+    A naming line of each kind (g, o, usemtl) covers the triangles from it to the next line
+    of its kind; the last line of each kind stays open (``pending``) until the next one, or
+    the end of the file, closes it. Ranges are kept per name as arrays, merged where they
+    touch, so many lines naming the same group cost little.
+    """
+
+    def __init__(self) -> None:
+        #: the raw bytes of each distinct name, after b"g" (a g line's token, which may hold
+        #: several names) or b"n" (an o or usemtl line's one name), -> its id
+        self.ids: dict[bytes, int] = {}
+        self.pieces: dict[int, list[np.ndarray]] = {}  # id -> its ranges, of those with some
+        self.pending: dict[int, tuple[int, np.ndarray]] = {}  # kind -> open line's bound, ids
+
+    def add(self, code, text, bounds, on=(), starts=(), ends=()) -> None:
+        """New naming lines of kind ``code`` at the triangle counts ``bounds``, and names
+        ``text[starts[k]:ends[k]]`` on line ``on[k]`` of them (-1: the line left open),
+        a batch of names at a time."""
+        on, bounds = np.asarray(on, dtype=np.int64), np.asarray(bounds, dtype=np.int64)
+        starts, ends = np.asarray(starts), np.asarray(ends)
+        bound, still_open = self.pending.get(code, (0, np.zeros(0, dtype=np.int64)))
+        last, stops = len(bounds) - 1, np.append(bounds[1:], -1)
+        before, opened = [still_open], [np.zeros(0, dtype=np.int64)]
+        for batch in range(0, len(on), _NAME_BATCH):
+            part = slice(batch, batch + _NAME_BATCH)
+            ids, lines = self._ids(code, text, starts[part], ends[part]), on[part]
+            before.append(ids[lines == -1])  # on the line left open: its range ends below
+            closed = (lines >= 0) & (lines < last)
+            self._cover(ids[closed], bounds[lines[closed]], stops[lines[closed]])
+            opened.append(ids[lines == last])
+        still_open = np.unique(np.concatenate(before))
+        if len(bounds):
+            self._cover(still_open, bound, int(bounds[0]))
+            bound, still_open = int(bounds[-1]), np.unique(np.concatenate(opened))
+        self.pending[code] = (bound, still_open)
+
+    def _cover(self, ids: np.ndarray, starts, stops) -> None:
+        """Name ``ids[k]`` covers the triangles ``[starts[k], stops[k])``."""
+        starts = np.broadcast_to(np.asarray(starts, dtype=np.int64), ids.shape)
+        stops = np.broadcast_to(np.asarray(stops, dtype=np.int64), ids.shape)
+        full = starts < stops
+        ids, starts, stops = ids[full], starts[full], stops[full]
+        if not ids.size:
+            return
+        order = np.argsort(ids, kind="stable")  # by name, then in file order
+        ids, spans = ids[order], np.stack((starts[order], stops[order]), axis=1)
+        cuts = np.flatnonzero(ids[1:] != ids[:-1]) + 1
+        for name, group in zip(
+            ids[np.append(0, cuts)].tolist(), np.split(spans, cuts), strict=True
+        ):
+            self.pieces.setdefault(name, []).append(_merged(group))
+
+    def _ids(self, code, text, starts, ends) -> np.ndarray:
+        """(names,) int: the id of each name ``text[starts[k]:ends[k]]`` (one per distinct
+        bytes), found with a numpy pass over the names of each length."""
+        ids = np.empty(len(starts), dtype=np.int64)
+        lengths = ends - starts
+        for length in np.unique(lengths).tolist():
+            mine = np.flatnonzero(lengths == length)
+            keys, inverse = _distinct(text, starts[mine], length)
+            kind = b"g" if code == _GROUP else b"n"
+            known = [self.ids.setdefault(kind + key, len(self.ids)) for key in keys]
+            ids[mine] = np.asarray(known, dtype=np.int64)[inverse]
+        return ids
+
+    def ranges(self, triangles: int) -> dict[str, np.ndarray]:
+        """Name -> (k, 2) int ranges of face ids, once the file's ``triangles`` are read."""
+        for bound, still_open in self.pending.values():
+            self._cover(still_open, bound, triangles)
+        by_name: dict[str, list[np.ndarray]] = {}
+        for raw, name_id in self.ids.items():
+            text = raw[1:].decode("utf-8", "replace")
+            names = text.split() if raw[:1] == b"g" else [text.strip()] if text.strip() else []
             for name in names:
-                ranges.setdefault(name, []).append((int(bounds[j]), int(bounds[j + 1])))
-    return {name: np.array(spans, dtype=np.int64).reshape(-1, 2) for name, spans in ranges.items()}
+                by_name.setdefault(name, []).extend(self.pieces.pop(name_id, ()))
+        groups = {}
+        for name in list(by_name):  # each name's pieces dropped as its array is made
+            spans = by_name.pop(name)
+            groups[name] = _merged(np.concatenate(spans)) if spans else _NO_RANGES
+        return groups
+
+
+#: The ranges of a name on lines followed by no face (one array, read-only, shared).
+_NO_RANGES = np.zeros((0, 2), dtype=np.int64)
+_NO_RANGES.flags.writeable = False
+
+
+#: Names whose ids one numpy pass finds (its temporaries are some 70 bytes a name).
+_NAME_BATCH = 1 << 15
+
+
+def _distinct(text: np.ndarray, starts: np.ndarray, length: int) -> tuple[list[bytes], np.ndarray]:
+    """The distinct byte strings ``text[s:s + length]`` for ``s`` in ``starts`` and the index
+    of each one's among them."""
+    rows = np.lib.stride_tricks.sliding_window_view(text, length)[starts]
+    if length <= 8:  # as integers, which sort faster than raw bytes
+        padded = np.zeros((len(rows), 8), dtype=np.uint8)
+        padded[:, :length] = rows
+        keys, inverse = np.unique(padded.view("<u8").ravel(), return_inverse=True)
+        return [key.tobytes()[:length] for key in keys], inverse.ravel()
+    keys, inverse = np.unique(rows.view(f"V{length}").ravel(), return_inverse=True)
+    return [key.tobytes() for key in keys], inverse.ravel()
+
+
+def _merged(spans: np.ndarray) -> np.ndarray:
+    """(k, 2) int: the union of ranges ``spans`` as ascending disjoint ranges, touching
+    ones joined."""
+    if len(spans) > 1:
+        spans = spans[np.argsort(spans[:, 0], kind="stable")]
+        reach = np.maximum.accumulate(spans[:, 1])
+        fresh = np.append(True, spans[1:, 0] > reach[:-1])
+        starts = spans[fresh, 0]
+        stops = reach[np.append(np.flatnonzero(fresh)[1:] - 1, len(spans) - 1)]
+        spans = np.stack((starts, stops), axis=1)
+    return np.ascontiguousarray(spans, dtype=np.int64).reshape(-1, 2)

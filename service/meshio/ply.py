@@ -16,9 +16,22 @@ Rules (the API documentation repeats them):
   skipped; list counts may be of any integer type.
 
 Every count the header declares is checked against the limits and against the bytes that
-follow before anything is allocated for it. Rows of fixed size are read in one numpy pass;
-a face element whose polygons differ in size is walked once for its list sizes, then read
-with one pass per polygon size.
+follow before anything is allocated for it. The body is read twice, a batch of rows at a
+time (about :data:`text.CHUNK_BYTES` of the file): a first pass finds every element's rows
+and counts the triangles of the face and strip elements, which are checked against the
+limits; the second writes the vertices and triangles into arrays made for them. Binary rows
+of one shape are read with one numpy pass per batch; where polygons differ in size, the rows'
+list sizes are walked (a row a tenth of a microsecond) and the rows read with one numpy pass
+per polygon size in the batch.
+
+Memory: the arrays, (n, 3) float64 vertices and (m, 3) int64 faces, and a constant (the
+temporaries of one batch, a few MiB). An ASCII row is never split, so a row longer than a
+chunk (a strip of a million ids) costs some 12 bytes an id more. The arrays are at most 8
+bytes a byte of the file except where fewer than 3 bytes make a triangle: lists of 1- or
+2-byte items (``list uchar uchar``: a 24-byte triangle from each corner past the second) and
+ASCII polygons and strips written with one-digit ids (12 bytes of triangles a byte). An
+int64 triangle cannot be held in less, so there a read needs the triangles, at most 24 bytes
+times ``MESHFLAT_MAX_FACES`` (120 MB), plus the constant.
 """
 
 from __future__ import annotations
@@ -28,6 +41,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from . import text
 from .mesh import (
     Limits,
     Mesh,
@@ -35,9 +49,18 @@ from .mesh import (
     MeshTooLargeError,
     check_counts,
     checked_vertices,
-    fan_triangles,
+    fan_into,
 )
-from .text import LF, TextLines, parse_numbers
+from .text import (
+    LF,
+    Lines,
+    as_bytes_array,
+    chunks,
+    count_lines,
+    parse_numbers,
+    positions,
+    token_starts,
+)
 
 _TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
@@ -50,6 +73,12 @@ _INDEX_NAMES = ("vertex_indices", "vertex_index")
 _MAX_CORNERS = 255  # a polygon with more is surely a misread list
 #: The elements whose rows hold triangles.
 _TRIANGLE_ELEMENTS = ("face", "tristrips")
+#: Rows one numpy pass reads at most (their temporaries are some tens of bytes a row).
+_BATCH_ROWS = 1 << 15
+#: Runs of rows of one shape shorter than this are walked with their neighbours.
+_MIN_RUN = 16
+#: Strip items turned into triangles in one numpy pass (some 100 bytes of temporaries each).
+_STRIP_ITEMS = 1 << 15
 
 
 @dataclass(frozen=True)
@@ -70,8 +99,26 @@ class _Element:
     def fixed(self) -> bool:
         return all(p.count_type is None for p in self.properties)
 
+    @property
+    def lists(self) -> list[_Property]:
+        return [p for p in self.properties if p.count_type is not None]
 
-def read_ply(data: bytes, limits: Limits) -> Mesh:
+
+@dataclass(frozen=True)
+class _Batch:
+    """Rows ``[row, row + rows)`` of an element, in bytes ``[begin, end)``: binary rows of
+    one ``shape`` (their list sizes), binary rows of several (``counts``: each list's sizes,
+    one a row), or ASCII rows (neither)."""
+
+    row: int
+    rows: int
+    begin: int
+    end: int
+    shape: tuple[int, ...] | None = None
+    counts: tuple[np.ndarray, ...] | None = None
+
+
+def read_ply(data: bytes | memoryview, limits: Limits) -> Mesh:
     """Parse a PLY file held in memory.
 
     Raises
@@ -86,7 +133,13 @@ def read_ply(data: bytes, limits: Limits) -> Mesh:
         replace(e, max_items=limits.max_faces + 2) if e.name == "tristrips" else e for e in elements
     ]
     vertex, indices = _what_to_read(elements, limits)
-    return _read_body(data, body, elements, order, vertex, indices, limits)
+    reader = _Body(as_bytes_array(data), order, vertex, indices)
+    plan = reader.plan(elements, body)
+    check_counts(vertex.count, reader.sink.triangles, limits)
+    vertices, faces = reader.fill(plan)
+    if not faces.size:
+        raise MeshFormatError("the PLY file holds no triangles")
+    return Mesh(vertices=checked_vertices(vertices), faces=faces, format="ply")
 
 
 def _what_to_read(elements: list, limits: Limits) -> tuple:
@@ -117,32 +170,6 @@ def _what_to_read(elements: list, limits: Limits) -> tuple:
     return vertex, indices
 
 
-def _read_body(data, body, elements, order, vertex, indices, limits) -> Mesh:
-    """The mesh from the rows after the header (``body`` is where they start)."""
-    rows = _binary_rows if order else _ascii_rows
-    vertices, pieces = None, []
-    position = body
-    for element in elements:
-        columns, position = rows(data, position, element, order)
-        if element is vertex:
-            vertices = np.stack([columns[k] for k in "xyz"], axis=1).astype(np.float64)
-        elif element.name in indices:
-            items, sizes = columns[indices[element.name]]
-            if element.name == "tristrips" and items.dtype.kind == "u":
-                # An unsigned list writes the -1 that ends a strip as its largest value.
-                items = np.where(items == np.iinfo(items.dtype).max, -1, items.astype(np.int64))
-            items = _indices(items, sizes, element.name)
-            if element.name == "face":
-                pieces.append(_fan(items, sizes, vertex.count, limits))
-            else:
-                pieces.append(_strips(items, sizes, vertex.count))
-            check_counts(vertex.count, sum(len(piece) for piece in pieces), limits)
-    faces = np.concatenate(pieces) if pieces else np.empty((0, 3), dtype=np.int64)
-    if not faces.size:
-        raise MeshFormatError("the PLY file holds no triangles")
-    return Mesh(vertices=checked_vertices(vertices), faces=faces, format="ply")
-
-
 def _index_property(element: _Element) -> str:
     """The name of a triangle element's list of vertex ids."""
     index = next((p for p in element.properties if p.name in _INDEX_NAMES), None)
@@ -153,40 +180,164 @@ def _index_property(element: _Element) -> str:
     return index.name
 
 
-def _strips(items: np.ndarray, sizes: np.ndarray, n_vertices: int) -> np.ndarray:
-    """(t, 3) int: the triangles of triangle strips, row by row, ``-1`` ending a strip
-    (module docstring); triangles that repeat a vertex are left out.
+class _Body:
+    """The rows after the header: found and counted (:meth:`plan`), then read (:meth:`fill`)."""
 
-    Parameters
-    ----------
-    items : (k,) int, the rows' lists, flat, in row order
-    sizes : (rows,) int, each row's list length
-    n_vertices : int
-    """
-    bad = np.flatnonzero((items < -1) | (items >= n_vertices))
-    if bad.size:
+    def __init__(self, buffer: np.ndarray, order: str | None, vertex, indices: dict) -> None:
+        self.buffer, self.order, self.vertex, self.indices = buffer, order, vertex, indices
+        self.sink = _Sink(vertex.count)
+
+    def plan(self, elements: list[_Element], body: int) -> list[tuple[_Element, list[_Batch]]]:
+        """Every element's batches of rows, in order; counts the triangles (``sink``)."""
+        plan, position = [], body
+        for element in elements:
+            if self.order:
+                batches, position = _binary_batches(self.buffer, position, element, self.order)
+            else:
+                batches, position = _ascii_batches(self.buffer, position, element)
+            plan.append((element, batches))
+            if element.name in self.indices:
+                for batch in batches:
+                    self._triangles(element, batch)
+        return plan
+
+    def fill(self, plan) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 3) float vertices and (m, 3) int faces, read batch by batch."""
+        vertices = np.empty((self.vertex.count, 3), dtype=np.float64)
+        self.sink = _Sink(self.vertex.count, np.empty((self.sink.triangles, 3), dtype=np.int64))
+        for element, batches in plan:
+            needed = element is self.vertex or element.name in self.indices
+            if not needed and self.order:
+                continue  # binary rows were checked when found; ASCII rows are read
+            for batch in batches:
+                if element is self.vertex:
+                    columns = self._columns(element, batch)
+                    for k, axis in enumerate("xyz"):
+                        vertices[batch.row : batch.row + batch.rows, k] = columns[axis]
+                elif needed:
+                    self._triangles(element, batch)
+                else:
+                    self._columns(element, batch)
+        return vertices, self.sink.out
+
+    def _triangles(self, element: _Element, batch: _Batch) -> None:
+        name = self.indices[element.name]
+        if self.sink.out is None and element.name == "face" and not self.order:
+            sizes = _ascii_sizes(self.buffer, batch, element, name)
+            if sizes is not None:  # counting needs only the polygons' sizes
+                self.sink.faces(None, sizes, batch.row)
+                return
+        items, sizes = self._columns(element, batch, only=name)
+        if element.name == "face":
+            self.sink.faces(items, sizes, batch.row)
+        else:
+            self.sink.strips(items, sizes, batch.row)
+
+    def _columns(self, element: _Element, batch: _Batch, only: str | None = None):
+        if self.order:
+            columns = _binary_columns(self.buffer, batch, element, self.order)
+        else:
+            columns = _ascii_columns(self.buffer, batch, element)
+        return columns if only is None else columns[only]
+
+
+class _Sink:
+    """Where the triangle elements' rows go: counted (``out`` None) or written to ``out``
+    ((m, 3) int), ``triangles`` so far."""
+
+    def __init__(self, n_vertices: int, out: np.ndarray | None = None) -> None:
+        self.n_vertices, self.out, self.triangles = n_vertices, out, 0
+        self.strip = _Strip()
+
+    def faces(self, items: np.ndarray, corners: np.ndarray, row: int) -> None:
+        """Fan triangles of polygons given as flat ``items`` and ``corners`` (rows from
+        ``row``)."""
+        if self.out is None:
+            self.triangles += int(np.maximum(corners - 2, 0).sum())
+            return
+        short = np.flatnonzero(corners < 3)
+        if short.size:
+            raise MeshFormatError(
+                f"PLY face {row + int(short[0])} has {int(corners[short[0]])} corners; a face "
+                "needs 3"
+            )
+        items = _indices(items, corners, row)
+        bad = np.flatnonzero((items < 0) | (items >= self.n_vertices))
+        if bad.size:
+            raise MeshFormatError(
+                f"PLY face {row + _face_of(int(bad[0]), corners)} refers to vertex "
+                f"{int(items[bad[0]])}, but the file has {self.n_vertices:,} vertices (ids count "
+                "from 0)"
+            )
+        count = int((corners - 2).sum())
+        fan_into(self.out[self.triangles : self.triangles + count], items, corners)
+        self.triangles += count
+
+    def strips(self, items: np.ndarray, sizes: np.ndarray, row: int) -> None:
+        """Triangles of triangle strips, rows from ``row`` (module docstring): each row ends
+        its strips. Read a piece of the items at a time, so a long row costs no more."""
+        ends = np.cumsum(sizes)  # where each row's items end
+        for start in range(0, len(items), _STRIP_ITEMS):
+            piece = _strip_ids(items[start : start + _STRIP_ITEMS])
+            stop = start + len(piece)
+            bad = _not_whole(piece)
+            if bad < 0 and self.out is not None:
+                outside = np.flatnonzero((piece < -1) | (piece >= self.n_vertices))
+                bad = int(outside[0]) if outside.size else -1
+            if bad >= 0:
+                self._refuse_strip(items[start + bad], row + _face_of(start + bad, sizes))
+            breaks = ends[(ends > start) & (ends <= stop)] - start
+            triangles = self.strip.triangles(np.insert(piece.astype(np.int64), breaks, -1))
+            if self.out is not None:
+                self.out[self.triangles : self.triangles + len(triangles)] = triangles
+            self.triangles += len(triangles)
+
+    def _refuse_strip(self, item, row: int) -> None:
+        if np.asarray(item).dtype.kind == "f" and not float(item).is_integer():
+            raise MeshFormatError(
+                f"PLY tristrips row {row} lists {float(item)!r}, not a vertex index"
+            )
         raise MeshFormatError(
-            f"PLY tristrips row {_face_of(int(bad[0]), sizes)} refers to vertex "
-            f"{int(items[bad[0]])}, but the file has {n_vertices:,} vertices (ids count from 0; "
-            "-1 ends a strip)"
+            f"PLY tristrips row {row} refers to vertex {int(_strip_ids(np.array([item]))[0])}, "
+            f"but the file has {self.n_vertices:,} vertices (ids count from 0; -1 ends a strip)"
         )
-    # Every row ends its strips: a -1 after each row, then one sequence.
-    ends = np.cumsum(sizes)
-    sequence = np.insert(items, ends, -1)
-    n = len(sequence)
-    if n < 3:
-        return np.empty((0, 3), dtype=np.int64)
-    position = np.arange(n)
-    last_break = np.maximum.accumulate(np.where(sequence == -1, position, -1))
-    step = position - last_break - 1  # the item's place in its strip
-    first = np.arange(n - 2)
-    whole = (sequence[first] >= 0) & (sequence[first + 1] >= 0) & (sequence[first + 2] >= 0)
-    first = first[whole]
-    a, b, c = sequence[first], sequence[first + 1], sequence[first + 2]
-    odd = step[first] % 2 == 1
-    triangles = np.stack([np.where(odd, b, a), np.where(odd, a, b), c], axis=1)
-    proper = (a != b) & (b != c) & (a != c)
-    return triangles[proper]
+
+
+def _strip_ids(items: np.ndarray) -> np.ndarray:
+    """Strip items as signed ids: an unsigned list writes the -1 ending a strip as its
+    largest value."""
+    if items.dtype.kind == "u":
+        return np.where(items == np.iinfo(items.dtype).max, -1, items.astype(np.int64))
+    return items
+
+
+class _Strip:
+    """Triangles of a strip sequence (ids, ``-1`` between strips) read in pieces: the last
+    two items of the previous piece and the first one's place in its strip carry over."""
+
+    def __init__(self) -> None:
+        self.carried = np.zeros(0, dtype=np.int64)
+        self.step = 0  # the first carried item's place in its strip
+
+    def triangles(self, piece: np.ndarray) -> np.ndarray:
+        """(t, 3) int: the triangles that end in ``piece``."""
+        sequence = np.concatenate((self.carried, piece))
+        n = len(sequence)
+        if n < 3:
+            self.carried = sequence
+            return np.zeros((0, 3), dtype=np.int64)
+        position = np.arange(n)
+        # The place of each item in its strip: the distance from the last -1 before it.
+        last_break = np.maximum.accumulate(np.where(sequence == -1, position, -1 - self.step))
+        step = position - last_break - 1
+        first = np.arange(n - 2)
+        whole = (sequence[:-2] >= 0) & (sequence[1:-1] >= 0) & (sequence[2:] >= 0)
+        first = first[whole]
+        a, b, c = sequence[first], sequence[first + 1], sequence[first + 2]
+        odd = step[first] % 2 == 1
+        triangles = np.stack([np.where(odd, b, a), np.where(odd, a, b), c], axis=1)
+        self.carried, self.step = sequence[-2:], int(step[-2])
+        return triangles[(a != b) & (b != c) & (a != c)]
 
 
 def _face_of(item: int, corners: np.ndarray) -> int:
@@ -194,23 +345,32 @@ def _face_of(item: int, corners: np.ndarray) -> int:
     return int(np.searchsorted(np.cumsum(corners), item, side="right"))
 
 
-def _indices(items: np.ndarray, corners: np.ndarray, element: str = "face") -> np.ndarray:
-    """Vertex references as int64; a float list must hold whole numbers."""
-    if items.dtype.kind == "f":
-        with np.errstate(invalid="ignore"):
-            bad = np.flatnonzero(~(np.isfinite(items) & (items % 1 == 0) & (np.abs(items) < 2**62)))
-        if bad.size:
-            row = "face" if element == "face" else f"{element} row"
-            raise MeshFormatError(
-                f"PLY {row} {_face_of(int(bad[0]), corners)} lists {float(items[bad[0]])!r}, "
-                "not a vertex index"
-            )
+def _not_whole(items: np.ndarray) -> int:
+    """The first of float ``items`` that is not a whole number (a vertex index), or -1."""
+    if items.dtype.kind != "f":
+        return -1
+    with np.errstate(invalid="ignore"):
+        bad = np.flatnonzero(~(np.isfinite(items) & (items % 1 == 0) & (np.abs(items) < 2**62)))
+    return int(bad[0]) if bad.size else -1
+
+
+def _indices(items: np.ndarray, corners: np.ndarray, row: int) -> np.ndarray:
+    """Face vertex references as int64; a float list must hold whole numbers."""
+    bad = _not_whole(items)
+    if bad >= 0:
+        raise MeshFormatError(
+            f"PLY face {row + _face_of(bad, corners)} lists {float(items[bad])!r}, not a "
+            "vertex index"
+        )
     return items.astype(np.int64)
 
 
-def _header(data: bytes) -> tuple[str | None, list[_Element], int]:
+# -- header ---------------------------------------------------------------------------------
+
+
+def _header(data: bytes | memoryview) -> tuple[str | None, list[_Element], int]:
     """The byte order (None for ASCII), the elements, and where the body starts."""
-    lines, body = _header_lines(data)
+    lines, body = _header_lines(bytes(data[: 1 << 16]))
     order, elements = None, []
     seen_format = False
     for number, line in enumerate(lines, 1):
@@ -232,11 +392,11 @@ def _header(data: bytes) -> tuple[str | None, list[_Element], int]:
     return order, elements, body
 
 
-def _header_lines(data: bytes) -> tuple[list[str], int]:
-    """The header's lines before ``end_header``, and where the body starts."""
-    if not data.startswith(b"ply"):
+def _header_lines(head: bytes) -> tuple[list[str], int]:
+    """The header's lines before ``end_header`` (``head``: the file's first 64 KiB), and
+    where the body starts."""
+    if not head.startswith(b"ply"):
         raise MeshFormatError("not a PLY file: it does not start with 'ply'")
-    head = data[: 1 << 16]
     lines, offset = [], 0
     while offset < len(head):
         newline = head.find(b"\n", offset)
@@ -275,100 +435,198 @@ def _prop(words: list[str]) -> _Property:
 _STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I"}
 
 
-def _binary_rows(data: bytes, position: int, element: _Element, order: str):
-    """Columns of an element's rows from ``position`` (name -> values; a list's name ->
-    (items, flat, in row order; sizes, one a row)), and where the element ends."""
+def _binary_batches(buffer: np.ndarray, position: int, element: _Element, order: str):
+    """The batches of an element's rows from ``position``, and where the element ends."""
     if element.count == 0:
-        return _no_rows(element), position
+        return [], position
     if element.fixed:
-        dtype = _row_dtype(element, order, ())
-        end = position + dtype.itemsize * element.count
-        if end > len(data):
-            raise _short(element, len(data) - position, end - position)
-        table = np.frombuffer(data, dtype=dtype, count=element.count, offset=position)
-        return {p.name: table[p.name] for p in element.properties}, end
+        size = _row_dtype(element, order, ()).itemsize
+        end = position + size * element.count
+        if end > len(buffer):
+            raise _short(element, len(buffer) - position, end - position)
+        per = max(1, min(_BATCH_ROWS, text.CHUNK_BYTES // max(size, 1)))
+        rows = [(row, min(per, element.count - row)) for row in range(0, element.count, per)]
+        begin = position
+        return [
+            _Batch(row, n, begin + row * size, begin + (row + n) * size, shape=())
+            for row, n in rows
+        ], end
     smallest = sum(np.dtype(p.count_type or p.type).itemsize for p in element.properties)
-    if position + smallest * element.count > len(data):
-        raise _short(element, len(data) - position, smallest * element.count)
-    shapes, row_bytes = _row_shapes(data, position, element, order)
-    starts = position + np.concatenate(([0], np.cumsum(row_bytes)[:-1]))
-    end = position + int(row_bytes.sum())
-    raw = np.frombuffer(data, dtype=np.uint8)
-    lists = [p for p in element.properties if p.count_type is not None]
-    columns: dict = {p.name: np.empty(element.count, p.type) for p in element.properties}
-    pieces: dict = {p.name: [] for p in lists}
-    # One numpy pass per distinct row shape (one, for a mesh of triangles only).
-    for shape in np.unique(shapes, axis=0):
-        rows = np.flatnonzero((shapes == shape).all(axis=1))
-        dtype = _row_dtype(element, order, shape)
-        if len(rows) == element.count:
-            table = np.frombuffer(data, dtype=dtype, count=element.count, offset=position)
+    if position + smallest * element.count > len(buffer):
+        raise _short(element, len(buffer) - position, smallest * element.count)
+    return _Walker(buffer, element, order, position).batches()
+
+
+class _Walker:
+    """Finds the rows of an element with lists, batch by batch: a run of rows of one shape
+    is checked in one numpy pass; rows of mixed shapes are walked one by one, reading only
+    their list sizes."""
+
+    def __init__(self, buffer: np.ndarray, element: _Element, order: str, start: int) -> None:
+        self.buffer, self.element, self.order, self.start = buffer, element, order, start
+        self.view = memoryview(buffer)
+        self.plan = [
+            (p, np.dtype(p.type).itemsize, None)
+            if p.count_type is None
+            else (p, np.dtype(p.type).itemsize, struct.Struct(order + _STRUCT[p.count_type]))
+            for p in element.properties
+        ]
+        self.count_types = [np.dtype(p.count_type) for p in element.lists]
+
+    def batches(self) -> tuple[list[_Batch], int]:
+        element, position, row, out = self.element, self.start, 0, []
+        while row < element.count:
+            counts, stop = self.walk(position, row, 1, 0)
+            shape, size, left = tuple(c[0] for c in counts), stop - position, element.count - row
+            run = self.run(
+                position, shape, size, max(1, min(_BATCH_ROWS, left, text.CHUNK_BYTES // size))
+            )
+            if run >= min(_MIN_RUN, left):
+                out.append(_Batch(row, run, position, position + run * size, shape=shape))
+                row, position = row + run, position + run * size
+                continue
+            counts, stop = self.walk(position, row, min(_BATCH_ROWS, left), text.CHUNK_BYTES)
+            sizes = tuple(
+                np.frombuffer(c, dtype=np.uint8) if isinstance(c, bytearray) else np.asarray(c, t)
+                for c, t in zip(counts, self.count_types, strict=True)
+            )
+            out.append(_Batch(row, len(counts[0]), position, stop, counts=sizes))
+            row, position = row + len(counts[0]), stop
+        return out, position
+
+    def run(self, position: int, shape: tuple, size: int, rows: int) -> int:
+        """How many of the ``rows`` rows from ``position`` have the list sizes ``shape``
+        (``size`` bytes each), the first of which has (one numpy pass)."""
+        rows = min(rows, (len(self.buffer) - position) // size)
+        same = np.ones(rows, dtype=bool)
+        for k, (p, at) in enumerate(_count_offsets(self.element, shape)):
+            dtype = np.dtype(self.order + p.count_type)
+            counts = np.ndarray((rows,), dtype, self.buffer, position + at, (size,))
+            same &= counts == shape[k]
+        return rows if same.all() else int(np.argmin(same))
+
+    def walk(self, position: int, row: int, rows: int, budget: int) -> tuple[list, int]:
+        """The list sizes of up to ``rows`` rows from ``position`` (fewer once they span
+        ``budget`` bytes), a sequence for each list, and where the last one ends."""
+        lists = self.element.lists
+        if len(lists) == 1 and np.dtype(lists[0].count_type).itemsize == 1:
+            counts, offset = self._walk_bytes(position, row, rows, position + budget)
         else:
-            table = raw[starts[rows, None] + np.arange(dtype.itemsize)].view(dtype).ravel()
+            counts, offset = self._walk_any(position, row, rows, position + budget)
+        if offset > len(self.buffer):
+            raise _short(self.element, len(self.buffer) - self.start, offset - self.start)
+        return counts, offset
+
+    def _walk_bytes(self, offset: int, row: int, rows: int, limit: int):
+        """:meth:`walk` for rows with one list counted in a byte (the usual face): a few
+        Python operations a row."""
+        element, view, end = self.element, self.view, len(self.buffer)
+        (p,) = element.lists
+        before = sum(
+            np.dtype(q.type).itemsize for q in element.properties[: element.properties.index(p)]
+        )
+        fixed = sum(np.dtype(q.count_type or q.type).itemsize for q in element.properties)
+        item, signed, most = np.dtype(p.type).itemsize, p.count_type == "i1", element.max_items
+        counts = bytearray()
+        for number in range(row, row + rows):
+            if offset + before >= end:
+                raise _short(element, end - self.start, offset + before + 1 - self.start)
+            n = view[offset + before]
+            if n > most or (signed and n > 127):
+                raise self._too_many(number, p, n - 256 if signed and n > 127 else n)
+            counts.append(n)
+            offset += fixed + n * item
+            if offset >= limit:
+                break
+        return [counts], offset
+
+    def _walk_any(self, offset: int, row: int, rows: int, limit: int):
+        """:meth:`walk` for any rows: each list's count read with ``struct``."""
+        element, view, end = self.element, self.view, len(self.buffer)
+        counts: list[list[int]] = [[] for _ in self.count_types]
+        for number in range(row, row + rows):
+            k = 0
+            for p, item_size, counter in self.plan:
+                if counter is None:
+                    offset += item_size
+                    continue
+                if offset + counter.size > end:
+                    raise _short(element, end - self.start, offset + counter.size - self.start)
+                (n,) = counter.unpack_from(view, offset)
+                if not 0 <= n <= element.max_items:
+                    raise self._too_many(number, p, n)
+                counts[k].append(n)
+                k += 1
+                offset += counter.size + n * item_size
+            if offset >= limit:
+                break
+        return counts, offset
+
+    def _too_many(self, row: int, p: _Property, n: int) -> MeshFormatError:
+        return MeshFormatError(
+            f"PLY {self.element.name} row {row} lists {n} items in {p.name!r}; 0 to "
+            f"{self.element.max_items} are read"
+        )
+
+
+def _binary_columns(buffer: np.ndarray, batch: _Batch, element: _Element, order: str) -> dict:
+    """The columns of a batch of binary rows: name -> values; a list's name -> (items, flat,
+    in row order; sizes, one a row)."""
+    if batch.counts is None:  # rows of one shape: a view of the file
+        table = np.frombuffer(
+            buffer,
+            dtype=_row_dtype(element, order, batch.shape),
+            count=batch.rows,
+            offset=batch.begin,
+        )
+        columns, k = {}, 0
         for p in element.properties:
             if p.count_type is None:
-                columns[p.name][rows] = table[p.name]
+                columns[p.name] = table[p.name]
             else:
-                pieces[p.name].append((rows, table[p.name].reshape(len(rows), -1)))
+                items = table[p.name].reshape(batch.rows, -1).ravel()
+                columns[p.name] = (items, np.full(batch.rows, batch.shape[k], dtype=np.int64))
+                k += 1
+        return columns
+    sizes = np.stack(batch.counts, axis=1).astype(np.int64)
+    starts = batch.begin + _row_starts(element, sizes)
+    columns = {
+        p.name: np.empty(batch.rows, p.type) for p in element.properties if p.count_type is None
+    }
+    lists = element.lists
+    items = [np.empty(int(sizes[:, k].sum()), p.type) for k, p in enumerate(lists)]
+    firsts = [np.cumsum(sizes[:, k]) - sizes[:, k] for k in range(len(lists))]
+    if sizes.shape[1] == 1:  # one list: its sizes are the shapes
+        shapes, inverse = np.unique(sizes[:, 0], return_inverse=True)
+        shapes = shapes[:, None]
+    else:
+        shapes, inverse = np.unique(sizes, axis=0, return_inverse=True)
+    # One numpy pass per row shape of the batch (one or two, for a mesh of polygons).
+    for j, shape in enumerate(shapes):
+        rows = np.flatnonzero(inverse.ravel() == j)
+        dtype = _row_dtype(element, order, shape)
+        raw = np.lib.stride_tricks.sliding_window_view(buffer, dtype.itemsize)[starts[rows]]
+        table = raw.view(dtype).ravel()
+        for name, column in columns.items():
+            column[rows] = table[name]
+        for k, p in enumerate(lists):
+            if shape[k]:
+                items[k][firsts[k][rows, None] + np.arange(shape[k])] = table[p.name]
     for k, p in enumerate(lists):
-        columns[p.name] = (_in_row_order(pieces[p.name], shapes[:, k], p.type), shapes[:, k])
-    return columns, end
+        columns[p.name] = (items[k], sizes[:, k])
+    return columns
 
 
-def _row_shapes(data: bytes, position: int, element: _Element, order: str):
-    """(rows, lists) list sizes and (rows,) byte sizes of an element's rows."""
-    (first,), (size,) = _walk_rows(data, position, element, order, 1)
-    first = np.array(first, dtype=np.int64)
-    count = element.count
-    # The usual case, checked in one pass: every row has the first row's shape.
-    if position + size * count <= len(data):
-        starts = position + size * np.arange(count)
-        raw = np.frombuffer(data, dtype=np.uint8)
-        same = np.ones(count, dtype=bool)
-        for k, (p, at) in enumerate(_count_offsets(element, first)):
-            count_dtype = np.dtype(order + p.count_type)
-            where = starts[:, None] + at + np.arange(count_dtype.itemsize)
-            same &= raw[where].view(count_dtype).ravel() == first[k]
-        if same.all():
-            return np.tile(first, (count, 1)), np.full(count, size, dtype=np.int64)
-    # Polygons of several sizes: walk every row.
-    shapes, row_bytes = _walk_rows(data, position, element, order, count)
-    return np.array(shapes, dtype=np.int64), np.array(row_bytes, dtype=np.int64)
-
-
-def _walk_rows(data: bytes, position: int, element: _Element, order: str, rows: int):
-    """The list sizes and byte sizes of the first ``rows`` rows from ``position``, reading
-    only their counts, with plain ints (a row a few hundred nanoseconds)."""
-    plan = [
-        (p.name, np.dtype(p.type).itemsize, None)
-        if p.count_type is None
-        else (p.name, np.dtype(p.type).itemsize, struct.Struct(order + _STRUCT[p.count_type]))
-        for p in element.properties
-    ]
-    shapes: list[list[int]] = []
-    row_bytes: list[int] = []
-    offset, end = position, len(data)
-    for row in range(rows):
-        start, shape = offset, []
-        for name, item_size, counter in plan:
-            if counter is None:
-                offset += item_size
-                continue
-            if offset + counter.size > end:
-                raise _short(element, end - position, offset + counter.size - position)
-            (n,) = counter.unpack_from(data, offset)
-            if not 0 <= n <= element.max_items:
-                raise MeshFormatError(
-                    f"PLY {element.name} row {row} lists {n} items in {name!r}; 0 to "
-                    f"{element.max_items} are read"
-                )
-            shape.append(n)
-            offset += counter.size + n * item_size
-        shapes.append(shape)
-        row_bytes.append(offset - start)
-    if offset > end:
-        raise _short(element, end - position, offset - position)
-    return shapes, row_bytes
+def _row_starts(element: _Element, sizes: np.ndarray) -> np.ndarray:
+    """(rows,) int: where each row begins after the first, whose lists have ``sizes``."""
+    row_bytes = np.zeros(len(sizes), dtype=np.int64)
+    k = 0
+    for p in element.properties:
+        row_bytes += np.dtype(p.count_type or p.type).itemsize
+        if p.count_type is not None:
+            row_bytes += sizes[:, k] * np.dtype(p.type).itemsize
+            k += 1
+    return np.cumsum(row_bytes) - row_bytes
 
 
 def _count_offsets(element: _Element, shape) -> list[tuple[_Property, int]]:
@@ -397,17 +655,6 @@ def _row_dtype(element: _Element, order: str, shape) -> np.dtype:
     return np.dtype(fields)
 
 
-def _in_row_order(pieces: list, sizes: np.ndarray, kind: str) -> np.ndarray:
-    """Flat list items in row order, from tables read one row shape at a time; ``kind`` is
-    the items' type (native byte order: values, not bytes, are copied)."""
-    starts = np.concatenate(([0], np.cumsum(sizes)[:-1]))
-    items = np.empty(int(sizes.sum()), dtype=kind)
-    for rows, table in pieces:
-        if table.shape[1]:
-            items[starts[rows, None] + np.arange(table.shape[1])] = table
-    return items
-
-
 def _short(element: _Element, have: int, need: int) -> MeshFormatError:
     return MeshFormatError(
         f"the PLY {element.name} element ({element.count:,} rows) is cut short: its rows "
@@ -415,44 +662,59 @@ def _short(element: _Element, have: int, need: int) -> MeshFormatError:
     )
 
 
-def _no_rows(element: _Element) -> dict:
-    return {
-        p.name: np.empty(0, p.type)
-        if p.count_type is None
-        else (np.empty(0, p.type), np.empty(0, np.int64))
-        for p in element.properties
-    }
-
-
 # -- ASCII ----------------------------------------------------------------------------------
 
 
-def _ascii_rows(data: bytes, position: int, element: _Element, _order=None):
-    """As :func:`_binary_rows`, for ASCII rows: one row a line."""
+def _ascii_batches(buffer: np.ndarray, position: int, element: _Element):
+    """The batches of an element's rows (one a line) from ``position``, and where the
+    element ends."""
     if element.count == 0:
-        return _no_rows(element), position
-    buffer = np.frombuffer(data, dtype=np.uint8, offset=position)
-    newlines = np.flatnonzero(buffer == LF)
-    if len(newlines) >= element.count:
-        end = int(newlines[element.count - 1]) + 1 if element.count else 0
-    elif len(newlines) == element.count - 1 and _last_start(newlines) < len(buffer):
-        end = len(buffer)  # the last row has no line feed
-    else:
-        raise MeshFormatError(
-            f"the PLY {element.name} element declares {element.count:,} rows; the file ends "
-            "before them"
-        )
-    block = buffer[:end]
-    lines = TextLines.of(block)
-    values = parse_numbers(block.tobytes(), np.float64, int(lines.tokens.sum()))
+        return [], position
+    batches, row, begin = [], 0, position
+    for end in chunks(buffer, position, whole_lines=True):
+        chunk = buffer[begin:end]
+        lines = count_lines(chunk)
+        if row + lines >= element.count:
+            take = element.count - row
+            end = begin + int(positions(chunk == LF)[take - 1]) + 1
+            batches.append(_Batch(row, take, begin, end))
+            return _checked_size(buffer, batches, element, end - position), end
+        if end == len(buffer) and row + lines == element.count - 1 and chunk[-1] != LF:
+            batches.append(_Batch(row, lines + 1, begin, end))  # the last row ends the file
+            return _checked_size(buffer, batches, element, end - position), end
+        batches.append(_Batch(row, lines, begin, end))
+        row, begin = row + lines, end
+    raise MeshFormatError(
+        f"the PLY {element.name} element declares {element.count:,} rows; the file ends before them"
+    )
+
+
+def _checked_size(buffer, batches: list[_Batch], element: _Element, size: int) -> list:
+    """``batches``, once rows too short for a value of each property (so that making an
+    array for them would cost more than the file) are refused."""
+    if size < 2 * len(element.properties) * element.count - 1:
+        for batch in batches:  # some row lacks a value: reading them says which
+            _ascii_columns(buffer, batch, element)
+    return batches
+
+
+def _ascii_columns(buffer: np.ndarray, batch: _Batch, element: _Element) -> dict:
+    """As :func:`_binary_columns`, for ASCII rows."""
+    chunk = buffer[batch.begin : batch.end]
+    starts = token_starts(chunk)
+    values = parse_numbers(chunk, np.float64, len(starts))
     if values is None:
         raise MeshFormatError(f"the PLY {element.name} rows hold a value that is not a number")
+    # Values per row: a row is a line.
+    if batch.rows == 1:
+        per_row = np.array([len(starts)])
+    else:
+        per_row = np.bincount(np.searchsorted(positions(chunk == LF), starts), minlength=batch.rows)
+    row_end = np.cumsum(per_row)
+    at = row_end - per_row
     columns: dict = {}
-    row_start = np.concatenate(([0], np.cumsum(lines.tokens)[:-1]))
-    row_end = row_start + lines.tokens
-    at = row_start.copy()
     for p in element.properties:
-        _check_values(at, row_end, element)
+        _check_values(at, row_end, element, batch.row)
         if p.count_type is None:
             columns[p.name] = values[at]
             at = at + 1
@@ -461,50 +723,70 @@ def _ascii_rows(data: bytes, position: int, element: _Element, _order=None):
         bad = np.flatnonzero((sizes < 0) | (sizes > element.max_items) | (sizes % 1 != 0))
         if bad.size:
             raise MeshFormatError(
-                f"PLY {element.name} row {int(bad[0])} gives {p.name!r} {float(sizes[bad[0]])!r} "
-                f"items; 0 to {element.max_items} are read"
+                f"PLY {element.name} row {batch.row + int(bad[0])} gives {p.name!r} "
+                f"{float(sizes[bad[0]])!r} items; 0 to {element.max_items} are read"
             )
         sizes = sizes.astype(np.int64)
-        _check_values(at + sizes, row_end, element)
-        offsets = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
-        items = values[np.repeat(at + 1, sizes) + offsets]
-        columns[p.name] = (items, sizes)  # as read: only the face indices are checked
+        _check_values(at + sizes, row_end, element, batch.row)
+        columns[p.name] = (_spans(values, at + 1, sizes), sizes)  # only indices are checked
         at = at + 1 + sizes
     extra = np.flatnonzero(at != row_end)
     if extra.size:
         raise MeshFormatError(
-            f"PLY {element.name} row {int(extra[0])} has more values than its properties"
+            f"PLY {element.name} row {batch.row + int(extra[0])} has more values than its "
+            "properties"
         )
-    return columns, position + end
+    return columns
 
 
-def _last_start(newlines: np.ndarray) -> int:
-    return int(newlines[-1]) + 1 if len(newlines) else 0
+def _ascii_sizes(buffer, batch: _Batch, element: _Element, name: str) -> np.ndarray | None:
+    """(rows,) int: the sizes of list ``name`` in ASCII rows, parsed alone when only scalars
+    come before it in a row; None otherwise, or when a row is not as it should be (reading
+    the rows whole then says how)."""
+    before = [p.name for p in element.properties].index(name)
+    if any(p.count_type is not None for p in element.properties[:before]):
+        return None
+    lines = Lines.of(buffer[batch.begin : batch.end], 0)
+    if len(lines) != batch.rows or np.any(lines.numbers < before):
+        return None
+    at = lines.key + before
+    sizes = _digits(lines.chunk, lines.tokens.starts[at], lines.tokens.ends[at])
+    if sizes is None or np.any(sizes > element.max_items):
+        return None
+    return sizes
 
 
-def _check_values(at: np.ndarray, row_end: np.ndarray, element: _Element) -> None:
+def _digits(chunk: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray | None:
+    """(tokens,) int: the tokens ``[starts, ends)`` read as numbers of 1 to 3 digits, or
+    None when one is not (a sum of digits, faster than parsing text)."""
+    lengths = ends - starts
+    if np.any((lengths < 1) | (lengths > 3)):
+        return None
+    values = np.zeros(len(starts), dtype=np.int64)
+    for k in range(3):
+        longer = lengths > k
+        digit = chunk[np.where(longer, starts + k, 0)].astype(np.int64) - ord("0")
+        if np.any(longer & ((digit < 0) | (digit > 9))):
+            return None
+        values = np.where(longer, 10 * values + digit, values)
+    return values
+
+
+def _spans(values: np.ndarray, starts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """``values[starts[r]:starts[r] + sizes[r]]`` for every row ``r``, concatenated (one
+    row's: a view)."""
+    if len(starts) == 1:
+        return values[int(starts[0]) : int(starts[0] + sizes[0])]
+    inside = np.zeros(len(values) + 1, dtype=np.int8)
+    inside[starts] += 1  # the rows' spans are disjoint and ascending
+    inside[starts + sizes] -= 1
+    np.cumsum(inside, dtype=np.int8, out=inside)
+    return values[inside[:-1].view(bool)]
+
+
+def _check_values(at: np.ndarray, row_end: np.ndarray, element: _Element, row: int) -> None:
     short = np.flatnonzero(at >= row_end)
     if short.size:
         raise MeshFormatError(
-            f"PLY {element.name} row {int(short[0])} has too few values for its properties"
+            f"PLY {element.name} row {row + int(short[0])} has too few values for its properties"
         )
-
-
-# -- faces ----------------------------------------------------------------------------------
-
-
-def _fan(items: np.ndarray, corners: np.ndarray, n_vertices: int, limits: Limits) -> np.ndarray:
-    """Fan triangles, in row order, of polygons given as flat ``items`` and ``corners``."""
-    short = np.flatnonzero(corners < 3)
-    if short.size:
-        raise MeshFormatError(
-            f"PLY face {int(short[0])} has {int(corners[short[0]])} corners; a face needs 3"
-        )
-    bad = np.flatnonzero((items < 0) | (items >= n_vertices))
-    if bad.size:
-        raise MeshFormatError(
-            f"PLY face {_face_of(int(bad[0]), corners)} refers to vertex "
-            f"{int(items[bad[0]])}, but the file has {n_vertices:,} vertices (ids count from 0)"
-        )
-    check_counts(n_vertices, int((corners - 2).sum()), limits)
-    return fan_triangles(items, corners)

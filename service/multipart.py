@@ -27,12 +27,13 @@ class Part:
 
 
 def parse_form(body: bytes, content_type: str) -> dict[str, Part]:
-    """The parts of a multipart/form-data body, by field name (the first of each name).
+    """The parts of a multipart/form-data body, by field name.
 
     Raises
     ------
     Problem
-        415 when the body is not multipart/form-data, 400 when it is malformed.
+        415 when the body is not multipart/form-data, 400 when it is malformed, 422 when
+        a field name comes twice (naming it).
     """
     media_type, _, parameters = content_type.partition(";")
     if media_type.strip().lower() != "multipart/form-data":
@@ -69,12 +70,19 @@ def parse_form(body: bytes, content_type: str) -> dict[str, Part]:
         name = values.get("name")
         if name is None:
             raise Problem(400, "a multipart part has no name", "malformed-multipart")
-        if name not in parts:
-            parts[name] = Part(
-                name=name,
-                filename=values.get("filename"),
-                data=view[header_end + 4 : next_delimiter],
+        if name in parts:
+            # Which one was meant cannot be told: refuse rather than take the first.
+            raise Problem(
+                422,
+                f"{name}: the form has more than one '{name}' part; send it once",
+                "invalid-request",
+                name,
             )
+        parts[name] = Part(
+            name=name,
+            filename=values.get("filename"),
+            data=view[header_end + 4 : next_delimiter],
+        )
         position = next_delimiter + 2
 
 

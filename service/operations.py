@@ -38,6 +38,7 @@ from transforms import (
     world_to_angles,
 )
 from transforms import selection as select
+from transforms.viewpoint import check_center_sees_area
 
 from .meshio import Mesh, format_of, read_mesh
 from .params import (
@@ -290,8 +291,12 @@ def locate_directions(mesh: Mesh, params: LocateParams, settings: Settings) -> L
     selection = select_region(mesh, params)
     chart, frame, _ = resolve(mesh, selection, params, settings)
     directions = chart.inverse(params.theta, params.phi, 1.0)
+    faces = mesh.faces[selection.faces]
+    # Seen edge-on from the centre, the region has nothing to hit (the flatten routes refuse
+    # such a centre in the core; a fixed frame and sigma reach locate without it).
+    check_center_sees_area(mesh.vertices, faces, frame.center)
     # Every vertex given, so that an error names the file's vertex ids.
-    hits = locate(frame.to_local(mesh.vertices), mesh.faces[selection.faces], directions)
+    hits = locate(frame.to_local(mesh.vertices), faces, directions)
     return Located(chart, frame, selection, hits, params.layout, mesh.format)
 
 

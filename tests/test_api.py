@@ -14,11 +14,12 @@ import pytest
 import trimesh
 
 from service.app import create_app
+from service.jsonkeys import repeated_key
 from service.samples import SAMPLES
 from service.settings import Settings
 from transforms import Chart, Frame, PoleCap, flatten_region, world_to_angles
 
-from .conftest import load_sample
+from .conftest import grid_mesh, load_sample
 
 pytestmark = pytest.mark.anyio
 
@@ -53,6 +54,13 @@ def problem(response, status, field=None):
     if field is not None:
         assert body.get("field") == field, body
     return body
+
+
+def obj_of(vertices, faces) -> bytes:
+    """An OBJ file of vertices (n, 3) and faces (m, 3), 0-based."""
+    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    return ("\n".join(lines) + "\n").encode()
 
 
 # -- health and samples ------------------------------------------------------------------
@@ -181,6 +189,49 @@ async def test_points_need_a_json_body(client):
     assert "JSON" in problem(broken, 422)["detail"]
 
 
+@pytest.mark.parametrize(
+    ("path", "body", "field"),
+    [
+        (
+            "/v1/points",
+            b'{"points": [[1, 2, 3]], "center": [0, 0, 0], "center": [1, 1, 1]}',
+            "center",
+        ),
+        (
+            "/v1/points",
+            b'{"points": [[1, 2, 3]], "rotation": {"pole": [0, 0, 1], "up": [0, 1, 0], '
+            b'"pole": [0, 0, -1]}}',
+            "rotation.pole",
+        ),
+        # The same key spelt with an escape is the same key.
+        ("/v1/points", b'{"points": [[1, 2, 3]], "sigma": 0.3, "\\u0073igma": 0.5}', "sigma"),
+        # Refused even where the value kept would be invalid: the repeat is the fault.
+        ("/v1/points/inverse", b'{"theta": [1], "phi": [-1], "sigma": 0.3, "sigma": -1}', "sigma"),
+    ],
+)
+async def test_a_json_body_repeating_a_key_is_refused_naming_its_path(client, path, body, field):
+    headers = {"content-type": "application/json"}
+    detail = problem(await client.post(path, content=body, headers=headers), 422, field)["detail"]
+    assert detail.startswith(f"{field}: given more than once in one JSON object")
+
+
+@pytest.mark.parametrize(
+    ("document", "path"),
+    [
+        (b'{"a": 1, "b": {"a": 2}}', None),  # one "a" per object
+        (b'[{"a": 1}, {"a": 2}]', None),
+        (b'{"a": "{\\"b\\": 1, \\"b\\": 2}", "b": ["b", "b"]}', None),  # in strings
+        (b'{"e1": 1, "E2": 2, "a.5": 3, "a-6": 4}', None),  # digits, signs, exponents
+        (b'{"p": [[1, 2], [3, 4]], "q": [{"k": 1}, [5], {"k": 2, "k": 3}]}', ("q", 2, "k")),
+        (b'{"r": {"s": [1, {"t": 0, "t": 1}]}}', ("r", "s", 1, "t")),
+        (b'{"\\u00e9": 1, "\xc3\xa9": 2}', ("\u00e9",)),  # one key, two spellings
+    ],
+)
+def test_a_repeated_key_is_found_within_one_object_only(document, path):
+    json.loads(document)  # valid JSON, as the check is given
+    assert repeated_key(document) == path
+
+
 async def test_standard_answers_no_cap_and_its_params_can_be_sent_back(client):
     first = await flatten(client, "fsaverage-head.ply", {"method": "standard"})
     params = first.json()["params"]
@@ -307,11 +358,104 @@ async def test_bad_regions(client, region, field, says):
         assert says in body["detail"]
 
 
+@pytest.mark.parametrize("tiny", [1e-300, 1e-320])  # 1e-320 is subnormal
+@pytest.mark.parametrize("which", ["axis", "pole", "up", "up of an automatic pole"])
+async def test_a_direction_however_small_is_its_direction(client, which, tiny):
+    """One rule for the cone's axis, the pole and up: three finite numbers, not all zero, are
+    a direction, whatever their size; only [0, 0, 0] is refused, with the same message."""
+
+    def params(size: float) -> dict:
+        chosen = {
+            "sigma": 0.3,
+            "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+            "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}},
+        }
+        if which == "axis":
+            chosen["region"]["cone"]["axis"] = [0, 0, size]
+        elif which == "pole":
+            chosen["rotation"]["pole"] = [0, 0, -size]
+        elif which == "up":
+            chosen["rotation"]["up"] = [0, size, 0]
+        else:
+            chosen["rotation"] = {"pole": "auto", "up": [0, size, 0]}
+        return chosen
+
+    unit = (await flatten(client, "fsaverage-head.ply", params(1.0))).json()
+    small = await flatten(client, "fsaverage-head.ply", params(tiny))
+    assert small.status_code == 200, small.text
+    small = small.json()
+    assert small["faces"] == unit["faces"] and small["vertices"] == unit["vertices"]
+    assert small["params"]["rotation"] == unit["params"]["rotation"]
+    zero = await flatten(client, "fsaverage-head.ply", params(0.0))
+    field = {"axis": "params.region.cone.axis", "pole": "params.rotation.pole"}.get(
+        which, "params.rotation.up"
+    )
+    assert "must be a non-zero direction" in problem(zero, 422, field)["detail"]
+
+
 async def test_a_centre_on_a_vertex_names_it(client):
     vertices, _ = load_sample("fsaverage-head.ply")
     response = await flatten(client, "fsaverage-head.ply", {"center": vertices[123].tolist()})
     body = problem(response, 422, "mesh")
     assert body["indices"] == [123] and "vertex 123" in body["detail"]
+
+
+#: Flat regions whose bounding-box centre, the default centre, lies in their plane: on the
+#: triangle's long edge, on the grid's middle vertex (12).
+FLAT = {
+    "triangle": (np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])),
+    "grid": grid_mesh(np.linspace(0, 1, 5), np.linspace(0, 1, 5), 0.0),
+}
+
+
+@pytest.mark.parametrize("name", list(FLAT))
+async def test_a_centre_in_the_plane_of_a_flat_region_is_named_as_the_centre(client, name):
+    data = obj_of(*FLAT[name])
+    response = await client.post("/v1/flatten", files={"mesh": ("flat.obj", data)})
+    body = problem(response, 422, "params.center")
+    detail = body["detail"]
+    assert detail.startswith("params.center: the centre [0.5, 0.5, 0] lies in the plane")
+    assert "edge-on" in detail and "move the centre off that plane" in detail
+    assert "zero area" not in detail
+    if name == "grid":
+        assert body["indices"] == [12] and "on vertex 12" in detail
+    # Off the plane, given or as the detail suggests, the same region flattens.
+    suggested = json.loads(detail.rpartition("for example to ")[2])
+    for center in ([0.25, 0.25, -1.0], suggested):
+        response = await flatten(client, "x", {"center": center}, data=data, filename="f.obj")
+        assert response.status_code == 200, response.text
+
+
+@pytest.mark.parametrize(
+    ("endpoint", "params"),
+    [
+        ("/v1/flatten", {"rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]}, "sigma": 0.3}),
+        ("/v1/validate", {"center": [5.0, 5.0, 0.0]}),  # in the plane, beside the region
+        ("/v1/fit", {"center": "centroid"}),
+        (
+            "/v1/locate",
+            {"rotation": "identity", "sigma": 0.3, "theta": [1.0], "phi": [-1.0]},
+        ),
+    ],
+)
+async def test_every_mesh_route_names_a_centre_in_the_regions_plane(client, endpoint, params):
+    data = obj_of(*FLAT["grid"])
+    response = await flatten(client, "x", params, data=data, filename="f.obj", endpoint=endpoint)
+    assert "lies in the plane of every face" in problem(response, 422, "params.center")["detail"]
+
+
+async def test_a_region_whose_faces_have_no_area_names_the_faces_not_the_centre(client):
+    data = obj_of([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]])
+    for params in ({}, {"center": [1.0, 1.0, 1.0]}):
+        response = await flatten(client, "x", params, data=data, filename="line.obj")
+        assert "every face of the region has zero area" in problem(response, 422, "mesh")["detail"]
+
+
+async def test_a_fitted_centre_leaves_the_plane_of_a_flat_region(client):
+    data = obj_of(*FLAT["grid"])
+    response = await flatten(client, "x", {}, data=data, filename="f.obj", endpoint="/v1/fit")
+    assert response.status_code == 200, response.text
+    assert response.json()["params"]["center"][2] != 0.0
 
 
 @pytest.mark.parametrize(
@@ -329,6 +473,24 @@ async def test_a_centre_on_a_vertex_names_it(client):
 async def test_bad_mesh_params_name_the_field(client, params, field):
     body = problem(await flatten(client, "fsaverage-head.ply", params), 422)
     assert body["field"].startswith(field)
+
+
+@pytest.mark.parametrize(
+    ("params", "field"),
+    [
+        ('{"center": [0, 0, 1], "center": "bbox_center"}', "params.center"),
+        (
+            '{"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70, "axis": [0, 1, 0]}}}',
+            "params.region.cone.axis",
+        ),
+    ],
+)
+async def test_params_repeating_a_key_are_refused_naming_its_path(client, params, field):
+    data = SAMPLES["fsaverage-head.ply"].path.read_bytes()
+    response = await client.post(
+        "/v1/flatten", files={"mesh": ("a.ply", data)}, data={"params": params}
+    )
+    assert "given more than once" in problem(response, 422, field)["detail"]
 
 
 async def test_params_must_be_json(client):
@@ -500,6 +662,15 @@ async def test_multipart_details(client):
         headers={"content-type": "multipart/form-data; boundary=AbC"},
     )
     assert "no file name" in problem(response, 422, "mesh")["detail"]
+
+
+@pytest.mark.parametrize("repeated", ["mesh", "params"])
+async def test_a_form_repeating_the_mesh_or_params_part_is_refused_naming_it(client, repeated):
+    data = SAMPLES["fsaverage-head.ply"].path.read_bytes()
+    files = [("mesh", ("a.ply", data))] * (2 if repeated == "mesh" else 1)
+    fields = {"params": ["{}", '{"sigma": 0.2}']} if repeated == "params" else {}
+    response = await client.post("/v1/flatten", files=files, data=fields)
+    assert f"more than one '{repeated}' part" in problem(response, 422, repeated)["detail"]
 
 
 async def test_wrong_content_type(client):

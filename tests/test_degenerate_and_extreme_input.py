@@ -26,9 +26,11 @@ from transforms import (
     validate,
     weighted_quantile,
 )
+from transforms.arrays import as_direction
 from transforms.frames import check_rotation
+from transforms.viewpoint import check_center_sees_area
 
-from .conftest import exact_sign
+from .conftest import exact_sign, grid_mesh
 
 
 def test_an_edge_dipping_across_the_seam_is_a_seam_crossing():
@@ -128,6 +130,36 @@ def test_tiny_pole_vectors(pole):
     check_rotation(frame.rotation)
     unit = np.array(pole) / np.abs(pole).max()
     assert np.allclose(frame.pole, unit / np.linalg.norm(unit))
+
+
+@pytest.mark.parametrize("tiny", [1e-300, 1e-320])
+def test_every_direction_follows_one_rule_however_small(tiny):
+    """The cone's axis, the pole and up: the direction of any finite vector not all zero."""
+    assert as_direction([tiny, 0.0, 0.0], "axis").tolist() == [1.0, 0.0, 0.0]
+    assert np.allclose(as_direction([tiny, -tiny, 0.0], "up"), [0.5**0.5, -(0.5**0.5), 0.0])
+    frame = Frame.from_pole_up([0.0, tiny, 0.0], [0.0, 0.0, tiny])
+    assert np.array_equal(frame.rotation, np.eye(3))
+    for field in ("region.cone.axis", "pole", "up"):
+        with pytest.raises(TransformInputError, match="must be a non-zero direction") as caught:
+            as_direction([0.0, -0.0, 0.0], field)
+        assert caught.value.field == field
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_tilted_flat_grid_seen_from_its_own_plane_is_refused_despite_rounding(seed):
+    """Rotated and moved, a flat grid is flat only to rounding, and its bounding-box centre in
+    its plane only to rounding: still refused, naming the centre; a centre off the plane by a
+    millionth of the grid's size is not."""
+    rng = np.random.default_rng(seed)
+    vertices, faces = grid_mesh(np.linspace(0, 1, 30), np.sort(rng.uniform(0, 1, 30)), 0.0)
+    frame = Frame.from_pole_up(rng.normal(size=3), rng.normal(size=3))
+    size = 10.0 ** rng.uniform(-4, 4)
+    world = (vertices @ frame.rotation) * size + rng.normal(size=3) * size * 10
+    center = (world.min(axis=0) + world.max(axis=0)) / 2
+    with pytest.raises(TransformInputError, match="lies in the plane") as caught:
+        check_center_sees_area(world, faces, center)
+    assert caught.value.field == "center"
+    check_center_sees_area(world, faces, center + frame.rotation[2] * size * 1e-6)
 
 
 @pytest.mark.parametrize("rho_deg", [10.0, 33.4, 90.0, 150.0])

@@ -103,6 +103,29 @@ def as_vector(vector, field: str) -> np.ndarray:
     return array
 
 
+def as_direction(vector, field: str) -> np.ndarray:
+    """Return the direction of ``vector``, a caller's cone axis, pole or up, as a ``(3,)``
+    unit float64 array: the one rule for every direction.
+
+    Accepted when its three numbers are finite (within ``MAX_ABS_COORDINATE``) and not all
+    zero. Only the direction matters, so no magnitude is too small: the vector is divided by
+    its largest magnitude before its length is taken (:func:`unit_rows`), so the squares
+    neither underflow nor overflow, and ``[1e-300, 0, 0]`` and the subnormal
+    ``[1e-320, 0, 0]`` are ``[1, 0, 0]`` as exactly as ``[1, 0, 0]`` is.
+
+    Raises
+    ------
+    TransformInputError
+        Not three finite numbers, or all three zero.
+    """
+    units, zero = unit_rows(as_vector(vector, field)[None, :])
+    if zero[0]:
+        raise TransformInputError(
+            field, "must be a non-zero direction (at least one component not 0), got [0, 0, 0]"
+        )
+    return units[0]
+
+
 def as_angles(theta, phi, r=1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Check spherical coordinates and broadcast them to three ``(n,)`` float64 arrays.
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
-from .arrays import as_faces, as_points, as_vector, unit_rows
+from .arrays import as_direction, as_faces, as_points, as_vector, unit_rows
 from .cap import PoleCap
 from .chart import Chart, Method
 from .emptycap import cap_radius, largest_empty_cap
@@ -38,6 +38,7 @@ from .layouts import Layout, measured_second
 from .metrics import distortion
 from .region import FlatRegion, flatten_region
 from .sampling import area_sample
+from .viewpoint import check_center_sees_area
 
 #: Faces the search evaluates each candidate on, and vertices the pole's hull is built from.
 SAMPLE_FACES = 4000
@@ -361,9 +362,8 @@ def _start_rotation(directions: np.ndarray, up, notes: list[str]) -> np.ndarray:
     hull_rows = np.linspace(0, len(directions) - 1, min(HULL_VERTICES, len(directions)))
     pole, _ = largest_empty_cap(directions[hull_rows.astype(np.int64)])
     if up is not None:
-        up = as_vector(up, "up")
-        length = float(np.linalg.norm(up))
-        if length > 0 and np.linalg.norm(np.cross(up / length, pole)) < _PARALLEL:
+        up = as_direction(up, "up")
+        if np.linalg.norm(np.cross(up, pole)) < _PARALLEL:
             notes.append(
                 "the up hint is parallel to the chosen pole, so it fixes no roll: the "
                 "roll follows the region's widest spread instead"
@@ -556,6 +556,8 @@ class _Problem:
             raise TransformInputError(
                 "sigma", "method 'standard' has no warp, so it takes no sigma"
             )
+        if fixed.center is not None:
+            check_center_sees_area(points, faces, as_vector(fixed.center, "center"))
         return cls(points, faces, method, threads, Layout(layout))
 
     @property

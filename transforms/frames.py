@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .arrays import as_points, as_vector, numeric_array, unit_rows
+from .arrays import as_direction, as_points, as_vector, numeric_array
 from .errors import TransformInputError
 
 #: How far from orthonormal with determinant +1 a matrix may be and still count as a rotation.
@@ -87,13 +87,7 @@ class Frame:
         TransformInputError
             A zero vector, or ``up`` parallel to ``pole``.
         """
-        y_axis, zero = unit_rows(as_vector(pole, "pole")[None, :])
-        if zero[0]:
-            raise TransformInputError("pole", "must be a non-zero direction")
-        up_unit, zero = unit_rows(as_vector(up, "up")[None, :])
-        if zero[0]:
-            raise TransformInputError("up", "must be a non-zero direction")
-        y_axis, up_unit = y_axis[0], up_unit[0]
+        y_axis, up_unit = as_direction(pole, "pole"), as_direction(up, "up")
         x_axis = np.cross(y_axis, up_unit)  # y x up: its length is the sine of their angle
         sine = float(np.linalg.norm(x_axis))
         if not sine > MIN_POLE_UP_SINE:

@@ -16,6 +16,7 @@ from .frames import Frame
 from .layouts import Layout, layout_xy, measured_second
 from .metrics import Distortion, distortion
 from .validation import RegionValidation, validate
+from .viewpoint import check_center_sees_area
 
 
 @dataclass(frozen=True)
@@ -79,12 +80,14 @@ def flatten_region(
     ------
     TransformInputError
         Bad coordinates or indices, a region vertex at the centre (named by its row in
-        ``vertices``), no faces, or only degenerate faces.
+        ``vertices``), no faces, only degenerate faces, or a centre from which every face
+        is seen edge-on (:func:`.viewpoint.check_center_sees_area`).
     """
     vertices = as_points(vertices, "vertices")
     faces = as_faces(faces, len(vertices))
     if len(faces) == 0:
         raise TransformInputError("faces", "the region has no faces")
+    check_center_sees_area(vertices, faces, frame.center)
     vertex_ids = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(vertices)))
     if len(vertex_ids) == len(vertices):  # every vertex used (the whole mesh): no renumbering
         compact, used = faces, vertices

@@ -13,6 +13,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from .arrays import as_direction, unit_rows
 from .errors import TransformInputError
 
 #: The named centres: the area-weighted centroid or the bounding-box centre of the faces.
@@ -183,16 +184,12 @@ def cone_faces(
     TransformInputError
         (``region.cone.axis``) A zero axis.
     """
-    axis = np.asarray(axis, dtype=np.float64)
-    length = float(np.linalg.norm(axis))
-    if not length > 0:
-        raise TransformInputError("region.cone.axis", "must be a non-zero direction")
-    centroids = vertices[faces].mean(axis=1) - apex
-    distance = np.linalg.norm(centroids, axis=1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cosine = centroids @ (axis / length) / distance
-    inside = cosine >= math.cos(math.radians(half_angle_deg)) - 1e-15
-    return np.flatnonzero(inside & (distance > 0))
+    axis = as_direction(axis, "region.cone.axis")
+    # The centroids' directions by the same rule as the axis: scale-free, so a tiny mesh's
+    # cone is the cone of the mesh scaled up.
+    directions, at_apex = unit_rows(vertices[faces].mean(axis=1) - apex)
+    inside = directions @ axis >= math.cos(math.radians(half_angle_deg)) - 1e-15
+    return np.flatnonzero(inside & ~at_apex)
 
 
 def nonempty(faces: np.ndarray) -> np.ndarray:

@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-service bench-zoo soak openapi clean
+.PHONY: serve test bench bench-fit bench-service bench-zoo soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -46,9 +46,13 @@ bench-service: $(VENV)/.installed-bench
 bench-zoo: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.zoo $(BENCH_ARGS)
 
-# Load and soak through a real two-worker server (the test extra suffices); CI runs --short.
+# Load and soak through a real server, as deployed (the test extra suffices); CI runs --short.
 soak: $(VENV)/.installed-test
 	$(BIN)/python -m benchmarks.soak $(BENCH_ARGS)
+
+# Hostile uploads and slow clients against a real server on 127.0.0.1; CI runs --short.
+attack: $(VENV)/.installed-test
+	$(BIN)/python -m benchmarks.attack $(BENCH_ARGS)
 
 openapi: $(VENV)/.installed-run
 	$(BIN)/python -m service.openapi

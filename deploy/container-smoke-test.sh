@@ -154,7 +154,8 @@ echo "the fit in progress was answered 200; exited 0 after" \
   "$((($(date +%s%N) - started) / 1000000)) ms"
 mkdir -p artifacts
 "${podman[@]}" logs "$NAME" 2>&1 | grep "^{" > artifacts/container-smoke.log
-python3 - artifacts/container-smoke.log "$KEY" <<'EOF' || fail "the logs"
+limit_bytes=$("${podman[@]}" inspect --format '{{.HostConfig.Memory}}' "$NAME")
+python3 - artifacts/container-smoke.log "$KEY" "$limit_bytes" <<'EOF' || fail "the logs"
 import json, sys
 lines = [line for line in open(sys.argv[1]) if line.startswith("{")]
 entries = [json.loads(line) for line in lines]
@@ -164,6 +165,10 @@ assert "ply" not in text.replace("fsaverage-head.ply", ""), "a file name in the 
 requests = [e for e in entries if e["message"] == "request"]
 assert any(e["request_id"] == "smoke-flatten-1" and e["status"] == 200 for e in requests)
 assert any(e["message"].startswith("Finished server process") for e in entries)
+# Each worker's memory budget comes from the container's limit (service.settings).
+budgets = [e["message"] for e in entries if e["message"].startswith("memory budget")]
+limit = int(sys.argv[3]) // 2**20
+assert len(budgets) >= 2 and all(f"container limit of {limit} MiB" in b for b in budgets), budgets
 # The fit was answered after the server had received SIGTERM: a graceful stop.
 sigterm = next(e["time"] for e in entries if e["message"].startswith("Received SIGTERM"))
 fit = next(e for e in requests if e["route"] == "/v1/fit")

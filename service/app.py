@@ -16,10 +16,10 @@ from . import demo, document, problems
 from .allocator import keep_large_blocks
 from .auth import KeyCheck, RequireApiKey
 from .bodylimit import BodySizeLimit
-from .observability import JsonFormatter, RequestContext
+from .observability import JsonFormatter, RequestContext, capture_warnings
 from .routes import router
 from .selfcheck import run_self_check
-from .settings import Settings
+from .settings import Settings, container_memory
 
 logger = logging.getLogger("meshflat")
 if not logger.handlers:  # imported without `meshflat serve`'s logging set-up
@@ -38,6 +38,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         """Tune the allocator, then flatten a bundled scan once, off the event loop, and log
         the outcome; /readyz answers 200 after it passes."""
+        capture_warnings()
         if not keep_large_blocks():
             logger.info("allocator: not glibc, default settings kept")
         if not settings.api_keys:
@@ -45,6 +46,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 "no API keys are configured (MESHFLAT_API_KEYS, MESHFLAT_API_KEYS_FILE): "
                 "every /v1 route is open to anyone who can reach the service"
             )
+        logger.info(
+            "memory budget: %d MiB for this worker's jobs (%s)",
+            settings.memory_budget_bytes // 2**20,
+            "MESHFLAT_MEMORY_BUDGET"
+            if settings.memory_budget
+            else f"from a container limit of {container_memory() // 2**20} MiB",
+        )
         check = await run_in_threadpool(run_self_check)
         (logger.info if check.ok else logger.error)(str(check))
         app.state.ready = check.ok

@@ -17,6 +17,7 @@ class BodyTooLarge(Problem):
             413,
             f"the request body exceeds {limit:,} bytes (MESHFLAT_MAX_UPLOAD_BYTES)",
             "body-too-large",
+            headers={"Connection": "close"},  # the rest of the body is not read
         )
 
 

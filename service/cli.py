@@ -239,6 +239,8 @@ def serve(args: argparse.Namespace) -> None:
             workers=workers,
             log_config=log_config(),
             access_log=False,  # the service logs each request itself, with its id
+            http="service.protocol:Protocol",  # a time limit on headers (service.protocol)
+            timeout_keep_alive=settings.keep_alive_timeout,
             timeout_graceful_shutdown=math.ceil(settings.request_timeout) + 5,
             # A worker busy in a long computation answers the supervisor's ping late; only
             # one that stays silent this long is taken for hung and replaced.

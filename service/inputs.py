@@ -9,10 +9,14 @@ shape are HTTP matters, answered here as problems.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TypeVar
 
-from pydantic import BaseModel
+from pydantic import BaseModel, ValidationError
+from pydantic_core import InitErrorDetails, PydanticCustomError
 
+from .jobs import charge_mesh
+from .jsonkeys import repeated_key
 from .meshio import Mesh, format_of, read_mesh
 from .multipart import parse_form
 from .observability import observe_mesh
@@ -39,33 +43,74 @@ def parse_json(model: type[M], body: bytes, content_type: str) -> M:
             f"send application/json, not {media_type or 'an untyped body'}",
             "unsupported-media-type",
         )
-    return model.model_validate_json(body)
+    return validated_json(model, body)
 
 
 def mesh_params(model: type[P], text: bytes) -> P:
     """The ``params`` JSON validated as ``model``."""
-    return model.model_validate_json(text)
+    return validated_json(model, text)
 
 
-def load_mesh(data: bytes, filename: str | None, params: MeshParams, settings: Settings) -> Mesh:
+def validated_json(model: type[M], text: bytes) -> M:
+    """``text`` validated as ``model``, refusing a key given twice in one object (which the
+    parser would take the last of): that error comes before the model's own, which may be
+    about the value that would have been taken.
+
+    Raises
+    ------
+    pydantic.ValidationError
+        Not JSON, not valid as ``model``, or a repeated key (type ``duplicate_key``, its
+        location the key's path).
+    """
+    try:
+        parsed = model.model_validate_json(text)
+    except ValidationError as error:
+        if all(item["type"] != "json_invalid" for item in error.errors()):
+            _refuse_repeated_keys(model, text)
+        raise
+    _refuse_repeated_keys(model, text)
+    return parsed
+
+
+def _refuse_repeated_keys(model: type[BaseModel], text: bytes) -> None:
+    path = repeated_key(text)
+    if path is not None:
+        message = (
+            "given more than once in one JSON object; give each key once (only one of the "
+            "values would be used, silently)"
+        )
+        error = InitErrorDetails(
+            type=PydanticCustomError("duplicate_key", message), loc=path, input=None
+        )
+        raise ValidationError.from_exception_data(model.__name__, [error])
+
+
+def load_mesh(
+    data: bytes | memoryview, filename: str | None, params: MeshParams, settings: Settings
+) -> Mesh:
     """The mesh in ``data`` (its format from ``params.format`` or the file name), read within
-    the settings' limits.
+    the settings' limits; in a job, its counts are charged to the memory budget before its
+    arrays are built (:func:`service.jobs.charge_mesh`).
 
     Raises
     ------
     MeshFormatError
         Not a readable mesh, or beyond a limit (:class:`~service.meshio.MeshTooLargeError`).
     """
-    mesh = read_mesh(data, format_of(filename, params.format), settings.limits)
+    limits = replace(settings.limits, on_counts=charge_mesh)
+    mesh = read_mesh(data, format_of(filename, params.format), limits)
     observe_mesh(mesh.format, len(mesh.vertices), len(mesh.faces))
     return mesh
 
 
-def mesh_form(body: bytes, content_type: str, settings: Settings, model: type[P]) -> tuple[P, Mesh]:
-    """The params (default ``{}``) and the mesh of a multipart mesh request."""
+def mesh_form(
+    body: bytes | bytearray, content_type: str, settings: Settings, model: type[P]
+) -> tuple[P, Mesh]:
+    """The params (default ``{}``) and the mesh of a multipart mesh request; the mesh is read
+    in place, from a view into ``body`` (no copy of the upload)."""
     form = parse_form(body, content_type)
     params = mesh_params(model, bytes(form["params"].data) if "params" in form else b"{}")
     if "mesh" not in form:
         raise Problem(422, "mesh: the form has no 'mesh' file field", "invalid-request", "mesh")
     part = form["mesh"]
-    return params, load_mesh(bytes(part.data), part.filename, params, settings)
+    return params, load_mesh(part.data, part.filename, params, settings)

@@ -69,6 +69,16 @@ JOBS_IN_FLIGHT = Gauge(
     "Jobs admitted and not yet finished: uploading, waiting for a slot or computing.",
     multiprocess_mode="livesum",
 )
+UPLOADS_IN_PROGRESS = Gauge(
+    "meshflat_uploads_in_progress",
+    "Requests admitted whose bodies are still arriving.",
+    multiprocess_mode="livesum",
+)
+MEMORY_RESERVED = Gauge(
+    "meshflat_memory_reserved_bytes",
+    "Bytes of the memory budget held by the jobs in flight (bodies, readers, computations).",
+    multiprocess_mode="livesum",
+)
 JOBS_COMPUTING = Gauge(
     "meshflat_jobs_computing", "Jobs computing in a slot.", multiprocess_mode="livesum"
 )
@@ -210,8 +220,9 @@ class JsonFormatter(logging.Formatter):
 
 
 def log_config() -> dict:
-    """``logging.config.dictConfig`` for the service and uvicorn: JSON lines on stderr; the
-    service writes its own access line (with the route, not the URL), so uvicorn's is off."""
+    """``logging.config.dictConfig`` for the service, uvicorn, Python's warnings and every
+    other library: JSON lines on stderr; the service writes its own access line (with the
+    route, not the URL), so uvicorn's is off."""
     handler = {"class": "logging.StreamHandler", "formatter": "json", "stream": "ext://sys.stderr"}
     return {
         "version": 1,
@@ -223,5 +234,15 @@ def log_config() -> dict:
             "uvicorn": {"handlers": ["stderr"], "level": "INFO", "propagate": False},
             "uvicorn.error": {"level": "INFO"},
             "uvicorn.access": {"handlers": [], "level": "WARNING", "propagate": False},
+            # Python warnings (numpy's, a library's) as log records: JSON like the rest.
+            "py.warnings": {"handlers": ["stderr"], "level": "WARNING", "propagate": False},
         },
+        # Any other library's log records, which would otherwise reach stderr as plain text.
+        "root": {"handlers": ["stderr"], "level": "WARNING"},
     }
+
+
+def capture_warnings() -> None:
+    """Route ``warnings.warn`` through logging (the ``py.warnings`` logger of
+    :func:`log_config`), once per process, so that no line of the log is plain text."""
+    logging.captureWarnings(True)

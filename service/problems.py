@@ -76,13 +76,21 @@ PROBLEMS = {
         (400, "Malformed request (for example a broken multipart body)."),
         (413, "Body, file or mesh beyond a limit; the detail names the limit."),
         (401, "No valid API key (when the service has keys): the detail says which."),
-        (408, "The body did not arrive within the time limit (MESHFLAT_REQUEST_TIMEOUT)."),
+        (
+            408,
+            "The body did not arrive within the time limit (MESHFLAT_REQUEST_TIMEOUT) or at "
+            "the least rate (MESHFLAT_MIN_UPLOAD_RATE).",
+        ),
         (415, "Wrong content type."),
         (
             422,
             "Invalid parameters or an unreadable mesh; the detail names the field, face or vertex.",
         ),
-        (503, "Busy: too many jobs in flight; Retry-After gives the seconds to wait."),
+        (
+            503,
+            "Busy: too many jobs or uploads in flight, or the memory budget taken; "
+            "Retry-After gives the seconds to wait.",
+        ),
         (504, "The job did not finish within the time limit (MESHFLAT_REQUEST_TIMEOUT)."),
     )
 }
@@ -91,8 +99,8 @@ PROBLEMS[503]["headers"] = {
 }
 
 
-def problem_response(problem: Problem) -> Response:
-    REJECTIONS.labels(problem.kind).inc()
+def problem_body(problem: Problem) -> bytes:
+    """The problem's JSON document."""
     body = {
         "type": f"urn:meshflat:problem:{problem.kind}",
         "title": HTTPStatus(problem.status).phrase,
@@ -103,8 +111,13 @@ def problem_response(problem: Problem) -> Response:
         body["field"] = problem.field
     if problem.indices:
         body["indices"] = problem.indices
+    return orjson.dumps(body)
+
+
+def problem_response(problem: Problem) -> Response:
+    REJECTIONS.labels(problem.kind).inc()
     return Response(
-        orjson.dumps(body),
+        problem_body(problem),
         status_code=problem.status,
         media_type=PROBLEM_JSON,
         headers=problem.headers,

@@ -6,6 +6,7 @@ capability off the event loop (:func:`run_job`); the use-cases are :mod:`service
 from __future__ import annotations
 
 import gc
+import time
 from functools import partial
 from typing import Annotated
 
@@ -28,11 +29,21 @@ from .capabilities import (
 )
 from .encoding import JSON, Timings
 from .inputs import mesh_form, parse_json
-from .jobs import Deadline, JobGate, TimeLimit
-from .meshio import READERS, format_of
+from .jobs import (
+    READER_BYTES_PER_BYTE,
+    Deadline,
+    JobGate,
+    Ticket,
+    TimeLimit,
+    TooSlow,
+    charge,
+    picture_bytes,
+)
+from .meshio import READERS, Mesh, format_of
 from .observability import metrics_response
 from .operations import sample_infos
 from .outputs import Output, choose_output
+from .params import MeshParams
 from .problems import JSON_BODY, PROBLEMS, Problem, core_errors_as_problems
 from .samples import SAMPLES
 from .schemas import Health, SampleInfo
@@ -140,22 +151,21 @@ def sample_file(
 
 
 async def run_job(request: Request, work) -> Response:
-    """Admit the job (a 503 at once when this process has no room, see :mod:`service.jobs`),
-    read the body (bounded by the upload limit), then run ``work(body, content_type,
-    settings)`` off the event loop in a compute slot, all within the time limit. A slow upload
-    holds an admission but no compute slot."""
+    """Admit the request as soon as its headers are in (a 503 at once when this process has
+    no room, see :mod:`service.jobs`), read the body (at the least rate, charged to the
+    memory budget), queue the job and run ``work(body, content_type, settings)`` off the
+    event loop in a compute slot, all within the time limit."""
     settings = settings_of(request)
     ticket = job_gate(request.app).admit()
     deadline = Deadline.after(settings.request_timeout)
     try:
         try:
-            with anyio.fail_after(settings.request_timeout):
-                body = await request.body()
+            body = await read_body(request, ticket, settings, deadline)
         except ClientDisconnect:
             # Nobody is left to answer; 499 (as nginx says) marks it in the log and metrics.
             return Response(status_code=499)
-        except TimeoutError:
-            raise TimeLimit(settings.request_timeout, while_reading=True) from None
+        ticket.uploaded()
+        ticket.charge(READER_BYTES_PER_BYTE * len(body))
         content_type = request.headers.get("content-type", "")
         job = partial(ticket.run, work, deadline, body, content_type, settings)
         try:
@@ -169,11 +179,55 @@ async def run_job(request: Request, work) -> Response:
         ticket.release()
 
 
+async def read_body(
+    request: Request, ticket: Ticket, settings: Settings, deadline: Deadline
+) -> bytearray:
+    """The request's body, each piece charged to ``ticket`` as it arrives.
+
+    Raises
+    ------
+    TooSlow
+        After ``settings.upload_grace`` seconds, less than ``min_upload_rate`` bytes a second
+        have arrived (a 408: the connection is not held by a slow or stalled client).
+    TimeLimit
+        The time limit passed first (408).
+    ClientDisconnect
+        The client left.
+    """
+    body = bytearray()
+    rate, grace = settings.min_upload_rate, settings.upload_grace
+    started = time.monotonic()
+    while True:
+        # The moment the bytes in so far stop being enough for the least rate.
+        due = min(started + grace + len(body) / rate, deadline.at)
+        try:
+            with anyio.fail_after(max(1e-3, due - time.monotonic())):
+                message = await request.receive()
+        except TimeoutError:
+            if deadline.remaining() <= 0:
+                raise TimeLimit(settings.request_timeout, while_reading=True) from None
+            raise TooSlow(rate, grace, len(body)) from None
+        if message["type"] == "http.disconnect":
+            raise ClientDisconnect
+        piece = message.get("body", b"")
+        if piece:
+            ticket.charge(len(piece))
+            body += piece
+        if not message.get("more_body", False):
+            return body
+
+
 def job_gate(app: FastAPI) -> JobGate:
     """The process's :class:`JobGate` (one per app: a worker process has one app)."""
     if getattr(app.state, "job_gate", None) is None:
         settings = app.state.settings
-        app.state.job_gate = JobGate(settings.max_jobs, settings.max_waiting, on_idle=_shrink)
+        app.state.job_gate = JobGate(
+            settings.max_jobs,
+            settings.max_waiting,
+            max_uploads=settings.max_uploads,
+            memory_budget=settings.memory_budget_bytes,
+            on_idle=_shrink,
+        )
     return app.state.job_gate
 
 
@@ -216,6 +270,7 @@ def answer_mesh(
             if len(capability.outputs) > 1:
                 requested = getattr(params, "output", None)
                 output = choose_output(accept, requested, capability.outputs)
+        charge_picture(mesh, params, output)
         data = capability.answer(mesh, params, settings, output, timings)
     headers = {"Server-Timing": timings.header()}
     if len(capability.outputs) > 1:
@@ -223,6 +278,13 @@ def answer_mesh(
     if output is not Output.JSON:
         headers["Content-Disposition"] = f'inline; filename="region.{output.value}"'
     return Response(data, media_type=output.media_type, headers=headers)
+
+
+def charge_picture(mesh: Mesh, params: MeshParams, output: Output) -> None:
+    """Charge the memory budget what drawing the answer takes (the mesh itself was charged
+    by its reader: service.jobs)."""
+    if output.rasterised:
+        charge(picture_bytes(params.image_width, params.image_height, len(mesh.faces)))
 
 
 def _post(capability: Capability, work_of, **documentation) -> None:

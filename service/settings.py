@@ -27,8 +27,18 @@ class Settings:
     max_points : MESHFLAT_MAX_POINTS, per /v1/points or /v1/locate request
     threads : MESHFLAT_THREADS, threads one request's computation may use
     max_jobs : MESHFLAT_MAX_JOBS, jobs computed at once per process
-    max_waiting : MESHFLAT_MAX_WAITING, jobs admitted beyond those (uploading or waiting for
-        a slot); a job beyond ``max_jobs + max_waiting`` is refused at once with a 503
+    max_waiting : MESHFLAT_MAX_WAITING, jobs queued for a slot beyond those (their bodies in);
+        a request that finds ``max_jobs + max_waiting`` jobs is refused as soon as its headers
+        are in, with a 503 (service.jobs)
+    max_uploads : MESHFLAT_MAX_UPLOADS, request bodies arriving at once per process (they hold
+        no compute slot)
+    memory_budget : MESHFLAT_MEMORY_BUDGET, bytes per process for its jobs' bodies, readers
+        and computations; 0 (the default): :func:`memory_budget_of` the container's limit
+    min_upload_rate, upload_grace : MESHFLAT_MIN_UPLOAD_RATE bytes/s, MESHFLAT_UPLOAD_GRACE
+        seconds: after the grace, a body must have arrived at that mean rate, or a 408
+    header_timeout : MESHFLAT_HEADER_TIMEOUT, seconds for a request's headers to arrive on a
+        connection (a new one, or a kept-alive one once it has started a request)
+    keep_alive_timeout : MESHFLAT_KEEP_ALIVE_TIMEOUT, seconds an idle connection stays open
     request_timeout : MESHFLAT_REQUEST_TIMEOUT, seconds a job may take from its first byte to
         its answer (a 408 while the body is still arriving, a 504 after)
     api_keys : MESHFLAT_API_KEYS, comma-separated keys; with any, every ``/v1`` route needs one
@@ -44,7 +54,13 @@ class Settings:
     max_points: int = 5_000_000
     threads: int = 1
     max_jobs: int = 2
-    max_waiting: int = 6
+    max_waiting: int = 1
+    max_uploads: int = 256
+    memory_budget: int = 0
+    min_upload_rate: int = 64 * 1024
+    upload_grace: float = 2.0
+    header_timeout: float = 10.0
+    keep_alive_timeout: float = 5.0
     request_timeout: float = 60.0
     api_keys: tuple[str, ...] = field(default=(), repr=False)
     api_keys_file: str = ""
@@ -83,12 +99,53 @@ class Settings:
         return settings
 
     @property
+    def memory_budget_bytes(self) -> int:
+        """MESHFLAT_MEMORY_BUDGET, or the share of the container's memory for one worker."""
+        return self.memory_budget or memory_budget_of(container_memory(), self.workers)
+
+    @property
     def limits(self) -> Limits:
         return Limits(
             max_vertices=self.max_vertices,
             max_faces=self.max_faces,
             max_bytes=self.max_upload_bytes,
         )
+
+
+MiB = 2**20
+#: What a worker process holds before any job (interpreter, numpy, scipy, the app, a warm
+#: heap): measured as the RSS of an idle worker after the start-up self-check, rounded up.
+WORKER_BASELINE_BYTES = 320 * MiB
+#: The share of a container's memory given to the workers' budgets; the rest is headroom
+#: for what the estimates do not see (allocator fragmentation, thread stacks).
+BUDGET_SHARE = 0.8
+
+
+def memory_budget_of(container_bytes: int, workers: int) -> int:
+    """One worker's budget in a container of ``container_bytes``: its share after every
+    worker's baseline (at least 256 MiB)."""
+    usable = container_bytes * BUDGET_SHARE - workers * WORKER_BASELINE_BYTES
+    return max(256 * MiB, int(usable / workers))
+
+
+def container_memory_for(budget: int, workers: int) -> int:
+    """The container memory limit at which each of ``workers`` gets ``budget``: the inverse
+    of :func:`memory_budget_of` (the manifests' limit is this, see tests/test_deploy.py)."""
+    return math.ceil((budget * workers + workers * WORKER_BASELINE_BYTES) / BUDGET_SHARE)
+
+
+def container_memory() -> int:
+    """The cgroup's memory limit (v2 ``memory.max`` or v1 ``memory.limit_in_bytes``), or the
+    machine's memory when there is none."""
+    physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(path).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            return min(int(text), physical)  # v1 says "no limit" as a huge number
+    return physical
 
 
 def _parse(name: str, text: str, default: object) -> object:
@@ -113,5 +170,6 @@ def _parse(name: str, text: str, default: object) -> object:
     return value
 
 
-#: Settings for which 0 makes sense (no queue: a job beyond MESHFLAT_MAX_JOBS is refused).
-_MAY_BE_ZERO = frozenset({"MESHFLAT_MAX_WAITING"})
+#: Settings for which 0 makes sense: no queue (a job beyond MESHFLAT_MAX_JOBS is refused);
+#: the budget from the container.
+_MAY_BE_ZERO = frozenset({"MESHFLAT_MAX_WAITING", "MESHFLAT_MEMORY_BUDGET"})

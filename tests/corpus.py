@@ -16,6 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from benchmarks.hostile import HOSTILE
 from service.samples import SAMPLES
 
 #: The upload limit of the app the corpus is sent to (small, so the big cases stay small).
@@ -335,8 +336,22 @@ def cases() -> list[Case]:
             "the centre on the surface",
             422,
             ("vertex 0", "at the centre", "choose a centre"),
+            # Bent: flat, the square would be seen edge-on from its own vertex (below).
+            mesh=("a.obj", OBJ_SQUARE.replace(b"v 1 1 1", b"v 1 1 2")),
+            params={"center": [0, 0, 1]},
+        ),
+        Case(
+            "the centre on a flat region's vertex",
+            422,
+            ("params.center", "in the plane of every face", "on vertex 0", "off that plane"),
             mesh=("a.obj", OBJ_SQUARE),
             params={"center": [0, 0, 1]},
+        ),
+        Case(
+            "a flat region from its default centre, in its plane",
+            422,
+            ("params.center", "[0.5, 0.5, 1]", "in the plane of every face", "edge-on"),
+            mesh=("a.obj", OBJ_SQUARE),
         ),
         Case(
             "region ids with a duplicate",
@@ -389,6 +404,13 @@ def cases() -> list[Case]:
             mesh=("a.obj", OBJ_SQUARE),
             params={"sigmaa": 0.3},
         ),
+        Case(
+            "params repeating a key",
+            422,
+            ("params.sigma", "more than once"),
+            mesh=("a.obj", OBJ_SQUARE),
+            params='{"sigma": 0.3, "sigma": 0.5}',
+        ),
         # bodies and content types
         Case("oversized JSON", 413, ("2,000,000",), route="/v1/points", body=b""),
         Case(
@@ -411,6 +433,25 @@ def cases() -> list[Case]:
             ("mesh",),
             body=b'--b\r\nContent-Disposition: form-data; name="params"\r\n\r\n{}\r\n--b--\r\n',
             content_type="multipart/form-data; boundary=b",
+        ),
+        Case(
+            "multipart with two mesh parts",
+            422,
+            ("mesh", "more than one 'mesh' part"),
+            body=2
+            * (
+                b'--b\r\nContent-Disposition: form-data; name="mesh"; filename="a.obj"\r\n'
+                b"\r\n" + OBJ_SQUARE + b"\r\n"
+            )
+            + b"--b--\r\n",
+            content_type="multipart/form-data; boundary=b",
+        ),
+        Case(
+            "points repeating a key",
+            422,
+            ("points", "more than once"),
+            route="/v1/points",
+            body=b'{"points": [[1, 0, 0]], "points": [[0, 1, 0]]}',
         ),
         Case(
             "multipart whose boundary never comes",
@@ -439,7 +480,33 @@ def cases() -> list[Case]:
         "data: URI beyond the limit": big_data_uri_gltf,
         "oversized JSON": oversized_points,
     }
-    return [_with_generated(case, generated) for case in c]
+    return [_with_generated(case, generated) for case in c] + hostile_cases()
+
+
+#: What the service says of each of the readers' worst offenders (benchmarks/hostile.py):
+#: no vertices at all, or triangles that have no area (or none seen from the centre).
+_HOSTILE_DETAILS = {
+    "OBJ of newlines": ("mesh:", "no vertex"),
+    "OBJ of comments": ("mesh:", "no vertex"),
+    "binary PLY, mixed polygon sizes": ("params.center", "plane"),
+    "ASCII STL, `facet  normal`": ("params.center", "plane"),
+    "binary STL": ("params.center", "plane"),
+}
+
+
+def hostile_cases(size: int = 200_000) -> list[Case]:
+    """The uploads that cost the readers the most memory per byte (``make attack`` sends them
+    at tens of MiB and measures it), small: each must still be read and answered right."""
+    return [
+        Case(
+            f"hostile: {name}",
+            422,
+            _HOSTILE_DETAILS.get(name, ("mesh:", "zero area")),
+            mesh=(file_name, build(size)),
+            params={},
+        )
+        for name, (file_name, build) in HOSTILE.items()
+    ]
 
 
 def _with_generated(case: Case, generated: dict) -> Case:

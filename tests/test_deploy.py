@@ -4,6 +4,7 @@ The image itself is built and run by deploy/container-smoke-test.sh (CI runs it)
 
 from __future__ import annotations
 
+import math
 import re
 import subprocess
 import sys
@@ -15,7 +16,7 @@ import pytest
 import yaml
 
 from service.app import create_app
-from service.settings import Settings
+from service.settings import Settings, container_memory_for, memory_budget_of
 
 ROOT = Path(__file__).parent.parent
 DOCKERFILE = ROOT / "Dockerfile"
@@ -109,6 +110,12 @@ def test_the_deployment_matches_the_image_and_the_service():
     mount = next(m for m in container["volumeMounts"] if m["name"] == secret["name"])
     item = secret["secret"]["items"][0]
     assert env["MESHFLAT_API_KEYS_FILE"] == f"{mount['mountPath']}/{item['path']}"
+
+    # The memory limit is the one at which the worker gets its budget (service.settings).
+    workers, budget = int(env["MESHFLAT_WORKERS"]), int(env["MESHFLAT_MEMORY_BUDGET"])
+    limit = container["resources"]["limits"]["memory"]
+    assert limit == f"{math.ceil(container_memory_for(budget, workers) / 2**20)}Mi"
+    assert memory_budget_of(int(limit.removesuffix("Mi")) * 2**20, workers) >= budget
 
     # Requests in progress get their time limit and the server's grace before the kill.
     grace = float(env["MESHFLAT_REQUEST_TIMEOUT"]) + 5

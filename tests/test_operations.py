@@ -6,20 +6,26 @@ from __future__ import annotations
 import io
 import json
 import logging
+import logging.config
+import sys
+import warnings
 import threading
 import time
+from functools import partial
 
 import anyio
 import httpx
+import orjson
 import pytest
 from prometheus_client.parser import text_string_to_metric_families
+from starlette.responses import Response
 
 from service import routes
 from service.app import create_app
 from service.auth import KeyCheck
 from service.encoding import Timings
 from service.jobs import Deadline, JobGate, TimeLimit, current_deadline
-from service.observability import JsonFormatter
+from service.observability import JsonFormatter, capture_warnings, log_config
 from service.problems import Problem
 from service.samples import SAMPLES
 from service.settings import Settings
@@ -162,24 +168,32 @@ async def test_cors_allows_only_the_configured_origins():
 # -- backpressure and time limits ----------------------------------------------------------
 
 
-async def test_jobs_beyond_the_bound_are_refused_at_once_with_retry_after():
-    """Two jobs in flight (one computing, one uploading) fill MESHFLAT_MAX_JOBS=1 +
-    MESHFLAT_MAX_WAITING=1; a third gets a 503 at once; after them, work goes on."""
-    app = create_app(Settings(max_jobs=1, max_waiting=1))
-    release = anyio.Event()
+def held_body(release: anyio.Event):
+    """A JSON body whose last byte waits for ``release``."""
 
-    async def held_body():  # an upload that does not end until released
+    async def body():
         yield b'{"points": [[1, 0, 0]]'
         await release.wait()
         yield b"}"
 
+    return body()
+
+
+async def test_slow_uploads_hold_no_compute_slot_and_are_bounded_apart():
+    """Two bodies still arriving fill MESHFLAT_MAX_UPLOADS=2 but hold no job slot: a third
+    upload is refused at once with Retry-After and Connection: close; the two are queued and
+    computed when they end."""
+    app = create_app(Settings(max_jobs=1, max_waiting=1, max_uploads=2, upload_grace=30))
+    release = anyio.Event()
     async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://m") as c:
         before = families((await c.get("/metrics")).text)
         statuses: list[int] = []
 
         async def slow_post():
             response = await c.post(
-                "/v1/points", content=held_body(), headers={"content-type": "application/json"}
+                "/v1/points",
+                content=held_body(release),
+                headers={"content-type": "application/json"},
             )
             statuses.append(response.status_code)
 
@@ -189,23 +203,128 @@ async def test_jobs_beyond_the_bound_are_refused_at_once_with_retry_after():
             with anyio.fail_after(5):
                 while routes.job_gate(app).in_flight < 2:
                     await anyio.sleep(0.005)
-            started = time.perf_counter()
-            refused = await c.post("/v1/points", json=POINTS)
-            waited = time.perf_counter() - started
             metrics = families((await c.get("/metrics")).text)
+            started = time.perf_counter()
+            refused = await c.post(
+                "/v1/points",
+                content=held_body(release),
+                headers={"content-type": "application/json"},
+            )
+            waited = time.perf_counter() - started
             release.set()
         body = problem(refused, 503)
-        assert "MESHFLAT_MAX_JOBS" in body["detail"] and "2 jobs" in body["detail"]
+        assert "2 request bodies are arriving" in body["detail"]
         assert 1 <= int(refused.headers["retry-after"]) <= 60
+        assert refused.headers["connection"] == "close"
         assert waited < 1.0  # refused, not queued
         assert statuses == [200, 200]
         # Gauges are per process: compare with the reading before (other tests' apps count).
-        in_flight = "meshflat_jobs_in_flight"
-        assert sample(metrics, in_flight) - sample(before, in_flight) == 2
-        busy = sample(metrics, "meshflat_rejections_total", reason="busy")
-        assert busy - sample(before, "meshflat_rejections_total", reason="busy") == 1
+        grown = sample(metrics, "meshflat_uploads_in_progress") - sample(
+            before, "meshflat_uploads_in_progress"
+        )
+        assert grown == 2
         assert (await c.post("/v1/points", json=POINTS)).status_code == 200
         assert routes.job_gate(app).in_flight == 0
+
+
+async def test_a_complete_request_computes_while_slow_uploads_arrive():
+    app = create_app(Settings(max_jobs=1, max_waiting=4, max_uploads=8, upload_grace=30))
+    release = anyio.Event()
+    async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://m") as c:
+        statuses: list[int] = []
+
+        async def slow_post():
+            response = await c.post(
+                "/v1/points",
+                content=held_body(release),
+                headers={"content-type": "application/json"},
+            )
+            statuses.append(response.status_code)
+
+        async with anyio.create_task_group() as group:
+            for _ in range(4):
+                group.start_soon(slow_post)
+            with anyio.fail_after(5):
+                while routes.job_gate(app).in_flight < 4:
+                    await anyio.sleep(0.005)
+            for _ in range(3):
+                assert (await c.post("/v1/points", json=POINTS)).status_code == 200
+            release.set()
+        assert statuses == [200] * 4
+
+
+async def test_jobs_beyond_the_bound_are_refused_before_their_body_is_read(monkeypatch):
+    """One job computing and one queued fill MESHFLAT_MAX_JOBS=1 + MESHFLAT_MAX_WAITING=1: a
+    third request is refused as soon as its headers are in; its body is never asked for."""
+    app = create_app(Settings(max_jobs=1, max_waiting=1))
+    computing, finish = threading.Event(), threading.Event()
+
+    def held_points(capability, body, content_type, settings):
+        computing.set()
+        finish.wait(5)
+        return Response(b"{}", media_type="application/json")
+
+    monkeypatch.setattr(routes, "answer_json", held_points)
+    read: list[bytes] = []
+
+    async def watched_body():
+        read.append(b"asked")
+        yield orjson.dumps(POINTS)
+
+    async with httpx.AsyncClient(transport=httpx.ASGITransport(app=app), base_url="http://m") as c:
+        async with anyio.create_task_group() as group:
+            for _ in range(2):
+                group.start_soon(partial(c.post, "/v1/points", json=POINTS))
+            with anyio.fail_after(5):
+                while routes.job_gate(app).in_flight < 2 or not computing.is_set():
+                    await anyio.sleep(0.005)
+            refused = await c.post(
+                "/v1/points", content=watched_body(), headers={"content-type": "application/json"}
+            )
+            finish.set()
+        body = problem(refused, 503)
+        assert "2 jobs are queued or computing" in body["detail"]
+        assert refused.headers["connection"] == "close"
+    assert routes.job_gate(app).in_flight == 0
+
+
+async def test_a_body_slower_than_the_least_rate_is_a_408_after_the_grace():
+    async with client_of(Settings(min_upload_rate=1000, upload_grace=0.2)) as c:
+
+        async def trickle():
+            yield b'{"points": '
+            for _ in range(20):
+                await anyio.sleep(0.1)
+                yield b" "  # 10 bytes/s
+            yield b"[]}"
+
+        started = time.perf_counter()
+        response = await c.post(
+            "/v1/points", content=trickle(), headers={"content-type": "application/json"}
+        )
+        detail = problem(response, 408)["detail"]
+        assert "slower than 1,000 bytes/s after 0.2 s" in detail
+        assert "MESHFLAT_MIN_UPLOAD_RATE" in detail
+        assert time.perf_counter() - started < 1.5
+
+
+async def test_a_job_beyond_the_memory_budget_is_a_413_and_one_beyond_what_is_left_a_503():
+    data = SAMPLES["fsaverage-head.ply"].path.read_bytes()
+    files = {"mesh": ("head.ply", data)}
+    async with client_of(Settings(memory_budget=16 * 2**20)) as c:
+        body = problem(await c.post("/v1/flatten", files=files), 413)
+        assert "MESHFLAT_MEMORY_BUDGET" in body["detail"] and "16 MiB" in body["detail"]
+    gate = JobGate(max_jobs=2, max_waiting=0, memory_budget=1000)
+    first, second = gate.admit(), gate.admit()
+    first.charge(800)
+    with pytest.raises(Problem) as busy:
+        second.charge(300)
+    assert busy.value.status == 503 and "memory budget" in busy.value.detail
+    first.release()
+    second.charge(300)  # given back when the first ended
+    assert gate.memory.reserved == 300
+    second.release()
+    assert gate.memory.reserved == 0
 
 
 async def test_a_body_that_does_not_arrive_in_time_is_a_408():
@@ -290,6 +409,8 @@ def test_timings_refuse_a_stage_after_the_deadline():
 def test_a_job_waiting_for_a_slot_past_its_deadline_does_not_start():
     gate = JobGate(max_jobs=1, max_waiting=1)
     first, second = gate.admit(), gate.admit()
+    first.uploaded()
+    second.uploaded()
     with pytest.raises(Problem) as busy:
         gate.admit()
     assert busy.value.status == 503
@@ -312,6 +433,32 @@ def test_a_job_waiting_for_a_slot_past_its_deadline_does_not_start():
 
 
 # -- request ids and logs ------------------------------------------------------------------
+
+
+def test_warnings_and_other_libraries_log_json_lines(monkeypatch):
+    """A Python warning (numpy's, a library's) and a third-party logger's record reach the log
+    as JSON objects, like the service's own lines."""
+    stream = io.StringIO()
+    config = log_config()
+    del config["handlers"]["stderr"]["stream"]  # sys.stderr when configured: the stream here
+    # Only the parts under test: the service's and uvicorn's loggers stay as they are.
+    config["loggers"] = {"py.warnings": config["loggers"]["py.warnings"]}
+    monkeypatch.setattr(sys, "stderr", stream)
+    logging.config.dictConfig(config)
+    try:
+        logging.captureWarnings(False)  # pytest swaps warnings.showwarning for each test
+        capture_warnings()
+        with warnings.catch_warnings():
+            warnings.simplefilter("always")
+            warnings.warn("overflow encountered in cast", RuntimeWarning, stacklevel=1)
+        logging.getLogger("some.library").warning("a library's own warning")
+    finally:
+        logging.captureWarnings(False)
+        for name in ("py.warnings", "some.library", ""):
+            logging.getLogger(name).handlers.clear()
+    lines = [json.loads(line) for line in stream.getvalue().splitlines() if line.strip()]
+    assert {line["logger"] for line in lines} == {"py.warnings", "some.library"}
+    assert any("RuntimeWarning" in line["message"] for line in lines)
 
 
 async def test_request_ids_are_accepted_returned_and_logged():

@@ -186,3 +186,86 @@ def test_health_command_is_the_containers_health_check(two_workers):
         timeout=30,
     )
     assert down.returncode == 1 and "/healthz" in down.stderr
+
+
+# -- connections: headers, idle time, framing (service.protocol) ---------------------------
+
+
+@pytest.fixture(scope="module")
+def strict_server():
+    with running(MESHFLAT_HEADER_TIMEOUT="0.5", MESHFLAT_KEEP_ALIVE_TIMEOUT="0.5") as server:
+        yield server
+
+
+def read_all(connection: socket.socket, seconds: float = 5) -> tuple[bytes, float]:
+    """What the server sends until it closes the connection, and when it closed it."""
+    connection.settimeout(seconds)
+    started, received = time.monotonic(), b""
+    while chunk := connection.recv(65536):
+        received += chunk
+    return received, time.monotonic() - started
+
+
+def problem_of(raw: bytes) -> tuple[int, dict[str, str], dict]:
+    head, _, body = raw.partition(b"\r\n\r\n")
+    lines = head.decode("latin-1").split("\r\n")
+    headers = dict(line.lower().split(": ", 1) for line in lines[1:])
+    return int(lines[0].split()[1]), headers, json.loads(body)
+
+
+def test_a_silent_connection_is_closed_at_the_header_time_limit(strict_server):
+    with socket.create_connection(("127.0.0.1", strict_server.port)) as connection:
+        received, seconds = read_all(connection)
+    assert received == b"" and 0.4 < seconds < 3
+
+
+def test_headers_sent_a_line_at_a_time_get_a_408_at_the_limit(strict_server):
+    with socket.create_connection(("127.0.0.1", strict_server.port)) as connection:
+        connection.sendall(b"GET /healthz HTTP/1.1\r\n")
+        started = time.monotonic()
+        for _ in range(3):
+            time.sleep(0.2)
+            with contextlib.suppress(OSError):
+                connection.sendall(b"X-Slow: 1\r\n")
+        received, _ = read_all(connection)
+    status, headers, body = problem_of(received)
+    assert status == 408 and headers["content-type"] == "application/problem+json"
+    assert "MESHFLAT_HEADER_TIMEOUT" in body["detail"] and headers["connection"] == "close"
+    assert time.monotonic() - started < 3
+
+
+def test_an_idle_kept_alive_connection_is_closed(strict_server):
+    with socket.create_connection(("127.0.0.1", strict_server.port)) as connection:
+        connection.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
+        received, seconds = read_all(connection)
+    assert received.startswith(b"HTTP/1.1 200") and 0.4 < seconds < 3
+
+
+def test_malformed_framing_is_answered_with_a_problem(strict_server):
+    with socket.create_connection(("127.0.0.1", strict_server.port)) as connection:
+        connection.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\nContent-Length: -4\r\n\r\n")
+        received, _ = read_all(connection)
+    status, headers, body = problem_of(received)
+    assert status == 400 and headers["content-type"] == "application/problem+json"
+    assert body["type"].endswith("malformed-request") and "not valid HTTP/1.1" in body["detail"]
+
+
+def test_a_full_service_refuses_before_the_body_and_closes(strict_server):
+    """The headers of an upload that cannot be admitted are answered at once; the client
+    that sent `Expect: 100-continue` never sends its body."""
+    with running(MESHFLAT_MAX_UPLOADS="1", MESHFLAT_UPLOAD_GRACE="30") as server:
+        with socket.create_connection(("127.0.0.1", server.port)) as holder:
+            holder.sendall(
+                b"POST /v1/points HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+                b"Content-Length: 100\r\n\r\n{"
+            )
+            time.sleep(0.3)
+            with socket.create_connection(("127.0.0.1", server.port)) as refused:
+                refused.sendall(
+                    b"POST /v1/points HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+                    b"Content-Length: 1000000\r\nExpect: 100-continue\r\n\r\n"
+                )
+                received, seconds = read_all(refused)
+    status, headers, body = problem_of(received)
+    assert status == 503 and headers["connection"] == "close" and "retry-after" in headers
+    assert "1 request bodies are arriving" in body["detail"] and seconds < 2

@@ -1,0 +1,452 @@
+"""Hostile traffic against ``meshflat serve`` on 127.0.0.1 (``make attack``).
+
+Runs a real server (``--workers`` processes, API keys on) and, one case after another:
+
+* **memory**: each hostile upload of :mod:`benchmarks.hostile` (``--size`` bytes) and two
+  honest scans, one at a time: the reader's peak allocation per byte of the file (read here,
+  under tracemalloc), and the peak resident memory a worker gained while it handled the
+  request (from /proc, sampled every 5 ms) against what the job was charged to the memory
+  budget (service.jobs);
+* **slow clients**: ``--slow`` connections at once that send their body at 1 KB/s, that
+  declare a Content-Length and stop sending, that send nothing, or that send a header line a
+  second; meanwhile a probe posts ``/v1/points`` and a small ``/v1/flatten`` in turn, and
+  its statuses and p99 latency are the case's.
+
+Every case ends with a health check: ``/healthz`` and a small flatten answer 200.
+
+Targets (the exit status is 1 when one is missed): every reader at most 8 bytes per byte
+uploaded plus 16 MiB; a worker's growth within its job's charge; no 500; the probes answer
+only 200, p99 under 1 s; the server is healthy after every case. ``--short`` (CI) sends
+16 MiB uploads and holds the slow clients for 6 s; ``--write-docs`` records the table in
+docs/benchmarks.md.
+Traffic goes only to 127.0.0.1; every case is bounded in time and connections.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import datetime
+import json
+import os
+import platform
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import tracemalloc
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import httpx
+
+from benchmarks.docs import record
+from benchmarks.hostile import HOSTILE
+from benchmarks.server import free_port, wait_ready
+from service.jobs import READER_BYTES_PER_BYTE, job_bytes
+from service.meshio import Mesh, MeshFormatError, format_of, read_mesh
+from service.samples import SAMPLES
+from service.settings import Settings
+
+KEY = "attack-key"
+HEADERS = {"X-API-Key": KEY}
+MiB = 2**20
+#: A reader's allowance on top of 8 bytes per byte (its chunk of text, small arrays).
+READER_CONSTANT = 16 * MiB
+SCALP = {"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}}
+
+
+@dataclass
+class Row:
+    case: str
+    uploaded: int = 0
+    reader: int | None = None  # bytes the reader allocated at its peak (tracemalloc)
+    peak: int | None = None  # bytes a worker's RSS grew by
+    charged: int | None = None  # what the job is charged to the memory budget
+    statuses: Counter = field(default_factory=Counter)
+    seconds: float = 0.0
+    probe_p99: float | None = None
+    probe_statuses: Counter = field(default_factory=Counter)
+    healthy: bool = False
+
+    @property
+    def per_byte(self) -> float | None:
+        if self.reader is None or not self.uploaded:
+            return None
+        return self.reader / self.uploaded
+
+    def checks(self) -> dict[str, bool]:
+        checks = {"no 500": 500 not in self.statuses, "healthy after": self.healthy}
+        if self.reader is not None:
+            checks["reader at most 8 B/B + 16 MiB"] = (
+                self.reader <= 8 * self.uploaded + READER_CONSTANT
+            )
+        if self.peak is not None:
+            checks["worker's growth within its charge"] = self.peak <= self.charged
+        if self.probe_p99 is not None:
+            checks["probes: only 200"] = set(self.probe_statuses) == {200}
+            checks["probes: p99 under 1 s"] = self.probe_p99 < 1.0
+        return checks
+
+    def line(self) -> str:
+        per_byte = f"{self.per_byte:.1f}" if self.per_byte is not None else "-"
+        peak = f"{self.peak / MiB:,.0f}" if self.peak is not None else "-"
+        charged = f"{self.charged / MiB:,.0f}" if self.charged is not None else "-"
+        statuses = ", ".join(f"{s}: {n}" for s, n in sorted(self.statuses.items(), key=str))
+        probes = (
+            f"{', '.join(f'{s}: {n}' for s, n in sorted(self.probe_statuses.items(), key=str))}; "
+            f"p99 {self.probe_p99 * 1e3:.0f} ms"
+            if self.probe_p99 is not None
+            else "-"
+        )
+        met = all(self.checks().values())
+        return (
+            f"| {self.case} | {self.uploaded / MiB:,.1f} | {per_byte} | {peak} | {charged} | "
+            f"{statuses} | "
+            f"{self.seconds:.2f} s | {probes} | {'yes' if self.healthy else 'NO'} | "
+            f"{'met' if met else 'MISSED'} |"
+        )
+
+
+# -- the server's memory ------------------------------------------------------------------
+
+
+def workers_of(supervisor: int) -> list[int]:
+    children = Path(f"/proc/{supervisor}/task/{supervisor}/children").read_text().split()
+    return [int(pid) for pid in children] or [supervisor]
+
+
+def rss(pid: int) -> int:
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return 0
+    line = next(line for line in status.splitlines() if line.startswith("VmRSS:"))
+    return int(line.split()[1]) * 1024
+
+
+class PeakWatch:
+    """The largest growth of any worker's RSS over its reading at the start, sampled."""
+
+    def __init__(self, supervisor: int) -> None:
+        self.pids = workers_of(supervisor)
+        self.start = {pid: rss(pid) for pid in self.pids}
+        self.peak = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._sample, daemon=True)
+
+    def _sample(self) -> None:
+        while not self._stop.is_set():
+            for pid in self.pids:
+                self.peak = max(self.peak, rss(pid) - self.start[pid])
+            time.sleep(0.005)
+
+    def __enter__(self) -> PeakWatch:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+# -- the cases ------------------------------------------------------------------------------
+
+
+def healthy(client: httpx.Client) -> bool:
+    try:
+        if client.get("/healthz").status_code != 200:
+            return False
+        response = client.post(
+            "/v1/flatten",
+            files={"mesh": ("head.ply", SAMPLES["fsaverage-head.ply"].path.read_bytes())},
+            data={"params": json.dumps(SCALP)},
+            headers=HEADERS,
+        )
+    except httpx.TransportError:
+        return False
+    return response.status_code == 200
+
+
+def settle() -> None:
+    """Time for an idle worker to give its free heap back (service.allocator), so that the
+    next case's growth is its own."""
+    time.sleep(1.6)
+
+
+def reader_peak(name: str, data: bytes) -> tuple[int, Mesh | None]:
+    """The reader's peak allocation for ``data`` (numpy's arrays included: tracemalloc
+    sees them), and the mesh when it reads."""
+    tracemalloc.start()
+    try:
+        mesh = read_mesh(data, format_of(name, None), Settings().limits)
+    except MeshFormatError:
+        mesh = None
+    finally:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+    return peak, mesh
+
+
+def charge_of(body: int, mesh: Mesh | None) -> int:
+    """What the service charges the job (service.jobs): the body, the reader's allowance and,
+    for a mesh that reads, the computation's estimate."""
+    charged = (1 + READER_BYTES_PER_BYTE) * body
+    return charged + (job_bytes(len(mesh.vertices), len(mesh.faces)) if mesh else 0)
+
+
+def upload_case(
+    client: httpx.Client, server: int, case: str, name: str, data: bytes, params: dict
+) -> Row:
+    row = Row(case, uploaded=len(data))
+    row.reader, mesh = reader_peak(name, data)
+    row.charged = charge_of(len(data), mesh)
+    del mesh
+    settle()
+    with PeakWatch(server) as watch:
+        started = time.perf_counter()
+        try:
+            response = client.post(
+                "/v1/flatten",
+                files={"mesh": (name, data)},
+                data={"params": json.dumps(params)},
+                headers=HEADERS,
+            )
+            row.statuses[response.status_code] += 1
+        except httpx.TransportError as error:
+            row.statuses[type(error).__name__] += 1
+        row.seconds = time.perf_counter() - started
+    row.peak = watch.peak
+    row.healthy = healthy(client)
+    return row
+
+
+class Probe:
+    """Posts /v1/points and a small /v1/flatten in turn until stopped."""
+
+    def __init__(self, url: str) -> None:
+        self.url, self.latencies, self.statuses = url, [], Counter()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._mesh = SAMPLES["fsaverage-head.ply"].path.read_bytes()
+
+    def _run(self) -> None:
+        with httpx.Client(base_url=self.url, timeout=30, headers=HEADERS) as client:
+            turn = 0
+            while not self._stop.is_set():
+                started = time.perf_counter()
+                try:
+                    if turn % 2:
+                        response = client.post(
+                            "/v1/flatten",
+                            files={"mesh": ("head.ply", self._mesh)},
+                            data={"params": json.dumps(SCALP)},
+                        )
+                    else:
+                        response = client.post("/v1/points", json={"points": [[1, 2, 3]]})
+                    self.statuses[response.status_code] += 1
+                except httpx.TransportError as error:
+                    self.statuses[type(error).__name__] += 1
+                self.latencies.append(time.perf_counter() - started)
+                turn += 1
+                time.sleep(0.05)
+
+    def __enter__(self) -> Probe:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    @property
+    def p99(self) -> float:
+        if len(self.latencies) < 2:
+            return float("nan")
+        return statistics.quantiles(self.latencies, n=100)[98]
+
+
+def _slow_upload(sock: socket.socket, stop: threading.Event, length: int) -> None:
+    sock.sendall(
+        b"POST /v1/flatten HTTP/1.1\r\nHost: x\r\nX-API-Key: " + KEY.encode() + b"\r\n"
+        b"Content-Type: multipart/form-data; boundary=b\r\n"
+        b"Content-Length: " + str(length).encode() + b"\r\n\r\n"
+    )
+    while not stop.wait(0.1):
+        sock.sendall(b"v 0 0 0\n" * 12 + b"v 0\n")  # 100 bytes every 0.1 s: 1 KB/s
+
+
+def _lying_length(sock: socket.socket, stop: threading.Event, length: int) -> None:
+    sock.sendall(
+        b"POST /v1/flatten HTTP/1.1\r\nHost: x\r\nX-API-Key: " + KEY.encode() + b"\r\n"
+        b"Content-Type: multipart/form-data; boundary=b\r\n"
+        b"Content-Length: " + str(length).encode() + b"\r\n\r\n" + b"x" * 1024
+    )
+    stop.wait()
+
+
+def _silent(sock: socket.socket, stop: threading.Event, length: int) -> None:
+    stop.wait()
+
+
+def _header_drip(sock: socket.socket, stop: threading.Event, length: int) -> None:
+    sock.sendall(b"GET /healthz HTTP/1.1\r\n")
+    while not stop.wait(1.0):
+        sock.sendall(b"X-Drip: 1\r\n")
+
+
+SLOW = {
+    "slow uploads, 1 KB/s": _slow_upload,
+    "Content-Length beyond the body": _lying_length,
+    "silent connections": _silent,
+    "a header line a second": _header_drip,
+}
+
+
+def slow_case(client: httpx.Client, url: str, port: int, case: str, count: int, hold: float):
+    """``count`` connections doing ``case`` for ``hold`` seconds while the probe runs; the
+    status each connection got (or how it ended)."""
+    row = Row(case)
+    stop = threading.Event()
+    behaviour = SLOW[case]
+
+    def connection() -> None:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=hold + 30) as sock:
+                worker = threading.Thread(
+                    target=_quietly, args=(behaviour, sock, stop, 1_000_000), daemon=True
+                )
+                worker.start()
+                answer = b""
+                with contextlib.suppress(OSError):
+                    while chunk := sock.recv(65536):
+                        answer += chunk
+                row.statuses[int(answer.split()[1]) if answer else "closed"] += 1
+        except OSError as error:
+            row.statuses[type(error).__name__] += 1
+
+    started = time.perf_counter()
+    with Probe(url) as probe:
+        threads = [threading.Thread(target=connection, daemon=True) for _ in range(count)]
+        for thread in threads:
+            thread.start()
+        time.sleep(hold)
+        stop.set()
+        for thread in threads:
+            thread.join(hold + 30)
+    row.seconds = time.perf_counter() - started
+    row.probe_p99, row.probe_statuses = probe.p99, probe.statuses
+    row.healthy = healthy(client)
+    return row
+
+
+def _quietly(behaviour, sock, stop, length) -> None:
+    with contextlib.suppress(OSError):
+        behaviour(sock, stop, length)
+
+
+# -- the run -------------------------------------------------------------------------------
+
+
+def honest_scans() -> dict[str, tuple[str, bytes, dict]]:
+    """Two real scans, whole: the peak of an honest upload for comparison."""
+    return {
+        "honest OBJ (Nefertiti, whole)": (
+            "head.obj",
+            SAMPLES["nefertiti-lowres.obj"].path.read_bytes(),
+            {},
+        ),
+        "honest GLB (Lee Perry-Smith, whole)": (
+            "head.glb",
+            SAMPLES["lee-perry-smith.glb"].path.read_bytes(),
+            {},
+        ),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--size", type=int, default=64 * MiB, help="bytes per hostile upload")
+    parser.add_argument("--slow", type=int, default=64, help="slow connections at once")
+    parser.add_argument("--hold", type=float, default=15, help="seconds the slow ones last")
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--short", action="store_true", help="16 MiB uploads, 6 s holds (CI)")
+    parser.add_argument("--write-docs", action="store_true")
+    args = parser.parse_args(argv)
+    if args.short:
+        args.size, args.hold = 16 * MiB, 6
+
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    rows: list[Row] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {k: v for k, v in os.environ.items() if not k.startswith("MESHFLAT_")}
+        env |= {
+            "MESHFLAT_PORT": str(port),
+            "MESHFLAT_WORKERS": str(args.workers),
+            "MESHFLAT_API_KEYS": KEY,
+            "TMPDIR": tmp,
+        }
+        # The log goes to a file: a pipe read only at the end would fill and stall the server.
+        log_file = tempfile.TemporaryFile("w+", dir=tmp)
+        server = subprocess.Popen(
+            [sys.executable, "-m", "service.cli", "serve"],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=log_file,
+        )
+        try:
+            with httpx.Client(base_url=url, timeout=120) as client:
+                wait_ready(client)
+                for case, (name, build) in HOSTILE.items():
+                    data = build(args.size)
+                    rows.append(upload_case(client, server.pid, case, name, data, {}))
+                    print(rows[-1].line(), file=sys.stderr)
+                for case, (name, data, params) in honest_scans().items():
+                    rows.append(upload_case(client, server.pid, case, name, data, params))
+                    print(rows[-1].line(), file=sys.stderr)
+                for case in SLOW:
+                    rows.append(slow_case(client, url, port, case, args.slow, args.hold))
+                    print(rows[-1].line(), file=sys.stderr)
+        finally:
+            server.send_signal(signal.SIGTERM)
+            server.wait(90)
+            log_file.seek(0)
+            log = log_file.read()
+            log_file.close()
+    plain = [line for line in log.splitlines() if line.strip() and not line.startswith("{")]
+
+    checks = {f"{row.case}: {name}": ok for row in rows for name, ok in row.checks().items()}
+    checks["every log line is JSON"] = not plain
+    report = "\n".join(
+        [
+            f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC, {platform.machine()}, "
+            f"{os.cpu_count()} CPUs (the clients run on the same machine); `meshflat serve` "
+            f"with {args.workers} workers, API keys on, default limits; hostile uploads of "
+            f"{args.size / MiB:.0f} MiB; {args.slow} slow connections for {args.hold:g} s.",
+            "",
+            "| case | upload (MiB) | reader's peak / byte | worker's RSS growth (MiB) | charged "
+            "(MiB) | statuses | time | probes (/v1/points, small /v1/flatten) | healthy after "
+            "| targets |",
+            "|---|---:|---:|---:|---:|---|---:|---|---|---|",
+            *(row.line() for row in rows),
+            "",
+            f"Log lines that are not JSON: {len(plain)}.",
+            "",
+            *(f"* {name}: MISSED" for name, ok in checks.items() if not ok),
+            f"* {sum(checks.values())} of {len(checks)} targets met",
+        ]
+    )
+    print(report)
+    if args.write_docs:
+        record("attack", "Hostile traffic (make attack)", report)
+    return 0 if all(checks.values()) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

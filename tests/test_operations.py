@@ -8,9 +8,9 @@ import json
 import logging
 import logging.config
 import sys
-import warnings
 import threading
 import time
+import warnings
 from functools import partial
 
 import anyio
@@ -179,6 +179,13 @@ def held_body(release: anyio.Event):
     return body()
 
 
+async def post_held(client: httpx.AsyncClient, release: anyio.Event) -> httpx.Response:
+    """A /v1/points request whose body ends when ``release`` is set."""
+    return await client.post(
+        "/v1/points", content=held_body(release), headers={"content-type": "application/json"}
+    )
+
+
 async def test_slow_uploads_hold_no_compute_slot_and_are_bounded_apart():
     """Two bodies still arriving fill MESHFLAT_MAX_UPLOADS=2 but hold no job slot: a third
     upload is refused at once with Retry-After and Connection: close; the two are queued and
@@ -190,12 +197,7 @@ async def test_slow_uploads_hold_no_compute_slot_and_are_bounded_apart():
         statuses: list[int] = []
 
         async def slow_post():
-            response = await c.post(
-                "/v1/points",
-                content=held_body(release),
-                headers={"content-type": "application/json"},
-            )
-            statuses.append(response.status_code)
+            statuses.append((await post_held(c, release)).status_code)
 
         async with anyio.create_task_group() as group:
             group.start_soon(slow_post)
@@ -205,11 +207,7 @@ async def test_slow_uploads_hold_no_compute_slot_and_are_bounded_apart():
                     await anyio.sleep(0.005)
             metrics = families((await c.get("/metrics")).text)
             started = time.perf_counter()
-            refused = await c.post(
-                "/v1/points",
-                content=held_body(release),
-                headers={"content-type": "application/json"},
-            )
+            refused = await post_held(c, release)
             waited = time.perf_counter() - started
             release.set()
         body = problem(refused, 503)
@@ -234,12 +232,7 @@ async def test_a_complete_request_computes_while_slow_uploads_arrive():
         statuses: list[int] = []
 
         async def slow_post():
-            response = await c.post(
-                "/v1/points",
-                content=held_body(release),
-                headers={"content-type": "application/json"},
-            )
-            statuses.append(response.status_code)
+            statuses.append((await post_held(c, release)).status_code)
 
         async with anyio.create_task_group() as group:
             for _ in range(4):

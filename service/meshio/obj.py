@@ -51,14 +51,12 @@ from .mesh import (
     vertex_error,
 )
 from .text import (
-    LF,
+    ChunkWalk,
     Lines,
     Tokens,
     as_bytes_array,
     blank_spans,
     chunks,
-    count_lines,
-    first_line_feed,
     numbers_text,
     parse_numbers,
     parse_spans,
@@ -139,7 +137,7 @@ class _Open:
 _KEPT_BYTES = 4 << 20
 
 
-class _Pass:
+class _Pass(ChunkWalk):
     """One pass over the file, chunk by chunk: counting (``out`` None) or filling ``out``.
 
     The counters say what the file held before the chunk in hand: ``line`` line feeds,
@@ -154,30 +152,16 @@ class _Pass:
         self.room = _KEPT_BYTES  # for lines kept
 
     def run(self) -> _Pass:
-        buffer, begin = self.buffer, 0
+        buffer = self.buffer
         ends = self.kept.pop("ends", None)  # the counting pass's chunks, for the filling one
         if ends is None:
             ends = self.kept["ends"] = list(chunks(buffer))
-        for end in ends:
-            if self.open is not None:  # the chunk begins with the rest of a long line
-                rest = first_line_feed(buffer[begin:end])
-                stop = begin + rest if rest >= 0 else end
-                self._piece(begin, stop, ends_line=rest >= 0 or end == len(buffer))
-                if rest < 0:
-                    begin = end
-                    continue
-                self.line, begin = self.line + 1, stop + 1
-            if begin < end and end < len(buffer) and buffer[end - 1] != LF:
-                self._piece(begin, end, ends_line=False)  # a line longer than a chunk
-            elif begin < end:
-                self._lines(begin, end)
-                self.line += count_lines(buffer[begin:end])
-            begin = end
+        self.walk(buffer, ends)
         return self
 
     # -- whole lines ------------------------------------------------------------------------
 
-    def _lines(self, begin: int, end: int) -> None:
+    def whole(self, begin: int, end: int) -> None:
         """Read the whole lines of ``buffer[begin:end]``."""
         lines, kind = self.kept.pop(begin, (None, None)) if self.out is not None else (None, None)
         if lines is None:
@@ -225,7 +209,7 @@ class _Pass:
 
     # -- a piece of a line longer than a chunk --------------------------------------------
 
-    def _piece(self, begin: int, end: int, ends_line: bool) -> None:
+    def piece(self, begin: int, end: int, ends_line: bool) -> None:
         """Read ``buffer[begin:end]``, a piece of the line :attr:`open` (a new one when
         None) that holds no line feed; ``ends_line`` when the line ends there."""
         chunk = self.buffer[begin:end]

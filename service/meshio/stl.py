@@ -27,13 +27,11 @@ import numpy as np
 
 from .mesh import Limits, Mesh, MeshFormatError, check_counts, checked_vertices
 from .text import (
-    LF,
+    ChunkWalk,
     Lines,
     Tokens,
     as_bytes_array,
     chunks,
-    count_lines,
-    first_line_feed,
     numbers_text,
     parse_numbers,
     parse_spans,
@@ -100,7 +98,7 @@ def _mesh(vertices: np.ndarray) -> Mesh:
     return Mesh(vertices=checked_vertices(vertices), faces=faces, format="stl")
 
 
-class _Pass:
+class _Pass(ChunkWalk):
     """One pass over an ASCII STL, chunk by chunk: counting (``out`` None) or filling
     ``out`` ((n, 3) float) with the corners. ``line`` line feeds and ``vertices`` vertex
     lines came before the chunk in hand; ``last_vertex`` and ``ended`` are where the last
@@ -114,25 +112,13 @@ class _Pass:
         self.open: _Open | None = None
 
     def run(self) -> _Pass:
-        buffer, begin = self.buffer, 0
-        for end in chunks(buffer):
-            if self.open is not None:  # the chunk begins with the rest of a long line
-                rest = first_line_feed(buffer[begin:end])
-                stop = begin + rest if rest >= 0 else end
-                self._piece(begin, stop, ends_line=rest >= 0 or end == len(buffer))
-                if rest < 0:
-                    begin = end
-                    continue
-                self.line, begin = self.line + 1, stop + 1
-            if begin < end and end < len(buffer) and buffer[end - 1] != LF:
-                self._piece(begin, end, ends_line=False)
-            elif begin < end:
-                lines = Lines.of(buffer[begin:end], self.line)
-                if len(lines):
-                    self._read(lines, begin)
-                self.line += count_lines(buffer[begin:end])
-            begin = end
+        self.walk(self.buffer, chunks(self.buffer))
         return self
+
+    def whole(self, begin: int, end: int) -> None:
+        lines = Lines.of(self.buffer[begin:end], self.line)
+        if len(lines):
+            self._read(lines, begin)
 
     def _read(self, lines: Lines, begin: int) -> None:
         """Count (or read) the vertex lines of ``lines``, a chunk from ``begin``."""
@@ -147,7 +133,7 @@ class _Pass:
             self.out[self.vertices : self.vertices + len(at)] = _corners(lines, at)
         self.vertices += len(at)
 
-    def _piece(self, begin: int, end: int, ends_line: bool) -> None:
+    def piece(self, begin: int, end: int, ends_line: bool) -> None:
         """Read ``buffer[begin:end]``, a piece of the line :attr:`open` (a new one when
         None) that holds no line feed; ``ends_line`` when the line ends there."""
         chunk = self.buffer[begin:end]

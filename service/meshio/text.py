@@ -78,6 +78,43 @@ def _cut(buffer: np.ndarray, begin: int, end: int, stop: int, whole_lines: bool)
     return stop
 
 
+class ChunkWalk:
+    """A pass over a text chunk by chunk (:func:`chunks`): runs of whole lines go to
+    :meth:`whole`, a line longer than a chunk goes in pieces cut between tokens to
+    :meth:`piece` (``open`` is what its pieces gave so far, None between lines). ``line``
+    counts the line feeds before the chunk in hand."""
+
+    line: int = 0
+    open: object | None = None
+
+    def walk(self, buffer: np.ndarray, ends) -> None:
+        """Every chunk of ``buffer`` (uint8) ending at ``ends``, in order."""
+        begin = 0
+        for end in ends:
+            if self.open is not None:  # the chunk begins with the rest of a long line
+                rest = first_line_feed(buffer[begin:end])
+                stop = begin + rest if rest >= 0 else end
+                self.piece(begin, stop, ends_line=rest >= 0 or end == len(buffer))
+                if rest < 0:
+                    begin = end
+                    continue
+                self.line, begin = self.line + 1, stop + 1
+            if begin < end and end < len(buffer) and buffer[end - 1] != LF:
+                self.piece(begin, end, ends_line=False)  # a line longer than a chunk
+            elif begin < end:
+                self.whole(begin, end)
+                self.line += count_lines(buffer[begin:end])
+            begin = end
+
+    def whole(self, begin: int, end: int) -> None:
+        """Lines ``[begin, end)`` of the buffer, whole."""
+        raise NotImplementedError
+
+    def piece(self, begin: int, end: int, ends_line: bool) -> None:
+        """Bytes ``[begin, end)`` of a long line; ``ends_line`` when they end it."""
+        raise NotImplementedError
+
+
 def count_lines(chunk: np.ndarray) -> int:
     """Line feeds in ``chunk``."""
     return int(np.count_nonzero(chunk == LF))

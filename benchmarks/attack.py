@@ -6,7 +6,7 @@ Runs a real server (``--workers`` processes, API keys on) and, one case after an
   honest scans, one at a time: the reader's peak allocation per byte of the file (read here,
   under tracemalloc), and the peak resident memory a worker gained while it handled the
   request (from /proc, sampled every 5 ms) against what the job was charged to the memory
-  budget (service.jobs);
+  budget (service.jobs); and two /v1/points bodies of that size, one of empty objects;
 * **slow clients**: ``--slow`` connections at once that send their body at 1 KB/s, that
   declare a Content-Length and stop sending, that send nothing, or that send a header line a
   second; meanwhile a probe posts ``/v1/points`` and a small ``/v1/flatten`` in turn, and
@@ -46,9 +46,9 @@ from pathlib import Path
 import httpx
 
 from benchmarks.docs import record
-from benchmarks.hostile import HOSTILE
+from benchmarks.hostile import HOSTILE, HOSTILE_JSON
 from benchmarks.server import free_port, wait_ready
-from service.jobs import READER_BYTES_PER_BYTE, job_bytes
+from service.jobs import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE, job_bytes
 from service.meshio import Mesh, MeshFormatError, format_of, read_mesh
 from service.samples import SAMPLES
 from service.settings import Settings
@@ -216,6 +216,26 @@ def upload_case(
                 files={"mesh": (name, data)},
                 data={"params": json.dumps(params)},
                 headers=HEADERS,
+            )
+            row.statuses[response.status_code] += 1
+        except httpx.TransportError as error:
+            row.statuses[type(error).__name__] += 1
+        row.seconds = time.perf_counter() - started
+    row.peak = watch.peak
+    row.healthy = healthy(client)
+    return row
+
+
+def json_case(client: httpx.Client, server: int, case: str, body: bytes) -> Row:
+    row = Row(case, uploaded=len(body), charged=(1 + JSON_BYTES_PER_BYTE) * len(body))
+    settle()
+    with PeakWatch(server) as watch:
+        started = time.perf_counter()
+        try:
+            response = client.post(
+                "/v1/points",
+                content=body,
+                headers=HEADERS | {"Content-Type": "application/json"},
             )
             row.statuses[response.status_code] += 1
         except httpx.TransportError as error:
@@ -406,6 +426,9 @@ def main(argv: list[str] | None = None) -> int:
                 for case, (name, build) in HOSTILE.items():
                     data = build(args.size)
                     rows.append(upload_case(client, server.pid, case, name, data, {}))
+                    print(rows[-1].line(), file=sys.stderr)
+                for case, build in HOSTILE_JSON.items():
+                    rows.append(json_case(client, server.pid, case, build(args.size)))
                     print(rows[-1].line(), file=sys.stderr)
                 for case, (name, data, params) in honest_scans().items():
                     rows.append(upload_case(client, server.pid, case, name, data, params))

@@ -39,6 +39,13 @@ def obj_many_corners(size: int) -> bytes:
     return _repeat(b" 1", size, head=TRIANGLE + b"f", tail=b"\n")
 
 
+def obj_group_names(size: int) -> bytes:
+    """A distinct group name a line, each a dictionary entry however short."""
+    count = max(1, size // 12)
+    names = b"".join(b"g n%d\n" % i for i in range(count))
+    return TRIANGLE + names + b"f 1 2 3\n"
+
+
 def ply_ascii(size: int) -> bytes:
     rows = max(1, size // 14)
     header = (
@@ -84,8 +91,26 @@ HOSTILE: dict[str, tuple[str, Callable[[int], bytes]]] = {
     "OBJ of `v` lines": ("a.obj", obj_vertices),
     "OBJ of `f 1 1 1` lines": ("a.obj", obj_faces),
     "OBJ polygon of 2-byte corners": ("a.obj", obj_many_corners),
+    "OBJ of distinct group names": ("a.obj", obj_group_names),
     "ASCII PLY": ("a.ply", ply_ascii),
     "binary PLY, mixed polygon sizes": ("a.ply", ply_binary_mixed),
     "ASCII STL, `facet  normal`": ("a.stl", stl_ascii),
     "binary STL": ("a.stl", stl_binary),
+}
+
+
+def points_of_objects(size: int) -> bytes:
+    """A /v1/points body whose every point is an empty object."""
+    return b'{"points": [' + b",".join([b"{}"] * max(1, size // 3)) + b"]}"
+
+
+def points_honest(size: int) -> bytes:
+    """A /v1/points body of real points (for comparison)."""
+    return b'{"points": [' + b",".join([b"[0.25, -1.5, 3.125]"] * max(1, size // 20)) + b"]}"
+
+
+#: name -> builder of a /v1/points body.
+HOSTILE_JSON: dict[str, Callable[[int], bytes]] = {
+    "/v1/points of empty objects": points_of_objects,
+    "/v1/points of real points": points_honest,
 }

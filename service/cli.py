@@ -227,10 +227,14 @@ def serve(args: argparse.Namespace) -> None:
     directory unless one is given)."""
     import uvicorn
 
-    from .observability import log_config
+    from .observability import capture_warnings, log_config
 
     settings = Settings.from_env()  # a bad variable stops here, named
     workers = args.workers or settings.workers
+    # The workers read their settings from the environment: each one's share of the memory
+    # budget depends on how many there are (Settings.memory_budget_bytes).
+    os.environ["MESHFLAT_WORKERS"] = str(workers)
+    capture_warnings()  # the supervisor's own warnings, as JSON too
     with _metrics_directory(workers):
         uvicorn.run(
             "service.app:app",

@@ -15,7 +15,7 @@ from typing import TypeVar
 from pydantic import BaseModel, ValidationError
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from .jobs import charge_mesh
+from .jobs import JSON_BYTES_PER_BYTE, charge, charge_mesh
 from .jsonkeys import repeated_key
 from .meshio import Mesh, format_of, read_mesh
 from .multipart import parse_form
@@ -23,6 +23,10 @@ from .observability import observe_mesh
 from .params import MeshParams
 from .problems import Problem
 from .settings import Settings
+
+#: The largest ``params`` field of a mesh form: parameters are a few hundred bytes, a region
+#: of listed face ids a few MB.
+MAX_PARAMS_BYTES = 32 * 2**20
 
 M = TypeVar("M", bound=BaseModel)
 P = TypeVar("P", bound=MeshParams)
@@ -109,7 +113,16 @@ def mesh_form(
     """The params (default ``{}``) and the mesh of a multipart mesh request; the mesh is read
     in place, from a view into ``body`` (no copy of the upload)."""
     form = parse_form(body, content_type)
-    params = mesh_params(model, bytes(form["params"].data) if "params" in form else b"{}")
+    text = form["params"].data if "params" in form else b"{}"
+    if len(text) > MAX_PARAMS_BYTES:
+        raise Problem(
+            413,
+            f"params: the field has {len(text):,} bytes; the limit is {MAX_PARAMS_BYTES:,}",
+            "body-too-large",
+            "params",
+        )
+    charge(JSON_BYTES_PER_BYTE * len(text))  # its parse, beyond the reader's allowance
+    params = mesh_params(model, bytes(text))
     if "mesh" not in form:
         raise Problem(422, "mesh: the form has no 'mesh' file field", "invalid-request", "mesh")
     part = form["mesh"]

@@ -46,16 +46,19 @@ current_deadline: ContextVar[Deadline | None] = ContextVar("current_deadline", d
 current_ticket: ContextVar[Ticket | None] = ContextVar("current_ticket", default=None)
 
 MiB = 2**20
-#: What a reader may allocate per byte of its file (the readers keep within it: see
-#: tests/test_meshio.py), charged when the body is in, on top of the body itself.
+#: What a reader may allocate per byte of its file beside its mesh (the readers keep within
+#: it: see tests/test_meshio.py), charged when the body is in, on top of the body itself.
 READER_BYTES_PER_BYTE = 7
+#: What parsing a JSON body may take per byte (pydantic's objects, then the arrays): about
+#: 20 measured for a /v1/points body, with room.
+JSON_BYTES_PER_BYTE = 32
 #: A computation's memory, an upper bound measured by ``make attack`` (docs/benchmarks.md):
 #: a constant plus bytes per vertex and per face of the mesh; a picture (SVG or PNG) adds its
 #: own raster, per pixel and per face.
 JOB_BASE_BYTES = 64 * MiB
 JOB_BYTES_PER_VERTEX = 200
 JOB_BYTES_PER_FACE = 700
-PICTURE_BASE_BYTES = 320 * MiB
+PICTURE_BASE_BYTES = 128 * MiB
 PICTURE_BYTES_PER_PIXEL = 24
 PICTURE_BYTES_PER_FACE = 400
 

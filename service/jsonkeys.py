@@ -51,7 +51,8 @@ def _first_repeat(document: bytes) -> tuple[str | int, ...] | None:
     keys: list[set[str] | None] = []
     path: list[str | int | None] = []
     string = None
-    for text, _array, mark in _TOKENS.findall(document):
+    for token in _TOKENS.finditer(document):  # one token at a time: no list of them all
+        text, mark = token.group(1), token.group(3)
         if text:
             string = text
             continue

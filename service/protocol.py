@@ -49,6 +49,14 @@ class Protocol(H11Protocol):
         self._stop_header_timer()
         super().connection_lost(exc)
 
+    def on_response_complete(self) -> None:
+        """An answer sent before its request's body was read (a 401, a 404, a refusal) ends
+        the connection: otherwise the rest of the body would be read and thrown away, at
+        whatever pace and length the client likes."""
+        if self.conn.their_state is h11.SEND_BODY and not self.transport.is_closing():
+            self.transport.close()
+        super().on_response_complete()
+
     def _start_header_timer(self) -> None:
         self._header_timer = self.loop.call_later(_header_timeout(), self._headers_too_slow)
 

@@ -30,6 +30,7 @@ from .capabilities import (
 from .encoding import JSON, Timings
 from .inputs import mesh_form, parse_json
 from .jobs import (
+    JSON_BYTES_PER_BYTE,
     READER_BYTES_PER_BYTE,
     Deadline,
     JobGate,
@@ -150,11 +151,12 @@ def sample_file(
 # -- jobs --------------------------------------------------------------------------------
 
 
-async def run_job(request: Request, work) -> Response:
+async def run_job(request: Request, work, parse_bytes_per_byte: int) -> Response:
     """Admit the request as soon as its headers are in (a 503 at once when this process has
     no room, see :mod:`service.jobs`), read the body (at the least rate, charged to the
     memory budget), queue the job and run ``work(body, content_type, settings)`` off the
-    event loop in a compute slot, all within the time limit."""
+    event loop in a compute slot, all within the time limit. Parsing the body is charged
+    ``parse_bytes_per_byte`` of the memory budget per byte of it."""
     settings = settings_of(request)
     ticket = job_gate(request.app).admit()
     deadline = Deadline.after(settings.request_timeout)
@@ -165,7 +167,7 @@ async def run_job(request: Request, work) -> Response:
             # Nobody is left to answer; 499 (as nginx says) marks it in the log and metrics.
             return Response(status_code=499)
         ticket.uploaded()
-        ticket.charge(READER_BYTES_PER_BYTE * len(body))
+        ticket.charge(parse_bytes_per_byte * len(body))
         content_type = request.headers.get("content-type", "")
         job = partial(ticket.run, work, deadline, body, content_type, settings)
         try:
@@ -287,11 +289,11 @@ def charge_picture(mesh: Mesh, params: MeshParams, output: Output) -> None:
         charge(picture_bytes(params.image_width, params.image_height, len(mesh.faces)))
 
 
-def _post(capability: Capability, work_of, **documentation) -> None:
+def _post(capability: Capability, work_of, parse_bytes_per_byte: int, **documentation) -> None:
     """Register ``capability``'s route: its handler runs ``work_of(request)`` as a job."""
 
     async def endpoint(request: Request) -> Response:
-        return await run_job(request, work_of(request))
+        return await run_job(request, work_of(request), parse_bytes_per_byte)
 
     router.add_api_route(
         capability.path,
@@ -308,6 +310,7 @@ def _json_route(capability: JsonCapability) -> None:
     _post(
         capability,
         lambda _: partial(answer_json, capability),
+        JSON_BYTES_PER_BYTE,
         tags=["transforms"],
         description=capability.description,
         responses=PROBLEMS,
@@ -319,6 +322,7 @@ def _mesh_route(capability: MeshCapability) -> None:
     _post(
         capability,
         lambda request: partial(answer_mesh, capability, accept=request.headers.get("accept")),
+        READER_BYTES_PER_BYTE,
         tags=["meshes"],
         description=document.mesh_description(capability),
         responses=PROBLEMS | document.other_forms(capability),

@@ -123,9 +123,9 @@ BUDGET_SHARE = 0.8
 
 def memory_budget_of(container_bytes: int, workers: int) -> int:
     """One worker's budget in a container of ``container_bytes``: its share after every
-    worker's baseline (at least 256 MiB)."""
+    worker's baseline (at least 128 MiB, room for a small scan's job)."""
     usable = container_bytes * BUDGET_SHARE - workers * WORKER_BASELINE_BYTES
-    return max(256 * MiB, int(usable / workers))
+    return max(128 * MiB, int(usable / workers))
 
 
 def container_memory_for(budget: int, workers: int) -> int:

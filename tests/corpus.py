@@ -488,6 +488,7 @@ def cases() -> list[Case]:
 _HOSTILE_DETAILS = {
     "OBJ of newlines": ("mesh:", "no vertex"),
     "OBJ of comments": ("mesh:", "no vertex"),
+    "OBJ of distinct group names": ("params.center", "plane"),
     "binary PLY, mixed polygon sizes": ("params.center", "plane"),
     "ASCII STL, `facet  normal`": ("params.center", "plane"),
     "binary STL": ("params.center", "plane"),

@@ -624,7 +624,7 @@ async def test_jobs_wait_for_a_slot(monkeypatch):
     monkeypatch.setattr(routes, "answer_json", counted)
     for jobs, expected in ((1, 1), (3, 3)):
         running = most = 0
-        app = create_app(Settings(max_jobs=jobs))
+        app = create_app(Settings(max_jobs=jobs, max_waiting=2))
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(transport=transport, base_url="http://m") as c:
             statuses = []

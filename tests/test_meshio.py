@@ -15,7 +15,9 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from benchmarks.hostile import obj_group_names
 from service.meshio import Limits, MeshFormatError, MeshTooLargeError, ply, read_mesh, text
+from service.meshio.obj import MAX_GROUP_NAMES
 from service.samples import SAMPLES
 
 from .corpus import glb as container
@@ -933,3 +935,13 @@ def test_obj_group_ranges_are_merged_and_names_without_faces_kept():
     assert mesh.groups["a"].tolist() == [[0, 2]]  # two touching ranges, one range
     assert mesh.groups["b"].tolist() == [[1, 2]]
     assert mesh.groups["c"].shape == (0, 2) and mesh.group_faces(["c"]).tolist() == []
+
+
+def test_an_obj_naming_too_many_groups_is_refused_by_the_count():
+    """Each distinct name is a dictionary entry: without a bound, a file of short names
+    would cost over 100 bytes per byte."""
+    data = obj_group_names((MAX_GROUP_NAMES + 10) * 12)
+    with pytest.raises(MeshTooLargeError, match="65,536 distinct group names"):
+        read_mesh(data, "obj", Limits())
+    below = read_mesh(obj_group_names(1000 * 12), "obj", Limits())
+    assert len(below.groups) == 1000

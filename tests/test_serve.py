@@ -250,7 +250,7 @@ def test_malformed_framing_is_answered_with_a_problem(strict_server):
     assert body["type"].endswith("malformed-request") and "not valid HTTP/1.1" in body["detail"]
 
 
-def test_a_full_service_refuses_before_the_body_and_closes(strict_server):
+def test_a_full_service_refuses_before_the_body_and_closes():
     """The headers of an upload that cannot be admitted are answered at once; the client
     that sent `Expect: 100-continue` never sends its body."""
     with running(MESHFLAT_MAX_UPLOADS="1", MESHFLAT_UPLOAD_GRACE="30") as server:
@@ -269,3 +269,12 @@ def test_a_full_service_refuses_before_the_body_and_closes(strict_server):
     status, headers, body = problem_of(received)
     assert status == 503 and headers["connection"] == "close" and "retry-after" in headers
     assert "1 request bodies are arriving" in body["detail"] and seconds < 2
+
+
+def test_an_answer_before_the_body_ends_the_connection(strict_server):
+    """A 401 or 404 sent before the body is read closes the connection: the rest of the body
+    is not read at the client's pace (here a 404 to a body that never comes)."""
+    with socket.create_connection(("127.0.0.1", strict_server.port)) as connection:
+        connection.sendall(b"POST /nowhere HTTP/1.1\r\nHost: x\r\nContent-Length: 100000\r\n\r\n")
+        received, seconds = read_all(connection)
+    assert received.startswith(b"HTTP/1.1 404") and seconds < 2

@@ -45,6 +45,7 @@ from .mesh import (
     Limits,
     Mesh,
     MeshFormatError,
+    MeshTooLargeError,
     check_counts,
     fan_into,
     out_of_range,
@@ -66,6 +67,11 @@ from .text import (
 
 _HASH, _SLASH = 35, 47
 _OTHER, _VERTEX, _FACE, _GROUP, _OBJECT, _MATERIAL = range(6)
+
+#: Distinct names a file may give its groups: each costs a few hundred bytes of dictionary
+#: however short it is written, so without a bound a file of names alone could cost over
+#: 100 bytes per byte (a scan has a handful; CAD exports a few thousand).
+MAX_GROUP_NAMES = 65_536
 
 
 def read_obj(data: bytes | memoryview, limits: Limits) -> Mesh:
@@ -499,6 +505,11 @@ class _Names:
             keys, inverse = _distinct(text, starts[mine], length)
             kind = b"g" if code == _GROUP else b"n"
             known = [self.ids.setdefault(kind + key, len(self.ids)) for key in keys]
+            if len(self.ids) > MAX_GROUP_NAMES:
+                raise MeshTooLargeError(
+                    f"the file has more than {MAX_GROUP_NAMES:,} distinct group names (g, o "
+                    f"and usemtl); the limit is {MAX_GROUP_NAMES:,}"
+                )
             ids[mine] = np.asarray(known, dtype=np.int64)[inverse]
         return ids
 

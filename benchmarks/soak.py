@@ -267,7 +267,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     if args.short:
         # 15 s phases cannot tell these from noise (runs on one machine read goodput from
-        # 85 % to 110 % and p99 from 1.2x to 2.4x): the full run judges them, --short reports.
+        # 76 % to 110 % and p99 from 1.2x to 2.4x): the full run judges them, --short reports.
         report_only = {
             f"{name} (reported, judged in the full run)": ok for name, ok in ratios.items()
         }

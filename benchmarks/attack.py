@@ -130,29 +130,40 @@ def rss(pid: int) -> int:
     return int(line.split()[1]) * 1024
 
 
-class PeakWatch:
-    """The largest growth of any worker's RSS over its reading at the start, sampled."""
+class Background:
+    """A daemon thread running :meth:`_run` for as long as the ``with`` block lasts (until
+    ``_stop`` is set)."""
 
-    def __init__(self, supervisor: int) -> None:
-        self.pids = workers_of(supervisor)
-        self.start = {pid: rss(pid) for pid in self.pids}
-        self.peak = 0
+    def __init__(self) -> None:
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._sample, daemon=True)
+        self._thread = threading.Thread(target=self._run, daemon=True)
 
-    def _sample(self) -> None:
-        while not self._stop.is_set():
-            for pid in self.pids:
-                self.peak = max(self.peak, rss(pid) - self.start[pid])
-            time.sleep(0.005)
+    def _run(self) -> None:
+        raise NotImplementedError
 
-    def __enter__(self) -> PeakWatch:
+    def __enter__(self):
         self._thread.start()
         return self
 
     def __exit__(self, *_) -> None:
         self._stop.set()
         self._thread.join()
+
+
+class PeakWatch(Background):
+    """The largest growth of any worker's RSS over its reading at the start, sampled."""
+
+    def __init__(self, supervisor: int) -> None:
+        self.pids = workers_of(supervisor)
+        self.start = {pid: rss(pid) for pid in self.pids}
+        self.peak = 0
+        super().__init__()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            for pid in self.pids:
+                self.peak = max(self.peak, rss(pid) - self.start[pid])
+            time.sleep(0.005)
 
 
 # -- the cases ------------------------------------------------------------------------------
@@ -208,36 +219,39 @@ def upload_case(
     row.charged = charge_of(len(data), mesh)
     del mesh
     settle()
-    with PeakWatch(server) as watch:
-        started = time.perf_counter()
-        try:
-            response = client.post(
-                "/v1/flatten",
-                files={"mesh": (name, data)},
-                data={"params": json.dumps(params)},
-                headers=HEADERS,
-            )
-            row.statuses[response.status_code] += 1
-        except httpx.TransportError as error:
-            row.statuses[type(error).__name__] += 1
-        row.seconds = time.perf_counter() - started
-    row.peak = watch.peak
-    row.healthy = healthy(client)
-    return row
+    return measured(
+        client,
+        server,
+        row,
+        lambda: client.post(
+            "/v1/flatten",
+            files={"mesh": (name, data)},
+            data={"params": json.dumps(params)},
+            headers=HEADERS,
+        ),
+    )
 
 
 def json_case(client: httpx.Client, server: int, case: str, body: bytes) -> Row:
     row = Row(case, uploaded=len(body), charged=(1 + JSON_BYTES_PER_BYTE) * len(body))
     settle()
+    return measured(
+        client,
+        server,
+        row,
+        lambda: client.post(
+            "/v1/points", content=body, headers=HEADERS | {"Content-Type": "application/json"}
+        ),
+    )
+
+
+def measured(client: httpx.Client, server: int, row: Row, send) -> Row:
+    """``row`` with the status, time and worker's peak growth of ``send()``, and the health
+    check after it."""
     with PeakWatch(server) as watch:
         started = time.perf_counter()
         try:
-            response = client.post(
-                "/v1/points",
-                content=body,
-                headers=HEADERS | {"Content-Type": "application/json"},
-            )
-            row.statuses[response.status_code] += 1
+            row.statuses[send().status_code] += 1
         except httpx.TransportError as error:
             row.statuses[type(error).__name__] += 1
         row.seconds = time.perf_counter() - started
@@ -246,13 +260,12 @@ def json_case(client: httpx.Client, server: int, case: str, body: bytes) -> Row:
     return row
 
 
-class Probe:
+class Probe(Background):
     """Posts /v1/points and a small /v1/flatten in turn until stopped."""
 
     def __init__(self, url: str) -> None:
         self.url, self.latencies, self.statuses = url, [], Counter()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
+        super().__init__()
         self._mesh = SAMPLES["fsaverage-head.ply"].path.read_bytes()
 
     def _run(self) -> None:
@@ -275,14 +288,6 @@ class Probe:
                 self.latencies.append(time.perf_counter() - started)
                 turn += 1
                 time.sleep(0.05)
-
-    def __enter__(self) -> Probe:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *_) -> None:
-        self._stop.set()
-        self._thread.join()
 
     @property
     def p99(self) -> float:

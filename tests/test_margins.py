@@ -12,7 +12,9 @@ from .conftest import directions
 
 def sample_arc(a, b, n=4001):
     t = np.linspace(0.0, 1.0, n)[:, None]
-    omega = np.arccos(np.clip(a @ b, -1, 1))
+    # atan2, not arccos: arccos of a dot product near 1 loses a short arc's length, and the
+    # samples then leave the arc (ends 1e-9 apart were sampled 1e-9 off).
+    omega = angle(a, b)
     if omega < 1e-12:
         return np.repeat(a[None], n, axis=0)
     return (np.sin((1 - t) * omega) * a + np.sin(t * omega) * b) / np.sin(omega)

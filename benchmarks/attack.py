@@ -30,10 +30,8 @@ import datetime
 import json
 import os
 import platform
-import signal
 import socket
 import statistics
-import subprocess
 import sys
 import tempfile
 import threading
@@ -47,7 +45,7 @@ import httpx
 
 from benchmarks.docs import record
 from benchmarks.hostile import HOSTILE, HOSTILE_JSON
-from benchmarks.server import free_port, wait_ready
+from benchmarks.server import serving
 from service.jobs import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE, job_bytes
 from service.meshio import Mesh, MeshFormatError, format_of, read_mesh
 from service.samples import SAMPLES
@@ -406,47 +404,28 @@ def main(argv: list[str] | None = None) -> int:
     if args.short:
         args.size, args.hold = 16 * MiB, 6
 
-    port = free_port()
-    url = f"http://127.0.0.1:{port}"
     rows: list[Row] = []
-    with tempfile.TemporaryDirectory() as tmp:
-        env = {k: v for k, v in os.environ.items() if not k.startswith("MESHFLAT_")}
-        env |= {
-            "MESHFLAT_PORT": str(port),
-            "MESHFLAT_WORKERS": str(args.workers),
-            "MESHFLAT_API_KEYS": KEY,
-            "TMPDIR": tmp,
-        }
-        # The log goes to a file: a pipe read only at the end would fill and stall the server.
-        log_file = tempfile.TemporaryFile("w+", dir=tmp)
-        server = subprocess.Popen(
-            [sys.executable, "-m", "service.cli", "serve"],
-            env=env,
-            stdout=subprocess.DEVNULL,
-            stderr=log_file,
-        )
-        try:
-            with httpx.Client(base_url=url, timeout=120) as client:
-                wait_ready(client)
-                for case, (name, build) in HOSTILE.items():
-                    data = build(args.size)
-                    rows.append(upload_case(client, server.pid, case, name, data, {}))
-                    print(rows[-1].line(), file=sys.stderr)
-                for case, build in HOSTILE_JSON.items():
-                    rows.append(json_case(client, server.pid, case, build(args.size)))
-                    print(rows[-1].line(), file=sys.stderr)
-                for case, (name, data, params) in honest_scans().items():
-                    rows.append(upload_case(client, server.pid, case, name, data, params))
-                    print(rows[-1].line(), file=sys.stderr)
-                for case in SLOW:
-                    rows.append(slow_case(client, url, port, case, args.slow, args.hold))
-                    print(rows[-1].line(), file=sys.stderr)
-        finally:
-            server.send_signal(signal.SIGTERM)
-            server.wait(90)
-            log_file.seek(0)
-            log = log_file.read()
-            log_file.close()
+    settings = {"MESHFLAT_WORKERS": str(args.workers), "MESHFLAT_API_KEYS": KEY}
+    with tempfile.TemporaryFile("w+") as log_file:
+        with (
+            serving(settings, own_limits=True, log=log_file) as served,
+            httpx.Client(base_url=served.url, timeout=120) as client,
+        ):
+            server = served.process.pid
+            for case, (name, build) in HOSTILE.items():
+                rows.append(upload_case(client, server, case, name, build(args.size), {}))
+                print(rows[-1].line(), file=sys.stderr)
+            for case, build in HOSTILE_JSON.items():
+                rows.append(json_case(client, server, case, build(args.size)))
+                print(rows[-1].line(), file=sys.stderr)
+            for case, (name, data, params) in honest_scans().items():
+                rows.append(upload_case(client, server, case, name, data, params))
+                print(rows[-1].line(), file=sys.stderr)
+            for case in SLOW:
+                rows.append(slow_case(client, served.url, served.port, case, args.slow, args.hold))
+                print(rows[-1].line(), file=sys.stderr)
+        log_file.seek(0)
+        log = log_file.read()
     plain = [line for line in log.splitlines() if line.strip() and not line.startswith("{")]
 
     checks = {f"{row.case}: {name}": ok for row in rows for name, ok in row.checks().items()}

@@ -32,11 +32,7 @@ import io
 import json
 import os
 import platform
-import signal
 import statistics
-import subprocess
-import sys
-import tempfile
 import threading
 import time
 from collections import Counter
@@ -49,7 +45,7 @@ import trimesh
 from trimesh.remesh import subdivide
 
 from benchmarks.docs import record
-from benchmarks.server import free_port, wait_ready
+from benchmarks.server import serving
 from service.samples import SAMPLES
 from service.settings import Settings
 
@@ -209,45 +205,27 @@ def main(argv: list[str] | None = None) -> int:
     capacity = args.workers * (settings.max_jobs + settings.max_waiting)
 
     mesh, faces = soak_mesh()
-    port = free_port()
-    url = f"http://127.0.0.1:{port}"
-    with tempfile.TemporaryDirectory() as tmp:
-        # The limits given in the environment are the server's (the defaults otherwise).
-        env = dict(os.environ) | {
-            "MESHFLAT_PORT": str(port),
-            "MESHFLAT_WORKERS": str(args.workers),
-            "TMPDIR": tmp,
-        }
-        server = subprocess.Popen(
-            [sys.executable, "-m", "service.cli", "serve"],
-            env=env,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
+    # The limits given in the environment are the server's (the defaults otherwise).
+    with serving({"MESHFLAT_WORKERS": str(args.workers)}, own_limits=False) as served:
+        url, server = served.url, served.process
+        # The warm-up is the first phase's load: the heap (kept, not trimmed: see
+        # service/allocator.py) reaches its working size before the first reading.
+        warm = Phase("warm-up", capacity, 5 if args.short else 15)
+        run_phase(url, mesh, warm, server.pid)
+        # Each reading after 2 s without requests (an idle worker returns its free heap
+        # after 1 s); the readings under load are in the phases' series.
+        time.sleep(2)
+        rss = [rss_mib(server.pid)]
+        below = Phase("at capacity", capacity, args.duration)
+        run_phase(url, mesh, below, server.pid)
+        time.sleep(2)
+        rss.append(rss_mib(server.pid))
+        beyond = Phase(
+            f"{args.overload}x capacity", args.overload * capacity, args.overload_duration
         )
-        try:
-            with httpx.Client(base_url=url, timeout=5) as client:
-                wait_ready(client)
-            # The warm-up is the first phase's load: the heap (kept, not trimmed: see
-            # service/allocator.py) reaches its working size before the first reading.
-            warm = Phase("warm-up", capacity, 5 if args.short else 15)
-            run_phase(url, mesh, warm, server.pid)
-            # Each reading after 2 s without requests (an idle worker returns its free heap
-            # after 1 s); the readings under load are in the phases' series.
-            time.sleep(2)
-            rss = [rss_mib(server.pid)]
-            below = Phase("at capacity", capacity, args.duration)
-            run_phase(url, mesh, below, server.pid)
-            time.sleep(2)
-            rss.append(rss_mib(server.pid))
-            beyond = Phase(
-                f"{args.overload}x capacity", args.overload * capacity, args.overload_duration
-            )
-            run_phase(url, mesh, beyond, server.pid)
-            time.sleep(2)
-            rss.append(rss_mib(server.pid))
-        finally:
-            server.send_signal(signal.SIGTERM)
-            server.wait(90)
+        run_phase(url, mesh, beyond, server.pid)
+        time.sleep(2)
+        rss.append(rss_mib(server.pid))
 
     growth = rss[-1] / rss[0] - 1
     goodput, p99 = beyond.goodput / below.goodput, beyond.quantile(99) / below.quantile(99)

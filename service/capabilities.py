@@ -8,11 +8,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from pydantic import BaseModel
 
 from . import operations
 from .encoding import Timings, encode
+from .jobs import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE
 from .meshio import Mesh
 from .outputs import Output
 from .outputs.render import RENDERERS
@@ -54,6 +56,7 @@ class Capability:
     description: str
     operation: Callable
     response: type[BaseModel]
+    parse_bytes_per_byte: ClassVar[int]
 
     def encoded(self, result, timings: Timings) -> bytes:
         """The JSON answer to ``result`` (timed as ``encode``)."""
@@ -74,6 +77,8 @@ class MeshCapability(Capability):
 
     params: type[MeshParams]
     renderers: Mapping[Output, Callable] = field(default_factory=dict)
+    #: What parsing the body may take per byte, beside the mesh (charged by service.jobs).
+    parse_bytes_per_byte: ClassVar[int] = READER_BYTES_PER_BYTE
 
     @property
     def command(self) -> str:
@@ -108,6 +113,8 @@ class JsonCapability(Capability):
     """
 
     request: type[BaseModel]
+    #: What parsing the body may take per byte (charged by service.jobs).
+    parse_bytes_per_byte: ClassVar[int] = JSON_BYTES_PER_BYTE
 
     def answer(self, request: BaseModel, settings: Settings, timings: Timings) -> bytes:
         with timings.measure("compute"):

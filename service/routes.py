@@ -30,21 +30,16 @@ from .capabilities import (
 from .encoding import JSON, Timings
 from .inputs import mesh_form, parse_json
 from .jobs import (
-    JSON_BYTES_PER_BYTE,
-    READER_BYTES_PER_BYTE,
     Deadline,
     JobGate,
     Ticket,
     TimeLimit,
     TooSlow,
-    charge,
-    picture_bytes,
 )
-from .meshio import READERS, Mesh, format_of
+from .meshio import READERS, format_of
 from .observability import metrics_response
 from .operations import sample_infos
 from .outputs import Output, choose_output
-from .params import MeshParams
 from .problems import JSON_BODY, PROBLEMS, Problem, core_errors_as_problems
 from .samples import SAMPLES
 from .schemas import Health, SampleInfo
@@ -272,7 +267,6 @@ def answer_mesh(
             if len(capability.outputs) > 1:
                 requested = getattr(params, "output", None)
                 output = choose_output(accept, requested, capability.outputs)
-        charge_picture(mesh, params, output)
         data = capability.answer(mesh, params, settings, output, timings)
     headers = {"Server-Timing": timings.header()}
     if len(capability.outputs) > 1:
@@ -282,18 +276,11 @@ def answer_mesh(
     return Response(data, media_type=output.media_type, headers=headers)
 
 
-def charge_picture(mesh: Mesh, params: MeshParams, output: Output) -> None:
-    """Charge the memory budget what drawing the answer takes (the mesh itself was charged
-    by its reader: service.jobs)."""
-    if output.rasterised:
-        charge(picture_bytes(params.image_width, params.image_height, len(mesh.faces)))
-
-
-def _post(capability: Capability, work_of, parse_bytes_per_byte: int, **documentation) -> None:
+def _post(capability: Capability, work_of, **documentation) -> None:
     """Register ``capability``'s route: its handler runs ``work_of(request)`` as a job."""
 
     async def endpoint(request: Request) -> Response:
-        return await run_job(request, work_of(request), parse_bytes_per_byte)
+        return await run_job(request, work_of(request), capability.parse_bytes_per_byte)
 
     router.add_api_route(
         capability.path,
@@ -310,7 +297,6 @@ def _json_route(capability: JsonCapability) -> None:
     _post(
         capability,
         lambda _: partial(answer_json, capability),
-        JSON_BYTES_PER_BYTE,
         tags=["transforms"],
         description=capability.description,
         responses=PROBLEMS,
@@ -322,7 +308,6 @@ def _mesh_route(capability: MeshCapability) -> None:
     _post(
         capability,
         lambda request: partial(answer_mesh, capability, accept=request.headers.get("accept")),
-        READER_BYTES_PER_BYTE,
         tags=["meshes"],
         description=document.mesh_description(capability),
         responses=PROBLEMS | document.other_forms(capability),

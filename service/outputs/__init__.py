@@ -21,11 +21,6 @@ class Output(StrEnum):
         return _MEDIA_TYPES[self]
 
     @property
-    def rasterised(self) -> bool:
-        """Whether the form is drawn on a pixel canvas (its memory grows with the pixels)."""
-        return self is Output.PNG
-
-    @property
     def binary(self) -> bool:
         """Whether the form is bytes rather than text."""
         return self in (Output.GLB, Output.PNG)

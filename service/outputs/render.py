@@ -12,6 +12,7 @@ import numpy as np
 from transforms import Layout
 
 from ..encoding import plain
+from ..jobs import charge, picture_bytes
 from ..params import FlattenParams
 from ..problems import Problem
 from ..schemas import Metrics, ResolvedParams, Validation
@@ -76,7 +77,9 @@ def svg(region: MeshRegion, params: FlattenParams) -> bytes:
 
 
 def png(region: MeshRegion, params: FlattenParams) -> bytes:
-    """The same picture as PNG."""
+    """The same picture as PNG, its raster charged to the job's memory budget first
+    (:func:`service.jobs.picture_bytes`)."""
+    charge(picture_bytes(params.image_width, params.image_height, len(region.mesh.faces)))
     return to_png(_picture(region, params))
 
 

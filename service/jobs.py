@@ -35,7 +35,13 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import TypeVar
 
-from .observability import JOBS_COMPUTING, JOBS_IN_FLIGHT, MEMORY_RESERVED, UPLOADS_IN_PROGRESS
+from .observability import (
+    COMPUTE_SECONDS,
+    JOBS_COMPUTING,
+    JOBS_IN_FLIGHT,
+    MEMORY_RESERVED,
+    UPLOADS_IN_PROGRESS,
+)
 from .problems import Problem
 
 T = TypeVar("T")
@@ -386,9 +392,9 @@ class Ticket:
             if not self._gate._slots.acquire(timeout=max(0.0, deadline.remaining())):
                 raise TimeLimit(deadline.seconds, while_reading=False)
             JOBS_COMPUTING.inc()
+            started = time.monotonic()
             try:
                 deadline.check()
-                started = time.monotonic()
                 # Seen by Timings and charge() in this thread.
                 tokens = [current_deadline.set(deadline), current_ticket.set(self)]
                 result = work(*args)
@@ -398,6 +404,7 @@ class Ticket:
                 if tokens:
                     current_ticket.reset(tokens[1])
                     current_deadline.reset(tokens[0])
+                COMPUTE_SECONDS.inc(time.monotonic() - started)
                 JOBS_COMPUTING.dec()
                 self._gate._slots.release()
         finally:

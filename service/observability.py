@@ -20,6 +20,7 @@ import os
 import re
 import time
 import uuid
+import warnings
 from contextvars import ContextVar
 from datetime import UTC, datetime
 from pathlib import Path
@@ -81,6 +82,11 @@ MEMORY_RESERVED = Gauge(
 )
 JOBS_COMPUTING = Gauge(
     "meshflat_jobs_computing", "Jobs computing in a slot.", multiprocess_mode="livesum"
+)
+COMPUTE_SECONDS = Counter(
+    "meshflat_compute_seconds",
+    "Seconds the compute slots have been busy, summed over the slots: its rate over "
+    "MESHFLAT_MAX_JOBS x workers is how full they are.",
 )
 REJECTIONS = Counter(
     "meshflat_rejections",
@@ -242,7 +248,24 @@ def log_config() -> dict:
     }
 
 
-def capture_warnings() -> None:
+_shown_before: list = []  # warnings.showwarning as it was before capture_warnings
+
+
+def capture_warnings(on: bool = True) -> None:
     """Route ``warnings.warn`` through logging (the ``py.warnings`` logger of
-    :func:`log_config`), once per process, so that no line of the log is plain text."""
-    logging.captureWarnings(True)
+    :func:`log_config`) so that no line of the log is plain text; ``on=False`` undoes it."""
+    if on and warnings.showwarning is not log_warning:
+        _shown_before[:] = [warnings.showwarning]
+        warnings.showwarning = log_warning
+    elif not on and warnings.showwarning is log_warning and _shown_before:
+        warnings.showwarning = _shown_before.pop()
+
+
+def log_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as a log record with its category and the place that raised it, but not its
+    text, which may quote a value of the request (numpy's overflow does not; a library's
+    warning about a file's field could)."""
+    logging.getLogger("py.warnings").warning(
+        "python warning",
+        extra={"category": category.__name__, "where": f"{Path(filename).name}:{lineno}"},
+    )

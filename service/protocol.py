@@ -7,7 +7,15 @@ then, would stay open for ever. Here a timer starts when a connection opens, and
 the first byte of a next request arrives on a kept-alive one; the headers must be complete
 before it fires (MESHFLAT_HEADER_TIMEOUT), or the connection gets a 408 (if it sent anything)
 and is closed. The body's pace is the application's to judge (MESHFLAT_MIN_UPLOAD_RATE,
-:func:`service.routes.read_body`).
+:func:`service.admission.read_body`).
+
+An answer sent before its request's body was read (a refusal, a 401, a 404) ends the
+connection, closed the way nginx's ``lingering_close`` does: the answer and a FIN go out,
+then what the client still sends is read and dropped, unparsed, until it closes, falls
+silent for :data:`LINGER_IDLE` seconds or has been at it for :data:`LINGER_SECONDS`. Closed
+at once, the socket would answer the body's next bytes with a reset, and the client's kernel
+would drop the answer unread: a client that writes its whole body before reading, as most
+do, would see a broken connection instead of its 503 and its ``Retry-After``.
 """
 
 from __future__ import annotations
@@ -29,16 +37,52 @@ def _header_timeout() -> float:
     return Settings.from_env().header_timeout
 
 
+#: Longest a connection is read and dropped after its early answer, seconds.
+LINGER_SECONDS = 2.0
+#: Silence that ends the lingering sooner, seconds.
+LINGER_IDLE = 0.5
+
+
+class _LingeringTransport:
+    """The connection's transport, as the protocol and uvicorn's request cycle see it: its
+    ``close`` lingers while the request's body is unread."""
+
+    def __init__(self, transport: asyncio.Transport, protocol: Protocol) -> None:
+        self._transport, self._protocol = transport, protocol
+        self.lingering = False
+
+    def __getattr__(self, name: str):
+        return getattr(self._transport, name)
+
+    def is_closing(self) -> bool:
+        return self.lingering or self._transport.is_closing()
+
+    def close(self) -> None:
+        if self.is_closing():
+            return
+        if self._protocol.conn.their_state is h11.SEND_BODY:
+            self.lingering = True
+            self._protocol._start_lingering()
+        else:
+            self._transport.close()
+
+
 class Protocol(H11Protocol):
-    """:class:`H11Protocol` with a header time limit; pass it as uvicorn's ``http``."""
+    """:class:`H11Protocol` with a header time limit and a lingering close; pass it as
+    uvicorn's ``http``."""
 
     _header_timer: asyncio.TimerHandle | None = None
+    _linger_end: float | None = None  # the loop's time at which lingering stops, once begun
+    _linger_timer: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
-        super().connection_made(transport)
+        super().connection_made(_LingeringTransport(transport, self))  # type: ignore[arg-type]
         self._start_header_timer()
 
     def data_received(self, data: bytes) -> None:
+        if self._linger_end is not None:
+            self._linger_on()  # the rest of a body nobody will read: dropped
+            return
         if self._header_timer is None and self.conn.their_state is h11.IDLE:
             self._start_header_timer()  # the first bytes of a next request
         super().data_received(data)
@@ -47,15 +91,46 @@ class Protocol(H11Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._stop_header_timer()
+        if self._linger_timer is not None:
+            self._linger_timer.cancel()
         super().connection_lost(exc)
+
+    def eof_received(self) -> bool | None:
+        if self._linger_end is not None:
+            self._close_now()  # the client has finished: lingering is over
+            return False
+        return super().eof_received()
 
     def on_response_complete(self) -> None:
         """An answer sent before its request's body was read (a 401, a 404, a refusal) ends
-        the connection: otherwise the rest of the body would be read and thrown away, at
-        whatever pace and length the client likes."""
-        if self.conn.their_state is h11.SEND_BODY and not self.transport.is_closing():
+        the connection, with a lingering close: otherwise the rest of the body would be read
+        and parsed at whatever pace and length the client likes."""
+        if self.conn.their_state is h11.SEND_BODY:
+            self.server_state.total_requests += 1  # as uvicorn counts a completed response
             self.transport.close()
+            return  # no keep-alive timer, no next request: this connection is ending
         super().on_response_complete()
+
+    def _start_lingering(self) -> None:
+        self._stop_header_timer()
+        if self.timeout_keep_alive_task is not None:
+            self.timeout_keep_alive_task.cancel()
+        self._linger_end = self.loop.time() + LINGER_SECONDS
+        self.flow.resume_reading()  # a paused read would leave the body to reset the socket
+        transport = self.transport._transport
+        if transport.can_write_eof():
+            transport.write_eof()  # the answer, then a FIN: the client reads it whole
+        self._linger_on()
+
+    def _linger_on(self) -> None:
+        """Another :data:`LINGER_IDLE` seconds of reading and dropping, within the total."""
+        if self._linger_timer is not None:
+            self._linger_timer.cancel()
+        when = min(self.loop.time() + LINGER_IDLE, self._linger_end)
+        self._linger_timer = self.loop.call_at(when, self._close_now)
+
+    def _close_now(self) -> None:
+        self.transport._transport.close()
 
     def _start_header_timer(self) -> None:
         self._header_timer = self.loop.call_later(_header_timeout(), self._headers_too_slow)

@@ -20,7 +20,7 @@ import pytest
 from prometheus_client.parser import text_string_to_metric_families
 from starlette.responses import Response
 
-from service import routes
+from service import admission, routes
 from service.app import create_app
 from service.auth import KeyCheck
 from service.encoding import Timings
@@ -203,7 +203,7 @@ async def test_slow_uploads_hold_no_compute_slot_and_are_bounded_apart():
             group.start_soon(slow_post)
             group.start_soon(slow_post)
             with anyio.fail_after(5):
-                while routes.job_gate(app).in_flight < 2:
+                while admission.job_gate(app).in_flight < 2:
                     await anyio.sleep(0.005)
             metrics = families((await c.get("/metrics")).text)
             started = time.perf_counter()
@@ -222,7 +222,7 @@ async def test_slow_uploads_hold_no_compute_slot_and_are_bounded_apart():
         )
         assert grown == 2
         assert (await c.post("/v1/points", json=POINTS)).status_code == 200
-        assert routes.job_gate(app).in_flight == 0
+        assert admission.job_gate(app).in_flight == 0
 
 
 async def test_a_complete_request_computes_while_slow_uploads_arrive():
@@ -238,7 +238,7 @@ async def test_a_complete_request_computes_while_slow_uploads_arrive():
             for _ in range(4):
                 group.start_soon(slow_post)
             with anyio.fail_after(5):
-                while routes.job_gate(app).in_flight < 4:
+                while admission.job_gate(app).in_flight < 4:
                     await anyio.sleep(0.005)
             for _ in range(3):
                 assert (await c.post("/v1/points", json=POINTS)).status_code == 200
@@ -269,7 +269,7 @@ async def test_jobs_beyond_the_bound_are_refused_before_their_body_is_read(monke
             for _ in range(2):
                 group.start_soon(partial(c.post, "/v1/points", json=POINTS))
             with anyio.fail_after(5):
-                while routes.job_gate(app).in_flight < 2 or not computing.is_set():
+                while admission.job_gate(app).in_flight < 2 or not computing.is_set():
                     await anyio.sleep(0.005)
             refused = await c.post(
                 "/v1/points", content=watched_body(), headers={"content-type": "application/json"}
@@ -278,7 +278,7 @@ async def test_jobs_beyond_the_bound_are_refused_before_their_body_is_read(monke
         body = problem(refused, 503)
         assert "2 jobs are queued or computing" in body["detail"]
         assert refused.headers["connection"] == "close"
-    assert routes.job_gate(app).in_flight == 0
+    assert admission.job_gate(app).in_flight == 0
 
 
 async def test_a_body_slower_than_the_least_rate_is_a_408_after_the_grace():
@@ -361,11 +361,11 @@ async def test_a_job_past_its_time_limit_is_a_504_and_stops_at_its_next_stage(mo
         assert "MESHFLAT_REQUEST_TIMEOUT" in body["detail"]
         assert answered < 2.5  # answered at the limit, long before the job ended
         # The job still holds its admission until its thread stops, at the next stage.
-        assert routes.job_gate(app).in_flight == 1
+        assert admission.job_gate(app).in_flight == 1
         await anyio.to_thread.run_sync(finished.wait, 8)
         await anyio.sleep(0.05)
         assert stages == ["parse"]
-        assert routes.job_gate(app).in_flight == 0
+        assert admission.job_gate(app).in_flight == 0
 
 
 async def test_a_job_cancelled_before_its_thread_starts_leaves_no_admission_behind():
@@ -381,7 +381,7 @@ async def test_a_job_cancelled_before_its_thread_starts_leaves_no_admission_behi
             transport=httpx.ASGITransport(app=app), base_url="http://m"
         ) as c:
             problem(await c.post("/v1/points", json=POINTS), 504)
-            assert routes.job_gate(app).in_flight == 0
+            assert admission.job_gate(app).in_flight == 0
     finally:
         for holder in holders:
             limiter.release_on_behalf_of(holder)
@@ -439,19 +439,21 @@ def test_warnings_and_other_libraries_log_json_lines(monkeypatch):
     monkeypatch.setattr(sys, "stderr", stream)
     logging.config.dictConfig(config)
     try:
-        logging.captureWarnings(False)  # pytest swaps warnings.showwarning for each test
         capture_warnings()
         with warnings.catch_warnings():
             warnings.simplefilter("always")
-            warnings.warn("overflow encountered in cast", RuntimeWarning, stacklevel=1)
+            warnings.warn("field 'patient-7' has 1e400", RuntimeWarning, stacklevel=1)
         logging.getLogger("some.library").warning("a library's own warning")
     finally:
-        logging.captureWarnings(False)
+        capture_warnings(False)
         for name in ("py.warnings", "some.library", ""):
             logging.getLogger(name).handlers.clear()
-    lines = [json.loads(line) for line in stream.getvalue().splitlines() if line.strip()]
+    text = stream.getvalue()
+    lines = [json.loads(line) for line in text.splitlines() if line.strip()]
     assert {line["logger"] for line in lines} == {"py.warnings", "some.library"}
-    assert any("RuntimeWarning" in line["message"] for line in lines)
+    warned = next(line for line in lines if line["logger"] == "py.warnings")
+    assert warned["category"] == "RuntimeWarning" and warned["where"].startswith("test_operations")
+    assert "patient-7" not in text  # a warning's text never reaches the log
 
 
 async def test_request_ids_are_accepted_returned_and_logged():

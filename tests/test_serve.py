@@ -266,9 +266,18 @@ def test_a_full_service_refuses_before_the_body_and_closes():
                     b"Content-Length: 1000000\r\nExpect: 100-continue\r\n\r\n"
                 )
                 received, seconds = read_all(refused)
+            # One that sends its whole body before reading gets the same answer, not a reset.
+            with socket.create_connection(("127.0.0.1", server.port)) as eager:
+                eager.sendall(
+                    b"POST /v1/points HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+                    b"Content-Length: 4000000\r\n\r\n" + b" " * 4_000_000
+                )
+                eager_received, _ = read_all(eager)
     status, headers, body = problem_of(received)
     assert status == 503 and headers["connection"] == "close" and "retry-after" in headers
     assert "1 request bodies are arriving" in body["detail"] and seconds < 2
+    eager_status, eager_headers, eager_body = problem_of(eager_received)
+    assert (eager_status, eager_body) == (status, body) and "retry-after" in eager_headers
 
 
 def test_an_answer_before_the_body_ends_the_connection(strict_server):
@@ -278,3 +287,34 @@ def test_an_answer_before_the_body_ends_the_connection(strict_server):
         connection.sendall(b"POST /nowhere HTTP/1.1\r\nHost: x\r\nContent-Length: 100000\r\n\r\n")
         received, seconds = read_all(connection)
     assert received.startswith(b"HTTP/1.1 404") and seconds < 2
+
+
+def test_a_client_that_sends_its_whole_body_before_reading_gets_the_early_answer(strict_server):
+    """The connection ends with a lingering close: the 8 MiB this client writes after its
+    404 was sent are read and dropped, so it reads the answer, not a reset."""
+    with socket.create_connection(("127.0.0.1", strict_server.port)) as connection:
+        size = 8 * 2**20
+        connection.sendall(
+            f"POST /nowhere HTTP/1.1\r\nHost: x\r\nContent-Length: {size}\r\n\r\n".encode()
+        )
+        connection.sendall(bytes(size))
+        received, seconds = read_all(connection)
+    assert received.startswith(b"HTTP/1.1 404") and received.endswith(b"}") and seconds < 2
+
+
+def test_a_lingering_connection_is_closed_when_its_client_keeps_sending(strict_server):
+    """Lingering is bounded: a client that keeps sending after its early answer is cut off
+    after LINGER_SECONDS (2 s)."""
+    with socket.create_connection(("127.0.0.1", strict_server.port)) as connection:
+        connection.sendall(
+            b"POST /nowhere HTTP/1.1\r\nHost: x\r\nContent-Length: 10000000000\r\n\r\n"
+        )
+        started, cut = time.monotonic(), None
+        while time.monotonic() - started < 10:
+            try:
+                connection.sendall(bytes(4096))
+            except OSError:
+                cut = time.monotonic() - started
+                break
+            time.sleep(0.05)
+    assert cut is not None and 1.5 < cut < 4

@@ -39,13 +39,12 @@ import time
 import tracemalloc
 from collections import Counter
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import httpx
 
-from benchmarks.docs import record
+from benchmarks.docs import publish
 from benchmarks.hostile import HOSTILE, HOSTILE_JSON
-from benchmarks.server import serving
+from benchmarks.server import children_of, rss_bytes, serving
 from service.jobs import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE, job_bytes
 from service.meshio import Mesh, MeshFormatError, format_of, read_mesh
 from service.samples import SAMPLES
@@ -115,17 +114,7 @@ class Row:
 
 
 def workers_of(supervisor: int) -> list[int]:
-    children = Path(f"/proc/{supervisor}/task/{supervisor}/children").read_text().split()
-    return [int(pid) for pid in children] or [supervisor]
-
-
-def rss(pid: int) -> int:
-    try:
-        status = Path(f"/proc/{pid}/status").read_text()
-    except FileNotFoundError:
-        return 0
-    line = next(line for line in status.splitlines() if line.startswith("VmRSS:"))
-    return int(line.split()[1]) * 1024
+    return children_of(supervisor) or [supervisor]
 
 
 class Background:
@@ -153,14 +142,14 @@ class PeakWatch(Background):
 
     def __init__(self, supervisor: int) -> None:
         self.pids = workers_of(supervisor)
-        self.start = {pid: rss(pid) for pid in self.pids}
+        self.start = {pid: rss_bytes(pid) for pid in self.pids}
         self.peak = 0
         super().__init__()
 
     def _run(self) -> None:
         while not self._stop.is_set():
             for pid in self.pids:
-                self.peak = max(self.peak, rss(pid) - self.start[pid])
+                self.peak = max(self.peak, rss_bytes(pid) - self.start[pid])
             time.sleep(0.005)
 
 
@@ -216,7 +205,6 @@ def upload_case(
     row.reader, mesh = reader_peak(name, data)
     row.charged = charge_of(len(data), mesh)
     del mesh
-    settle()
     return measured(
         client,
         server,
@@ -232,7 +220,6 @@ def upload_case(
 
 def json_case(client: httpx.Client, server: int, case: str, body: bytes) -> Row:
     row = Row(case, uploaded=len(body), charged=(1 + JSON_BYTES_PER_BYTE) * len(body))
-    settle()
     return measured(
         client,
         server,
@@ -244,8 +231,9 @@ def json_case(client: httpx.Client, server: int, case: str, body: bytes) -> Row:
 
 
 def measured(client: httpx.Client, server: int, row: Row, send) -> Row:
-    """``row`` with the status, time and worker's peak growth of ``send()``, and the health
-    check after it."""
+    """``row`` with the status, time and worker's peak growth of ``send()`` (sent once the
+    worker has settled), and the health check after it."""
+    settle()
     with PeakWatch(server) as watch:
         started = time.perf_counter()
         try:
@@ -449,9 +437,7 @@ def main(argv: list[str] | None = None) -> int:
             f"* {sum(checks.values())} of {len(checks)} targets met",
         ]
     )
-    print(report)
-    if args.write_docs:
-        record("attack", "Hostile traffic (make attack)", report)
+    publish("attack", "Hostile traffic (make attack)", report, args.write_docs)
     return 0 if all(checks.values()) else 1
 
 

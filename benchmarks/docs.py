@@ -20,3 +20,10 @@ def record(name: str, heading: str, report: str) -> None:
     _, tail = rest.split(end, 1)
     DOCS.write_text(f"{head}{begin}\n{report}\n{end}{tail}")
     print(f"\nrecorded in {DOCS}", file=sys.stderr)
+
+
+def publish(name: str, heading: str, report: str, write_docs: bool) -> None:
+    """Print ``report``, and with ``write_docs`` (``--write-docs``) :func:`record` it too."""
+    print(report)
+    if write_docs:
+        record(name, heading, report)

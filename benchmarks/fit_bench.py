@@ -31,7 +31,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from benchmarks.docs import record
+from benchmarks.docs import publish
 from benchmarks.transforms_bench import machine, subdivided, timed
 from service.allocator import keep_large_blocks
 from transforms import Chart, Frame, PoleCap, fit_region, flatten_region, locate
@@ -248,9 +248,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     keep_large_blocks()
     report = measure(args.runs)
-    print(report)
-    if args.write_docs:
-        record("fit-bench", "Automatic parameters and locate against libigl", report)
+    publish("fit-bench", "Automatic parameters and locate against libigl", report, args.write_docs)
     return 0
 
 

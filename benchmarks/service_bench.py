@@ -37,7 +37,7 @@ import httpx
 import numpy as np
 import trimesh
 
-from benchmarks.docs import record
+from benchmarks.docs import publish
 from benchmarks.server import free_port, wait_ready
 from benchmarks.transforms_bench import machine, subdivided
 from service.allocator import keep_large_blocks
@@ -221,9 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         f"Run {datetime.datetime.now(datetime.UTC).strftime('%Y-%m-%d %H:%M UTC')}.",
     ]
     table = "\n".join(lines)
-    print(table)
-    if args.write_docs:
-        record("service-bench", "The service end to end", table)
+    publish("service-bench", "The service end to end", table, args.write_docs)
     return 0
 
 

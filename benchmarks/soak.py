@@ -42,15 +42,14 @@ import threading
 import time
 from collections import Counter
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import httpx
 import numpy as np
 import trimesh
 from trimesh.remesh import subdivide
 
-from benchmarks.docs import record
-from benchmarks.server import serving
+from benchmarks.docs import publish
+from benchmarks.server import children_of, cpu_seconds, rss_bytes, serving
 from service.samples import SAMPLES
 from service.settings import Settings
 
@@ -83,22 +82,12 @@ def soak_mesh(faces_wanted: int = 100_000) -> tuple[bytes, int]:
 
 def server_pids(supervisor: int) -> list[int]:
     """The supervisor and its children (the workers)."""
-    children = Path(f"/proc/{supervisor}/task/{supervisor}/children").read_text().split()
-    return [supervisor, *map(int, children)]
+    return [supervisor, *children_of(supervisor)]
 
 
 def rss_mib(supervisor: int) -> float:
     """Resident memory of the supervisor and its children, MiB."""
-    total = 0
-    for pid in server_pids(supervisor):
-        try:
-            status = Path(f"/proc/{pid}/status").read_text()
-        except FileNotFoundError:
-            continue
-        total += int(
-            next(line for line in status.splitlines() if line.startswith("VmRSS:")).split()[1]
-        )
-    return total / 1024
+    return sum(map(rss_bytes, server_pids(supervisor))) / 2**20
 
 
 def compute_seconds(url: str) -> float:
@@ -108,17 +97,9 @@ def compute_seconds(url: str) -> float:
     return float(line.split()[-1])
 
 
-def cpu_seconds(supervisor: int) -> float:
-    """CPU time (user + system) of the supervisor and its live children so far, seconds."""
-    total = 0
-    for pid in server_pids(supervisor):
-        try:
-            stat = Path(f"/proc/{pid}/stat").read_text()
-        except FileNotFoundError:
-            continue
-        fields = stat.rsplit(")", 1)[1].split()  # after the command name, which may hold spaces
-        total += int(fields[11]) + int(fields[12])  # utime, stime
-    return total / os.sysconf("SC_CLK_TCK")
+def server_cpu_seconds(supervisor: int) -> float:
+    """CPU time of the supervisor and its live children so far, seconds."""
+    return sum(map(cpu_seconds, server_pids(supervisor)))
 
 
 @dataclass
@@ -237,13 +218,14 @@ def run_phase(url: str, mesh: bytes, phase: Phase, server: int) -> None:
     threads = [threading.Thread(target=client, args=(i,)) for i in range(phase.clients)]
     threads.append(threading.Thread(target=sample))
     compute = compute_seconds(url)
-    started, server_cpu, client_cpu = time.monotonic(), cpu_seconds(server), time.process_time()
+    server_cpu, client_cpu = server_cpu_seconds(server), time.process_time()
+    started = time.monotonic()
     for thread in threads:
         thread.start()
     for thread in threads:
         thread.join()
     phase.elapsed = time.monotonic() - started
-    phase.server_cpu = (cpu_seconds(server) - server_cpu) / phase.elapsed
+    phase.server_cpu = (server_cpu_seconds(server) - server_cpu) / phase.elapsed
     phase.client_cpu = (time.process_time() - client_cpu) / phase.elapsed
     phase.compute = compute_seconds(url) - compute
 
@@ -358,9 +340,7 @@ def main(argv: list[str] | None = None) -> int:
             *(f"* {name}: {'met' if ok else 'not met'}" for name, ok in report_only.items()),
         ]
     )
-    print(report)
-    if args.write_docs:
-        record("soak", "Load and soak (make soak)", report)
+    publish("soak", "Load and soak (make soak)", report, args.write_docs)
     return 0 if all(checks.values()) else 1
 
 

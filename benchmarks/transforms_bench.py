@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from benchmarks.docs import record
+from benchmarks.docs import publish
 from service.allocator import keep_large_blocks
 from service.samples import SAMPLES
 from transforms import Chart, Frame, PoleCap, assess_region, world_to_angles
@@ -200,9 +200,7 @@ def main(argv: list[str] | None = None) -> int:
         table = subprocess.run(child, check=True, capture_output=True, text=True, env=env).stdout
         sections.append(f"### With {title}\n\n{table.strip()}")
     report = "\n\n".join(sections)
-    print(report)
-    if args.write_docs:
-        record("transforms-bench", "Transform core against VTK", report)
+    publish("transforms-bench", "Transform core against VTK", report, args.write_docs)
     return 0
 
 

@@ -31,7 +31,7 @@ import orjson
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from benchmarks.docs import record
+from benchmarks.docs import publish
 from benchmarks.transforms_bench import machine
 from service.capabilities import MESH_COMMANDS
 from service.encoding import encode
@@ -226,9 +226,7 @@ def main(argv: list[str] | None = None) -> int:
     missing = [c.name for c in CASES if not available(c.scan)]
     if missing:
         report += f"\n\nNot run (their scans are not beside the repository): {', '.join(missing)}."
-    print(report)
-    if args.write_docs:
-        record("zoo", "Scan zoo (make bench-zoo)", report)
+    publish("zoo", "Scan zoo (make bench-zoo)", report, args.write_docs)
     good = all(r["seam_free"] and r["folded_after"] == 0 and r["identical"] for r in rows)
     return 0 if good else 1
 

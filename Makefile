@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-service bench-zoo soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-service bench-zoo bench-batch soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -45,6 +45,11 @@ bench-service: $(VENV)/.installed-bench
 # adds the shared meshes); exits 1 when a case is not seam-free, fold-free or identical.
 bench-zoo: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.zoo $(BENCH_ARGS)
+
+# `meshflat batch` over the sample set (../shared beside it adds the shared meshes) with 1 and
+# 2 processes: scans per minute per core.
+bench-batch: $(VENV)/.installed-bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.batch_bench $(BENCH_ARGS)
 
 # Load and soak through a real server, as deployed (the test extra suffices); CI runs --short.
 soak: $(VENV)/.installed-test

@@ -96,6 +96,11 @@ class MeshCapability(Capability):
         """The answer's bytes in ``output`` (one of :attr:`outputs`)."""
         with timings.measure("compute"):
             result = self.operation(mesh, params, settings)
+        return self.render(result, params, output, timings)
+
+    def render(self, result, params: MeshParams, output: Output, timings: Timings) -> bytes:
+        """The bytes of ``result`` in ``output``: one computation can be answered in several
+        forms (``meshflat batch`` writes each output a manifest line names)."""
         if output is Output.JSON:
             return self.encoded(result, timings)
         with timings.measure("encode"):

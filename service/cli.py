@@ -9,12 +9,18 @@
     meshflat validate MESH ... [--out FILE.json]
     meshflat fit MESH ... [--out FILE.json]
     meshflat locate MESH ... --params '{"theta": [...], "phi": [...]}'
+    meshflat batch MANIFEST.jsonl --out DIR [--processes N] [--shard-count N [--shard-index I]]
 
 One command per mesh route of :mod:`service.capabilities`, running the same operation: the
 parameters are the API's (``--params`` takes any of them as JSON, the options override it),
 checked by the same models, and the answers are the API's bytes (``flatten`` writes JSON,
 GLB, SVG or PNG by the extension of ``--out``); errors are the API's messages, on stderr,
 with exit status 2 (1 for anything unexpected).
+
+``batch`` (:mod:`service.batch`) runs those commands over a manifest of scans, one JSON line
+each, on N processes: resumable (a scan whose digest and outputs match is skipped), a failure
+logged per scan while the others go on (exit status 1), a bad manifest line named before
+anything runs (2); ``--shard-count`` splits a manifest over the pods of an Indexed Job.
 """
 
 from __future__ import annotations
@@ -46,15 +52,35 @@ class Progress:
 
     def __init__(self, steps: list[str], enabled: bool) -> None:
         self.steps, self.enabled, self.done = steps, enabled, 0
+        self._shown = ""  # the bar as last drawn (without its carriage return)
+
+    def begin(self, name: str) -> None:
+        """The bar before the first step is done."""
+        self._draw(name)
 
     @contextmanager
     def step(self, name: str) -> Iterator[None]:
         self._draw(name)
         yield
+        self.advance(name)
+
+    def advance(self, name: str) -> None:
+        """One more step done (steps may finish in any order, as a batch's scans do)."""
         self.done += 1
         self._draw(name if self.done < len(self.steps) else "done")
         if self.enabled and self.done == len(self.steps):
             sys.stderr.write("\n")
+            self._shown = ""
+
+    @contextmanager
+    def above(self) -> Iterator[None]:
+        """Lines written to stderr inside go above the bar: it is wiped, then drawn again."""
+        if self._shown:
+            sys.stderr.write("\r" + " " * len(self._shown) + "\r")
+        yield
+        if self._shown:
+            sys.stderr.write("\r" + self._shown)
+            sys.stderr.flush()
 
     def _draw(self, name: str) -> None:
         if not self.enabled:
@@ -62,8 +88,11 @@ class Progress:
         width = 24
         filled = width * self.done // len(self.steps)
         bar = "#" * filled + "-" * (width - filled)
-        sys.stderr.write(f"\r[{bar}] {self.done}/{len(self.steps)} {name:<12}")
+        # Padded to the last one's length, so that a shorter name leaves nothing behind.
+        shown = f"[{bar}] {self.done}/{len(self.steps)} {name:<12}".ljust(len(self._shown))
+        sys.stderr.write("\r" + shown)
         sys.stderr.flush()
+        self._shown = shown
 
 
 def _vector(text: str, option: str) -> list[float]:
@@ -120,11 +149,23 @@ def _output(capability, out: str | None) -> Output:
     otherwise, whatever the file is called)."""
     if not out or len(capability.outputs) == 1:
         return Output.JSON
+    return output_of_file(capability, out, "--out")
+
+
+def output_of_file(capability, name: str, field: str) -> Output:
+    """The form a file name's extension asks for, among the capability's forms.
+
+    Raises
+    ------
+    Problem
+        The extension is not one of theirs (422 naming ``field`` and the extensions).
+    """
     by_suffix = {f".{output.value}": output for output in capability.outputs}
-    suffix = Path(out).suffix.lower()
+    suffix = Path(name).suffix.lower()
     if suffix not in by_suffix:
         *most, last = by_suffix
-        raise Problem(422, f"--out: {out!r}: use {', '.join(most)} or {last}", field="--out")
+        choices = f"{', '.join(most)} or {last}" if most else last
+        raise Problem(422, f"{field}: {name!r}: use {choices}", field=field)
     return by_suffix[suffix]
 
 
@@ -170,6 +211,7 @@ def parser() -> argparse.ArgumentParser:
     serve.add_argument("--workers", type=int, help="processes; default: MESHFLAT_WORKERS or 1")
     health = commands.add_parser("health", help="exit 0 when the local service's /healthz answers")
     health.add_argument("--port", type=int, help="default: MESHFLAT_PORT or 8000")
+    _add_batch(commands)
     for name, capability in MESH_COMMANDS.items():
         forms = ", ".join(output.value.upper() for output in capability.outputs)
         command = commands.add_parser(
@@ -199,6 +241,39 @@ def parser() -> argparse.ArgumentParser:
     return top
 
 
+def _add_batch(commands) -> None:
+    batch = commands.add_parser(
+        "batch",
+        help="a manifest of scans (JSON lines) on N processes: resumable, a failure per scan",
+    )
+    batch.add_argument(
+        "manifest",
+        metavar="MANIFEST",
+        help='one JSON object a line: {"mesh": PATH, "params": {...}, "outputs": [FILE, ...]}',
+    )
+    batch.add_argument("--out", metavar="DIR", required=True, help="a folder per scan in DIR")
+    batch.add_argument(
+        "--processes", type=_positive, metavar="N", help="default: the CPUs this may use"
+    )
+    batch.add_argument(
+        "--shard-count", type=_positive, metavar="N", help="take the scans i with i %% N == INDEX"
+    )
+    batch.add_argument(
+        "--shard-index", type=int, metavar="INDEX", help="default: $JOB_COMPLETION_INDEX"
+    )
+    batch.add_argument("--progress", action="store_true", help="a progress bar always")
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: give a whole number of at least 1")
+    return value
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     try:
@@ -207,13 +282,17 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "health":
             return health(args)
+        if args.command == "batch":
+            from .batch import run_batch
+
+            return run_batch(args)
         run(args)
     except Problem as problem:
         where = f" ({problem.field})" if problem.field else ""
         print(f"meshflat: error {problem.status}{where}: {problem.detail}", file=sys.stderr)
         return 2
     except ValueError as error:  # a setting (Settings.from_env names the variable)
-        if args.command not in ("serve", "health"):
+        if args.command not in ("serve", "health", "batch"):
             raise
         print(f"meshflat: {error}", file=sys.stderr)
         return 2

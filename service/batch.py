@@ -1,0 +1,503 @@
+"""``meshflat batch``: a data set of scans, each answered by the service's own code.
+
+    meshflat batch MANIFEST.jsonl --out DIR [--processes N] [--shard-count N [--shard-index I]]
+
+The manifest has one JSON object per line (blank lines are skipped), one scan each::
+
+    {"mesh": "scans/p001.glb", "params": {"region": {...}}, "outputs": ["map.json", "map.png"]}
+
+``mesh`` (relative to the manifest's folder) and ``outputs`` (file names whose extensions pick
+the forms, among those the command answers) are required; ``params`` are the API's (default
+``{}``), ``command`` a mesh route's command (default ``flatten``) and ``name`` the scan's
+folder under DIR (default: the mesh's file name without its extension). The whole manifest is
+checked before anything runs: a bad line stops the batch, named by its number.
+
+A scan's outputs are what the API answers, byte for byte (the same params model, reader,
+operation and encoders: :meth:`service.capabilities.MeshCapability.render`), computed once and
+written into ``DIR/NAME/``; then ``digest.json``, last and atomically: the SHA-256 of the
+mesh's bytes with the command, the canonical params, the output names and meshflat's version,
+and each output's size and SHA-256. A rerun skips a scan whose digest matches and whose outputs
+are intact, so a batch that stopped goes on where it was. A scan that fails gets
+``error.json`` (the API's problem, and the line) and a log line; the others go on.
+
+Scans run on N processes that start clean (from a fork server, not forked from the command:
+nothing of its threads is inherited; BLAS on one thread each, as in the service); scans done
+before are skipped first, without them. With ``--shard-count N`` a run takes the scans ``i``
+with ``i % N == INDEX`` (counted from 0 in manifest order), INDEX being ``--shard-index`` or
+``JOB_COMPLETION_INDEX``, which Kubernetes sets in each pod of an Indexed Job.
+
+Logs are JSON lines on stderr: one per scan (name, line, outcome; a failure's status and
+detail), then a summary. Nothing of a mesh goes to disk but the outputs asked for.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import logging
+import os
+import re
+import sys
+import time
+from collections import Counter
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
+from dataclasses import dataclass
+from importlib.metadata import version
+from multiprocessing import get_all_start_methods, get_context
+from multiprocessing.context import BaseContext
+from pathlib import Path
+
+import orjson
+
+from .capabilities import MESH_COMMANDS, MESH_FORM, MeshCapability
+from .cli import Progress, output_of_file
+from .encoding import Timings
+from .inputs import load_mesh, mesh_params
+from .jsonkeys import repeated_key
+from .meshio import format_of
+from .observability import JsonFormatter
+from .outputs import Output
+from .problems import Problem, core_errors_as_problems, problem_body
+from .settings import Settings
+
+#: Written last into a scan's folder: the inputs' digest and each output's size and SHA-256.
+DIGEST_FILE = "digest.json"
+#: Written into a scan's folder when it fails: the API's problem and the manifest's line.
+ERROR_FILE = "error.json"
+#: The keys of a manifest line.
+LINE_KEYS = ("mesh", "outputs", "params", "command", "name")
+#: A scan's folder and its outputs' file names: one plain path component each.
+PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
+#: Kubernetes sets it in each pod of an Indexed Job (its index, from 0).
+JOB_INDEX_VARIABLE = "JOB_COMPLETION_INDEX"
+#: The exit status when scans failed (each logged, with its error.json); 2 is a bad manifest
+#: or option, when nothing ran.
+SCANS_FAILED = 1
+
+logger = logging.getLogger("meshflat.batch")
+
+
+@dataclass(frozen=True)
+class Scan:
+    """One line of the manifest, checked: ``outputs`` are (file name, form) pairs."""
+
+    line: int
+    name: str
+    mesh: Path
+    command: str
+    params: dict
+    outputs: tuple[tuple[str, Output], ...]
+
+    def digest(self, mesh_bytes: bytes) -> str:
+        """SHA-256 of everything the outputs depend on: the mesh's bytes, the command, the
+        params (keys sorted), the output names and meshflat's version."""
+        recipe = {
+            "mesh_sha256": hashlib.sha256(mesh_bytes).hexdigest(),
+            "command": self.command,
+            "params": self.params,
+            "outputs": [name for name, _ in self.outputs],
+            "meshflat": version("meshflat"),
+        }
+        return hashlib.sha256(orjson.dumps(recipe, option=orjson.OPT_SORT_KEYS)).hexdigest()
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What became of a scan: ``done``, ``skipped`` (done before, same inputs) or
+    ``failed``, with the API's problem as its JSON has it (an exception object would not
+    cross back from a worker process: ``Problem`` cannot be unpickled)."""
+
+    scan: Scan
+    status: str
+    seconds: float
+    problem: dict | None = None
+
+
+# -- the manifest --------------------------------------------------------------------------
+
+
+def read_manifest(path: Path) -> list[Scan]:
+    """Every scan of the manifest, checked (params by the API's models, outputs by the
+    command's forms, names unique).
+
+    Raises
+    ------
+    Problem
+        The manifest cannot be read, or has bad lines (each named by its number).
+    """
+    try:
+        lines = path.read_bytes().splitlines()
+    except OSError as error:
+        raise Problem(
+            422, f"cannot read {str(path)!r}: {error.strerror}", field="MANIFEST"
+        ) from None
+    scans, errors, lines_by_name = [], [], {}
+    for number, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            scan = parse_line(line, number, path.parent)
+            if scan.name in lines_by_name:
+                raise Problem(
+                    422,
+                    f"name: {scan.name!r} is also line {lines_by_name[scan.name]}'s folder; "
+                    'give each scan its own "name"',
+                )
+        except Problem as problem:
+            errors.append(f"line {number}: {problem.detail}")
+            continue
+        lines_by_name[scan.name] = number
+        scans.append(scan)
+    if errors:
+        shown = errors[:20] + ([f"and {len(errors) - 20} more"] if len(errors) > 20 else [])
+        raise Problem(422, f"{path.name}: " + "\n  ".join(shown), field="MANIFEST")
+    if not scans:
+        raise Problem(422, f"{path.name}: no scans (one JSON object per line)", field="MANIFEST")
+    return scans
+
+
+def parse_line(line: bytes, number: int, folder: Path) -> Scan:
+    """One manifest line as a :class:`Scan`; ``folder`` is where relative paths start.
+
+    Raises
+    ------
+    Problem
+        What is wrong with the line, naming its key (and the params' field).
+    """
+    entry = _object_of(line)
+    mesh = entry.get("mesh")
+    if not isinstance(mesh, str) or not mesh:
+        raise Problem(422, 'mesh: each line needs "mesh", the path of its scan', field="mesh")
+    command = entry.get("command", "flatten")
+    if command not in MESH_COMMANDS:
+        raise Problem(422, f"command: {command!r} is not one of {', '.join(MESH_COMMANDS)}")
+    capability = MESH_COMMANDS[command]
+    params = entry.get("params", {})
+    _check_params(params, capability, Path(mesh).name)
+    name = entry.get("name", Path(mesh).stem)
+    if not isinstance(name, str) or not PLAIN_NAME.fullmatch(name):
+        raise Problem(
+            422,
+            f"name: {name!r} cannot name a folder: give \"name\", letters, digits, '.', '_' "
+            "or '-', starting with a letter or digit, at most 128",
+            field="name",
+        )
+    return Scan(number, name, folder / mesh, command, params, _outputs(entry, capability))
+
+
+def _object_of(line: bytes) -> dict:
+    try:
+        entry = orjson.loads(line)
+    except orjson.JSONDecodeError as error:
+        raise Problem(422, f"not JSON ({error})") from None
+    if not isinstance(entry, dict):
+        raise Problem(422, 'not a JSON object such as {"mesh": ..., "outputs": [...]}')
+    repeated = repeated_key(line)
+    if repeated is not None:
+        where = ".".join(str(part) for part in repeated)
+        raise Problem(422, f"{where}: given more than once (only one would be used)", field=where)
+    unknown = sorted(set(entry) - set(LINE_KEYS))
+    if unknown:
+        raise Problem(422, f"{unknown[0]}: not a key of a line; the keys: {', '.join(LINE_KEYS)}")
+    return entry
+
+
+def _check_params(params, capability: MeshCapability, mesh_name: str) -> None:
+    """The params as the API checks them, and the mesh's format known from its name."""
+    if not isinstance(params, dict):
+        raise Problem(422, "params: must be a JSON object (the API's params)", field="params")
+    if "output" in params:
+        raise Problem(
+            422,
+            "params.output: the extensions in outputs choose the forms; leave it out",
+            field="params.output",
+        )
+    with core_errors_as_problems(MESH_FORM):
+        parsed = mesh_params(capability.params, orjson.dumps(params))
+        format_of(mesh_name, parsed.format)
+
+
+def _outputs(entry: dict, capability: MeshCapability) -> tuple[tuple[str, Output], ...]:
+    names = entry.get("outputs")
+    if not names or not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise Problem(
+            422, 'outputs: a list of file names, such as ["map.json", "map.png"]', field="outputs"
+        )
+    for name in names:
+        if not PLAIN_NAME.fullmatch(name) or name in (DIGEST_FILE, ERROR_FILE):
+            raise Problem(
+                422,
+                f"outputs: {name!r} is not a plain file name (letters, digits, '.', '_', '-'; "
+                f"not {DIGEST_FILE} or {ERROR_FILE}, which the batch writes)",
+                field="outputs",
+            )
+    if len(set(names)) != len(names):
+        raise Problem(422, "outputs: a file name is given twice", field="outputs")
+    return tuple((name, output_of_file(capability, name, "outputs")) for name in names)
+
+
+def shard_of(scans: list[Scan], index: int | None, count: int | None) -> list[Scan]:
+    """The scans ``i`` with ``i % count == index``; all of them without a count. The index
+    defaults to ``JOB_COMPLETION_INDEX``."""
+    if count is None:
+        if index is not None:
+            raise Problem(422, "--shard-index: give --shard-count too", field="--shard-index")
+        return scans
+    if index is None:
+        given = os.environ.get(JOB_INDEX_VARIABLE)
+        if given is None:
+            raise Problem(
+                422,
+                f"--shard-count: give --shard-index, or set {JOB_INDEX_VARIABLE} "
+                "(Kubernetes does in an Indexed Job)",
+                field="--shard-index",
+            )
+        try:
+            index = int(given)
+        except ValueError:
+            raise Problem(
+                422, f"{JOB_INDEX_VARIABLE}: {given!r} is not a whole number", field="--shard-index"
+            ) from None
+    if not 0 <= index < count:
+        raise Problem(422, f"--shard-index: {index} is outside [0, {count})", field="--shard-index")
+    return scans[index::count]
+
+
+# -- one scan ------------------------------------------------------------------------------
+
+
+def process(scan: Scan, out: Path, settings: Settings) -> Outcome:
+    """Compute ``scan`` into ``out/NAME/`` unless its digest says it is done; a failure is
+    recorded in its ``error.json`` and returned, never raised."""
+    started = time.perf_counter()
+    folder = out / scan.name
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        data = scan.mesh.read_bytes()
+    except OSError as error:
+        detail = f"mesh: cannot read {str(scan.mesh)!r}: {error.strerror}"
+        return _failed(scan, folder, Problem(422, detail, field="mesh"), started)
+    digest = scan.digest(data)
+    if _finished(folder, scan, digest):
+        return Outcome(scan, "skipped", time.perf_counter() - started)
+    _forget(folder, scan)
+    try:
+        written = _compute(scan, data, settings, folder)
+    except Problem as problem:
+        return _failed(scan, folder, problem, started)
+    except Exception as error:  # a bug: this scan fails alone, named by the error's type only
+        # (its message could quote the mesh).
+        problem = Problem(500, f"internal error ({type(error).__name__})", "internal-error")
+        return _failed(scan, folder, problem, started)
+    record = {"digest": digest, "meshflat": version("meshflat"), "outputs": written}
+    _write_atomically(folder / DIGEST_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
+    return Outcome(scan, "done", time.perf_counter() - started)
+
+
+def _compute(scan: Scan, data: bytes, settings: Settings, folder: Path) -> dict[str, dict]:
+    """The outputs of one computation, each written as it is rendered (partial names until
+    all are), with their sizes and SHA-256."""
+    capability = MESH_COMMANDS[scan.command]
+    timings = Timings()
+    written = {}
+    with core_errors_as_problems(MESH_FORM):
+        params = mesh_params(capability.params, orjson.dumps(scan.params))
+        mesh = load_mesh(data, scan.mesh.name, params, settings)
+        with timings.measure("compute"):
+            result = capability.operation(mesh, params, settings)
+        for name, output in scan.outputs:
+            answer = capability.render(result, params, output, timings)
+            _partial(folder / name).write_bytes(answer)
+            written[name] = {"bytes": len(answer), "sha256": hashlib.sha256(answer).hexdigest()}
+    for name in written:
+        os.replace(_partial(folder / name), folder / name)
+    return written
+
+
+def _finished(folder: Path, scan: Scan, digest: str) -> bool:
+    """Whether the folder's digest is ``digest`` and every output is as it recorded."""
+    try:
+        record = orjson.loads((folder / DIGEST_FILE).read_bytes())
+    except (OSError, orjson.JSONDecodeError):
+        return False
+    if not isinstance(record, dict) or record.get("digest") != digest:
+        return False
+    recorded = record.get("outputs")
+    return isinstance(recorded, dict) and all(
+        _intact(folder / name, recorded.get(name)) for name, _ in scan.outputs
+    )
+
+
+def _intact(path: Path, recorded) -> bool:
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return False
+    return isinstance(recorded, dict) and recorded == {
+        "bytes": len(data),
+        "sha256": hashlib.sha256(data).hexdigest(),
+    }
+
+
+def _forget(folder: Path, scan: Scan) -> None:
+    """Before a scan is computed: no record of an earlier run, and no output of other
+    inputs left to pass for this one's."""
+    for name in (DIGEST_FILE, ERROR_FILE, *(name for name, _ in scan.outputs)):
+        (folder / name).unlink(missing_ok=True)
+        _partial(folder / name).unlink(missing_ok=True)
+
+
+def _failed(scan: Scan, folder: Path, problem: Problem, started: float) -> Outcome:
+    for name, _ in scan.outputs:
+        _partial(folder / name).unlink(missing_ok=True)
+    answer = orjson.loads(problem_body(problem))
+    record = {
+        **answer,
+        "scan": scan.name,
+        "line": scan.line,
+        "mesh": str(scan.mesh),
+        "meshflat": version("meshflat"),
+    }
+    _write_atomically(folder / ERROR_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
+    return Outcome(scan, "failed", time.perf_counter() - started, answer)
+
+
+def _partial(path: Path) -> Path:
+    return path.with_name(f".{path.name}.partial")
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    partial = _partial(path)
+    partial.write_bytes(data)
+    os.replace(partial, path)
+
+
+# -- many scans ----------------------------------------------------------------------------
+
+
+def outcomes(scans: list[Scan], out: Path, settings: Settings, processes: int) -> Iterator[Outcome]:
+    """Each scan's outcome as it finishes: first those done before (checked here, so that a
+    resumed batch starts no process for them), then the others on ``processes`` processes,
+    or in this one when there is a single process or scan."""
+    todo = []
+    for scan in scans:
+        started = time.perf_counter()
+        if _done_before(scan, out):
+            yield Outcome(scan, "skipped", time.perf_counter() - started)
+        else:
+            todo.append(scan)
+    if processes == 1 or len(todo) <= 1:
+        for scan in todo:
+            yield process(scan, out, settings)
+        return
+    pool = ProcessPoolExecutor(min(processes, len(todo)), mp_context=_fresh_processes())
+    try:
+        futures = {pool.submit(process, scan, out, settings): scan for scan in todo}
+        for future in as_completed(futures):
+            try:
+                yield future.result()
+            except BrokenProcessPool:
+                detail = "the process computing it died (killed, or out of memory); rerun to retry"
+                died = orjson.loads(problem_body(Problem(500, detail, "worker-died")))
+                yield Outcome(futures[future], "failed", 0.0, died)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _done_before(scan: Scan, out: Path) -> bool:
+    try:
+        data = scan.mesh.read_bytes()
+    except OSError:
+        return False  # its process says why
+    return _finished(out / scan.name, scan, scan.digest(data))
+
+
+def _fresh_processes() -> BaseContext:
+    """Worker processes that start clean, not forked from this one (whose threads and
+    state they would inherit): forked from a fresh server process that has imported the
+    service once (a few seconds), or else spawned, each importing it. BLAS runs on one
+    thread in each (OPENBLAS_NUM_THREADS=1 from service/__init__.py is in their
+    environment)."""
+    if "forkserver" not in get_all_start_methods():
+        return get_context("spawn")
+    context = get_context("forkserver")
+    context.set_forkserver_preload([__name__])
+    return context
+
+
+def available_cpus() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+
+
+def run_batch(args: argparse.Namespace) -> int:
+    """``meshflat batch``: 0 when every scan is done (now or before), :data:`SCANS_FAILED`
+    when any failed.
+
+    Raises
+    ------
+    Problem
+        The manifest or an option is wrong (nothing has run).
+    """
+    settings = Settings.from_env()
+    scans = shard_of(read_manifest(Path(args.manifest)), args.shard_index, args.shard_count)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    progress = Progress([scan.name for scan in scans], args.progress or sys.stderr.isatty())
+    counts = Counter({"done": 0, "skipped": 0, "failed": 0})
+    started = time.perf_counter()
+    progress.begin(f"{len(scans)} scans")
+    with _logs_above(progress):
+        for outcome in outcomes(scans, out, settings, args.processes or available_cpus()):
+            counts[outcome.status] += 1
+            _log(outcome)
+            failed = f" ({counts['failed']} failed)" if counts["failed"] else ""
+            progress.advance(f"{outcome.scan.name}{failed}")
+        logger.info(
+            "batch finished",
+            extra={**counts, "seconds": round(time.perf_counter() - started, 3)},
+        )
+    return SCANS_FAILED if counts["failed"] else 0
+
+
+def _log(outcome: Outcome) -> None:
+    where = {"scan": outcome.scan.name, "line": outcome.scan.line}
+    if outcome.problem is None:
+        seconds = round(outcome.seconds, 3)
+        message = (
+            "scan done" if outcome.status == "done" else "scan skipped: done before, same inputs"
+        )
+        logger.info(message, extra={**where, "seconds": seconds})
+        return
+    problem = outcome.problem
+    logger.error(
+        "scan failed",
+        extra={**where, **{key: problem.get(key) for key in ("status", "field", "detail")}},
+    )
+
+
+class _AboveTheBar(logging.StreamHandler):
+    """JSON lines on stderr, written above the progress bar."""
+
+    def __init__(self, progress: Progress) -> None:
+        super().__init__(sys.stderr)
+        self.progress = progress
+        self.setFormatter(JsonFormatter())
+
+    def emit(self, record: logging.LogRecord) -> None:
+        with self.progress.above():
+            super().emit(record)
+
+
+@contextmanager
+def _logs_above(progress: Progress) -> Iterator[None]:
+    handler = _AboveTheBar(progress)
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
+    logger.propagate = False
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)

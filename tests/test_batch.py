@@ -1,0 +1,296 @@
+"""``meshflat batch``: a manifest of scans answered as the API answers them, resumable, each
+failure on its own, sharded over pods; a bad manifest line is named by its number."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from service.batch import DIGEST_FILE, ERROR_FILE, SCANS_FAILED
+from service.cli import main
+from service.outputs import Output
+from service.samples import SAMPLES
+
+from .corpus import cases
+from .test_api import flatten, problem
+from .test_cli import NAME, PARAMS
+from .test_privacy import watched_writes
+
+pytestmark = pytest.mark.anyio
+
+BAD_MESH = next(case for case in cases() if case.name == "OBJ face past the vertex list")
+
+
+def write_manifest(folder: Path, lines: list) -> Path:
+    """A manifest of ``lines`` (objects as JSON, strings as they are) in ``folder``."""
+    path = folder / "manifest.jsonl"
+    text = [line if isinstance(line, str) else json.dumps(line) for line in lines]
+    path.write_text("\n".join(text) + "\n")
+    return path
+
+
+def scalp(outputs=("map.json",)) -> dict:
+    """A manifest line for the bundled scalp (its folder: the file's name, unless named)."""
+    return {"mesh": SAMPLES[NAME].path.as_posix(), "params": PARAMS, "outputs": list(outputs)}
+
+
+def batch(manifest: Path, out: Path, *options) -> int:
+    return main(["batch", str(manifest), "--out", str(out), *map(str, options)])
+
+
+def logged(capsys) -> list[dict]:
+    """The JSON lines the last runs wrote on stderr (progress bars are off: not a terminal)."""
+    return [json.loads(line) for line in capsys.readouterr().err.splitlines() if line]
+
+
+def by_scan(lines: list[dict]) -> dict[str, str]:
+    return {line["scan"]: line["message"].split(":")[0] for line in lines if "scan" in line}
+
+
+async def test_outputs_are_the_api_answers_byte_for_byte(client, tmp_path):
+    forms = [f"map.{output.value}" for output in Output]
+    manifest = write_manifest(
+        tmp_path,
+        [
+            {"mesh": str(SAMPLES[NAME].path), "params": PARAMS, "outputs": forms, "name": "s"},
+            {"mesh": str(SAMPLES[NAME].path), "params": PARAMS, "outputs": ["v.json"],
+             "command": "validate", "name": "v"},
+        ],
+    )  # fmt: skip
+    assert batch(manifest, tmp_path / "out", "--processes", 1) == 0
+    for name in forms:
+        output = Path(name).suffix[1:]
+        response = await flatten(client, NAME, {**PARAMS, "output": output})
+        assert response.status_code == 200
+        assert (tmp_path / "out" / "s" / name).read_bytes() == response.content, name
+    response = await flatten(client, NAME, PARAMS, endpoint="/v1/validate")
+    assert (tmp_path / "out" / "v" / "v.json").read_bytes() == response.content
+    # Only the outputs asked for, and the digest: nothing partial is left behind.
+    assert sorted(p.name for p in (tmp_path / "out" / "s").iterdir()) == sorted(
+        [*forms, DIGEST_FILE]
+    )
+
+
+def test_a_rerun_skips_what_is_done_and_redoes_what_changed(tmp_path, capsys):
+    scans = tmp_path / "scans"
+    scans.mkdir()
+    for name in ("a", "b", "c"):
+        shutil.copy(SAMPLES[NAME].path, scans / f"{name}.ply")
+    lines = [
+        {"mesh": f"scans/{name}.ply", "params": PARAMS, "outputs": ["map.json", "map.png"]}
+        for name in ("a", "b", "c")
+    ]
+    manifest = write_manifest(tmp_path, lines)
+    out = tmp_path / "out"
+    assert batch(manifest, out, "--processes", 1) == 0
+    assert by_scan(logged(capsys)) == {"a": "scan done", "b": "scan done", "c": "scan done"}
+    written = (out / "a" / "map.json").stat().st_mtime_ns
+
+    assert batch(manifest, out, "--processes", 1) == 0
+    assert set(by_scan(logged(capsys)).values()) == {"scan skipped"}
+    assert (out / "a" / "map.json").stat().st_mtime_ns == written
+
+    # A changed mesh (one more comment in its header), changed params, a lost output: each
+    # of those scans alone is computed again.
+    ply = (scans / "a.ply").read_bytes()
+    (scans / "a.ply").write_bytes(ply.replace(b"\n", b"\ncomment touched\n", 1))
+    lines[1]["params"] = {**PARAMS, "sigma": 0.25}
+    manifest = write_manifest(tmp_path, lines)
+    (out / "c" / "map.png").unlink()
+    assert batch(manifest, out, "--processes", 1) == 0
+    assert by_scan(logged(capsys)) == {"a": "scan done", "b": "scan done", "c": "scan done"}
+
+    # An output altered after the run does not pass for done.
+    (out / "b" / "map.json").write_bytes(b"{}")
+    assert batch(manifest, out, "--processes", 1) == 0
+    assert by_scan(logged(capsys)) == {"a": "scan skipped", "b": "scan done", "c": "scan skipped"}
+    assert json.loads((out / "b" / "map.json").read_bytes())["params"]["sigma"] == 0.25
+
+
+async def test_one_bad_scan_fails_alone_with_the_api_message(client, tmp_path, capsys):
+    filename, data = BAD_MESH.mesh
+    (tmp_path / filename).write_bytes(data)
+    manifest = write_manifest(
+        tmp_path,
+        [
+            {**scalp(), "name": "first"},
+            {"mesh": filename, "outputs": ["map.json"], "name": "broken"},
+            {**scalp(), "name": "last"},
+        ],
+    )
+    out = tmp_path / "out"
+    assert batch(manifest, out, "--processes", 2) == SCANS_FAILED
+    lines = logged(capsys)
+    assert by_scan(lines) == {"first": "scan done", "broken": "scan failed", "last": "scan done"}
+    assert (out / "first" / DIGEST_FILE).exists() and (out / "last" / DIGEST_FILE).exists()
+
+    answer = problem(await flatten(client, NAME, data=data, filename=filename), 422, "mesh")
+    error = json.loads((out / "broken" / ERROR_FILE).read_bytes())
+    assert {key: error[key] for key in answer} == answer
+    assert (error["line"], error["scan"]) == (2, "broken")
+    failed = next(line for line in lines if line.get("scan") == "broken")
+    assert (failed["level"], failed["line"], failed["detail"]) == ("error", 2, answer["detail"])
+    summary = lines[-1]
+    assert [summary[key] for key in ("message", "done", "skipped", "failed")] == [
+        "batch finished",
+        2,
+        0,
+        1,
+    ]
+    assert (
+        not (out / "broken" / "map.json").exists() and not (out / "broken" / DIGEST_FILE).exists()
+    )
+    # Nothing of the mesh in the logs.
+    stderr = "\n".join(json.dumps(line) for line in lines)
+    assert not any(row in stderr for row in data.decode().splitlines() if row.strip())
+
+    # A rerun retries the failure and skips the rest.
+    assert batch(manifest, out, "--processes", 1) == SCANS_FAILED
+    assert by_scan(logged(capsys)) == {
+        "first": "scan skipped",
+        "broken": "scan failed",
+        "last": "scan skipped",
+    }
+
+
+async def test_only_the_outputs_asked_for_and_the_records_reach_the_disk(tmp_path):
+    filename, data = BAD_MESH.mesh
+    (tmp_path / filename).write_bytes(data)
+    forms = [f"map.{output.value}" for output in Output]
+    manifest = write_manifest(
+        tmp_path, [{**scalp(forms), "name": "s"}, {"mesh": filename, "outputs": ["map.json"]}]
+    )
+    out = tmp_path / "out"
+
+    async def run():
+        assert batch(manifest, out, "--processes", 1) == SCANS_FAILED
+
+    writes = await watched_writes(run)
+    finals = [out / "s" / name for name in (*forms, DIGEST_FILE)] + [out / "a" / ERROR_FILE]
+    allowed = {*finals, *(path.with_name(f".{path.name}.partial") for path in finals)}
+    opened = {Path(path) for event, path in writes if event == "open"}
+    assert opened and opened <= allowed, opened - allowed
+    made = {Path(path) for event, path in writes if event == "os.mkdir"}
+    assert made <= {out, out / "s", out / "a"}
+
+
+def test_an_unreadable_mesh_fails_its_scan_only(tmp_path, capsys):
+    manifest = write_manifest(
+        tmp_path, [{"mesh": "missing.obj", "outputs": ["m.json"]}, {**scalp(), "name": "ok"}]
+    )
+    assert batch(manifest, tmp_path / "out", "--processes", 1) == SCANS_FAILED
+    lines = logged(capsys)
+    assert by_scan(lines) == {"missing": "scan failed", "ok": "scan done"}
+    error = json.loads((tmp_path / "out" / "missing" / ERROR_FILE).read_bytes())
+    assert error["field"] == "mesh" and "cannot read" in error["detail"]
+
+
+def test_shards_partition_the_scans(tmp_path, capsys, monkeypatch):
+    names = [f"s{i}" for i in range(7)]
+    line = {**scalp(), "command": "validate"}
+    manifest = write_manifest(tmp_path, [{**line, "name": name} for name in names])
+    seen = []
+    for index in range(3):
+        options = ["--shard-count", 3, "--shard-index", index, "--processes", 1]
+        assert batch(manifest, tmp_path / "out", *options) == 0
+        seen.append(set(by_scan(logged(capsys))))
+    assert seen == [{"s0", "s3", "s6"}, {"s1", "s4"}, {"s2", "s5"}]
+    assert {p.name for p in (tmp_path / "out").iterdir()} == set(names)
+
+    # In an Indexed Job the index is Kubernetes's JOB_COMPLETION_INDEX.
+    monkeypatch.setenv("JOB_COMPLETION_INDEX", "1")
+    assert batch(manifest, tmp_path / "again", "--shard-count", 3, "--processes", 1) == 0
+    assert set(by_scan(logged(capsys))) == {"s1", "s4"}
+
+
+@pytest.mark.parametrize(
+    ("options", "words"),
+    [
+        (["--shard-index", "0"], ["--shard-index", "--shard-count"]),
+        (["--shard-count", "2"], ["JOB_COMPLETION_INDEX"]),
+        (["--shard-count", "2", "--shard-index", "2"], ["2", "[0, 2)"]),
+    ],
+)
+def test_shard_options_are_checked(tmp_path, capsys, monkeypatch, options, words):
+    monkeypatch.delenv("JOB_COMPLETION_INDEX", raising=False)
+    manifest = write_manifest(tmp_path, [scalp()])
+    assert batch(manifest, tmp_path / "out", *options) == 2
+    said = capsys.readouterr().err
+    assert all(word in said for word in words), said
+
+
+LINE = {"mesh": "head.ply", "outputs": ["map.json"]}
+
+
+@pytest.mark.parametrize(
+    ("line", "words"),
+    [
+        ("{not json", ["not JSON"]),
+        ("[1, 2]", ["not a JSON object"]),
+        ({"outputs": ["map.json"]}, ["mesh", "each line needs"]),
+        ({"mesh": "head.ply"}, ["outputs", "list of file names"]),
+        ({**LINE, "outputs": ["map.jpeg"]}, ["outputs", "'map.jpeg'", ".json, .glb, .svg or .png"]),
+        ({**LINE, "command": "locate", "params": {"theta": [1], "phi": [0]},
+          "outputs": ["hits.png"]}, ["outputs", "use .json"]),
+        ({**LINE, "outputs": ["../map.json"]}, ["outputs", "not a plain file name"]),
+        ({**LINE, "outputs": ["digest.json"]}, ["outputs", "digest.json"]),
+        ({**LINE, "outputs": ["a.json", "a.json"]}, ["outputs", "twice"]),
+        ({**LINE, "name": "../up"}, ["name", "cannot name a folder"]),
+        ({**LINE, "mesh": "head.fbx"}, ["mesh", "format"]),
+        ({**LINE, "params": {"sigma": -1}}, ["params.sigma"]),
+        ({**LINE, "params": {"output": "png"}}, ["params.output", "extensions"]),
+        ({**LINE, "params": [1]}, ["params", "JSON object"]),
+        ({**LINE, "command": "serve"}, ["command", "flatten, validate, fit, locate"]),
+        ({**LINE, "outptus": []}, ["outptus", "not a key"]),
+        ('{"mesh": "a.ply", "outputs": ["m.json"], "params": {"sigma": 0.3, "sigma": 0.5}}',
+         ["params.sigma", "more than once"]),
+    ],
+)  # fmt: skip
+def test_a_bad_line_is_named_by_its_number_and_nothing_runs(tmp_path, capsys, line, words):
+    manifest = write_manifest(tmp_path, [{**LINE, "name": "first"}, "", line])
+    assert batch(manifest, tmp_path / "out") == 2
+    said = capsys.readouterr().err
+    assert "manifest.jsonl: line 3: " in said, said
+    assert all(word in said for word in words), said
+    assert not (tmp_path / "out").exists()
+
+
+def test_every_bad_line_is_listed_and_names_are_unique(tmp_path, capsys):
+    manifest = write_manifest(tmp_path, [LINE, "{", LINE, {"mesh": "x.obj"}])
+    assert batch(manifest, tmp_path / "out") == 2
+    said = capsys.readouterr().err
+    assert "line 2: not JSON" in said and "line 4: outputs" in said
+    assert "line 3: name: 'head' is also line 1's folder" in said
+
+
+def test_an_empty_or_missing_manifest_is_refused(tmp_path, capsys):
+    assert batch(write_manifest(tmp_path, [""]), tmp_path / "out") == 2
+    assert "no scans" in capsys.readouterr().err
+    assert batch(tmp_path / "nothing.jsonl", tmp_path / "out") == 2
+    assert "cannot read" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("anyio_backend", ["asyncio"])
+async def test_the_installed_command_runs_scans_in_processes(tmp_path):
+    manifest = write_manifest(
+        tmp_path,
+        [{**scalp(["map.svg"]), "name": name} for name in ("one", "two", "three")],
+    )
+    command = Path(sys.executable).parent / "meshflat"
+    run = subprocess.run(
+        [command, "batch", manifest, "--out", tmp_path / "out", "--processes", "2", "--progress"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    assert "3/3 done" in run.stderr  # the progress bar
+    for name in ("one", "two", "three"):
+        assert (tmp_path / "out" / name / "map.svg").read_bytes().startswith(b"<svg")
+    summary = json.loads(run.stderr.rsplit("\n", 2)[-2].rpartition("\r")[2])
+    assert summary["message"] == "batch finished" and summary["done"] == 3

@@ -213,7 +213,8 @@ def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest
     validation judges it). The objective is their share of the sample's area (times the
     weight) plus the energy of the faces seen from the front measured alone, so their own
     energies play no part."""
-    from transforms.fit import _BACKFACING_WEIGHT, _Candidate, _Problem
+    from transforms.fit import _Candidate, _Problem
+    from transforms.objective import BACKFACING_WEIGHT
 
     vertices, faces = load_sample("nefertiti-lowres.obj")
     centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
@@ -228,5 +229,5 @@ def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest
     assert 0 < behind.sum() < len(behind)
     hidden = problem.sample_areas[behind].sum() / problem.sample_areas.sum()
     seen = flatten_region(problem.sample_points, problem.sample_faces[~behind], frame, chart)
-    expected = seen.distortion.isometric.mean + _BACKFACING_WEIGHT * hidden
+    expected = seen.distortion.isometric.mean + BACKFACING_WEIGHT * hidden
     assert problem.energy(_Candidate(centre, rotation, 0.5)) == pytest.approx(expected, rel=1e-9)

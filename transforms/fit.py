@@ -31,18 +31,17 @@ from .cap import PoleCap
 from .chart import Chart, Method
 from .emptycap import cap_radius, largest_empty_cap
 from .errors import TransformInputError, listed_rows
-from .faces import measure_checked
 from .frames import Frame
 from .kernel import Kernel, chebyshev_center, kernel_planes
-from .layouts import Layout, measured_second
-from .metrics import distortion
+from .layouts import Layout
+from .objective import Candidates, FaceEnergy, Motion, region_energy
 from .region import FlatRegion, flatten_region
 from .sampling import area_sample
 from .viewpoint import check_center_sees_area
 
 #: Faces the search evaluates each candidate on, and vertices the pole's hull is built from.
-SAMPLE_FACES = 4000
-HULL_VERTICES = 20000
+SAMPLE_FACES = 1000
+HULL_VERTICES = 2000
 #: Where sigma is searched (beyond these the warp squeezes the region to a point or a line).
 SIGMA_SEARCH = (1e-3, 10.0)
 #: Planes nearest the start whose depth the refinement watches (besides the sampled ones).
@@ -51,19 +50,30 @@ _NEAR_PLANES = 4096
 _REACH = 3.0
 #: Centres tried along the pole before the refinement, in inscribed radii from the deepest point.
 _SLIDE = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)
-#: The sigma search: grid points in log sigma, golden-section steps after, and the relative
-#: difference of energies below which they count as equal.
+#: The sigma search: grid points in log sigma, finer grids after (each of ``_ZOOM_POINTS``
+#: spanning the step either side of the best so far), and the relative difference of
+#: energies below which they count as equal.
 _SIGMA_GRID = 17
-_GOLDEN_STEPS = 14
+_ZOOMS = 3
+_ZOOM_POINTS = 7
 _TIE = 1e-9
+#: The slide's coarser sigma search per centre (the refinement tunes sigma after): grid
+#: points, zooms and points per zoom.
+_SLIDE_SIGMA_SEARCH = (9, 1, 5)
 #: Below this sine of the angle between the up hint and the chosen pole, the hint is ignored.
 _PARALLEL = 1e-6
-#: The refinement's cost where a candidate cannot be measured: finite, so that Nelder-Mead's
-#: convergence test (differences of costs) never meets inf - inf, and above any real cost.
+#: The refinement's cost where a candidate cannot be measured: finite, so that differences
+#: of costs never meet inf - inf, and above any real cost.
 _INFEASIBLE = 1e100
-#: What a centre pays for each unit of the fraction of the region's area it sees from behind
-#: (1% costs 10, more than any energy difference the front-facing faces make).
-_BACKFACING_WEIGHT = 1000.0
+#: The refinement: its most quasi-Newton steps, the forward-difference step of its gradients
+#: (its coordinates are of order 1), and the weight of a bound's squared shortfall (a
+#: shortfall of 1e-4 costs 1e-4, as much as the energy a step can win there).
+_REFINE_STEPS = 60
+#: Relative decrease of the cost below which the refinement stops: far below the energy
+#: differences a plan can see, and below the sample's own noise.
+_REFINE_TOLERANCE = 1e-14
+_STEP = 1e-7
+_PENALTY = 1e4
 #: Sigmas whose energy the explanation reports.
 REPORTED_SIGMAS = (0.3, 1.0)
 
@@ -237,6 +247,7 @@ class _Search:
     initial: _Candidate
     notes: list[str]
     energy_start: float | None = None
+    energy_at_sigma: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -407,15 +418,34 @@ def _keep_margin(
 
 def _keep_the_better(problem: _Problem, search: _Search, answer: _Flattened) -> _Flattened:
     """The start instead of ``answer`` when, on every face, its energy is lower and it keeps
-    the margin: the search saw a sample."""
+    the margin: the search saw a sample. The start's energy on every face is measured
+    together with the answer's at :data:`REPORTED_SIGMAS` (one pass); it is flattened only
+    when it may win."""
+    reported = _reported(problem, answer.candidate)
+    energies = problem.region_energies([search.initial, *reported])
+    search.energy_start = float(energies[0])
+    search.energy_at_sigma = dict(zip(REPORTED_SIGMAS, energies[1:].tolist(), strict=False))
+    if not search.energy_start < answer.flat.distortion.isometric.mean:
+        return answer
     first = _flattened(problem, search.initial)
-    search.energy_start = first.flat.distortion.isometric.mean
     keeps_margin = search.margin is None or first.margin_deg >= min(
         answer.margin_deg, search.bounds.min_margin_deg
     )
-    if search.energy_start < answer.flat.distortion.isometric.mean and keeps_margin:
+    if (
+        first.flat.distortion.isometric.mean < answer.flat.distortion.isometric.mean
+        and keeps_margin
+    ):
+        search.energy_at_sigma = None  # measured for the answer, which lost
         return first
     return answer
+
+
+def _reported(problem: _Problem, best: _Candidate) -> list[_Candidate]:
+    """The answer's centre and rotation at :data:`REPORTED_SIGMAS` (none for the standard
+    method, which has no sigma)."""
+    if problem.method is Method.STANDARD:
+        return []
+    return [_Candidate(best.center, best.rotation, sigma) for sigma in REPORTED_SIGMAS]
 
 
 def _explain(problem: _Problem, search: _Search, answer: _Flattened) -> Fit:
@@ -436,20 +466,22 @@ def _explain(problem: _Problem, search: _Search, answer: _Flattened) -> Fit:
             f"{kernel.inscribed_radius:.4g})"
         )
     energy_end = flat.distortion.isometric.mean
-    energy_at_sigma = {}
-    if problem.method is not Method.STANDARD:
-        for reported in REPORTED_SIGMAS:
-            candidate = _Candidate(best.center, best.rotation, reported)
-            energy_at_sigma[reported] = problem.flatten(candidate).distortion.isometric.mean
+    energy_at_sigma = search.energy_at_sigma
+    if energy_at_sigma is None:
+        reported = _reported(problem, best)
+        energies = problem.region_energies(reported) if reported else []
+        energy_at_sigma = dict(zip(REPORTED_SIGMAS, list(energies), strict=False))
     explanation = FitExplanation(
         energy_start=energy_end if search.energy_start is None else search.energy_start,
         energy_end=energy_end,
         kernel_inscribed_radius=kernel.inscribed_radius,
         kernel_empty=kernel.empty,
         center_depth=depth,
-        empty_cap_deg=math.degrees(cap_radius(problem.directions(best.center), best.rotation[1])),
+        empty_cap_deg=math.degrees(
+            _cap_radii(problem.region_points, best.center[None], best.rotation[1])[0]
+        ),
         margin_deg=answer.margin_deg,
-        energy_at_sigma=energy_at_sigma,
+        energy_at_sigma={float(k): float(v) for k, v in energy_at_sigma.items()},
         backfacing_faces=flat.validation.backfacing_faces,
         notes=notes,
     )
@@ -484,33 +516,6 @@ def roll_axis(directions: np.ndarray, pole: np.ndarray) -> np.ndarray:
     return axis
 
 
-def _beats(e1: float, x1: float, e2: float, x2: float) -> bool:
-    """Whether energy ``e1`` at ``x1`` beats ``e2`` at ``x2``: energies equal to ``_TIE``
-    (relative) count as equal, and then the larger ``x`` wins."""
-    if abs(e1 - e2) <= _TIE * max(abs(e1), abs(e2)):
-        return x1 > x2
-    return e1 < e2
-
-
-def _golden_section(energy, bracket: tuple[float, float], best_x: float, best_e: float) -> float:
-    """The best ``x`` found by ``_GOLDEN_STEPS`` golden sections of ``bracket``, starting
-    from ``best_x`` of energy ``best_e``."""
-    a, b = bracket
-    ratio = (math.sqrt(5.0) - 1.0) / 2.0
-    for _ in range(_GOLDEN_STEPS):
-        x1, x2 = b - ratio * (b - a), a + ratio * (b - a)
-        e1, e2 = energy(x1), energy(x2)
-        if _beats(e1, x1, e2, x2):
-            b = x2
-            if _beats(e1, x1, best_e, best_x):
-                best_x, best_e = x1, e1
-        else:
-            a = x1
-            if _beats(e2, x2, best_e, best_x):
-                best_x, best_e = x2, e2
-    return best_x
-
-
 def _margin_deg(flat: FlatRegion) -> float:
     v = flat.validation
     return min(v.margin_deg_seam, v.margin_deg_north, v.margin_deg_south)
@@ -543,6 +548,10 @@ class _Problem:
         self.sample_faces = compact.reshape(-1, 3)
         self.sample_points = points[sample_used]
         self.sample_areas = areas[picked]
+        self.sample = FaceEnergy(self.sample_points, self.sample_faces, method, layout)
+        # The directions the pole's hull and the slide's caps are judged on.
+        rows = np.linspace(0, len(self.region_points) - 1, min(HULL_VERTICES, len(self.used)))
+        self.hull_points = self.region_points[rows.astype(np.int64)]
 
     @classmethod
     def checked(cls, vertices, faces, fixed: FitFixed, method, threads: int, layout) -> _Problem:
@@ -604,59 +613,69 @@ class _Problem:
             layout=self.layout,
         )
 
+    def region_energies(self, candidates: list[_Candidate]) -> np.ndarray:
+        """(k,) the energy of every face for each candidate (docs/math.md, section 7), as
+        :meth:`flatten` would report it, without the validation."""
+        batch = _batch(candidates)
+        return region_energy(self.points, self.faces, batch, self.method, self.layout)
+
     def energy(self, candidate: _Candidate) -> float:
         """The robust objective on the sample (docs/math.md, section 9): the fraction of its
         area seen from behind from the candidate's centre (such faces fold whatever the
-        pole and sigma), times ``_BACKFACING_WEIGHT``, plus the area-weighted isometric
+        pole and sigma), times ``BACKFACING_WEIGHT``, plus the area-weighted isometric
         energy of the faces seen from the front; inf where it cannot be measured.
 
         So a few slivers seen from behind, whose energy can be thousands, do not steer the
         choice: a centre is first judged by how much it cannot see, then by the rest.
         """
-        frame = Frame.from_matrix(candidate.rotation, candidate.center)
-        chart = self.chart(candidate.sigma)
-        try:
-            rows = np.empty((3, len(self.sample_points)))
-            theta, phi, _ = chart.forward_checked(
-                self.sample_points, frame, 1, ("vertices", "vertex", None), rows_out=rows
-            )
-            second = measured_second(theta, self.layout)
-            measures = measure_checked(rows, self.sample_faces, second, phi, chart.cap)
-            # Seen from behind as validation judges it: against the sample's own winding.
-            orientation = measures.orientation
-            winding = -1 if int(orientation.sum(dtype=np.int64)) < 0 else 1
-            behind = orientation != winding
-            # The faces seen from the front measured alone: the layout's scale from them too.
-            energy = float(distortion(measures.subset(~behind)).isometric.mean)
-        except TransformInputError:  # every face seen from the front is degenerate
-            return math.inf
-        total = float(self.sample_areas.sum())
-        hidden = float(self.sample_areas[behind].sum()) / total if total > 0 else 0.0
-        return energy + _BACKFACING_WEIGHT * hidden
+        return float(self.sample.scores(_batch([candidate])).objective[0])
 
-    def best_sigma(self, center: np.ndarray, rotation: np.ndarray, largest_rho: float) -> float:
-        """The sigma of least sample energy with the cap's angle at most ``largest_rho``.
+    def best_sigmas(
+        self,
+        centers: np.ndarray,
+        rotations: np.ndarray,
+        largest_rho: np.ndarray,
+        search: tuple[int, int, int] = (_SIGMA_GRID, _ZOOMS, _ZOOM_POINTS),
+    ) -> np.ndarray:
+        """(k,) for each of ``k`` centres (k, 3) and rotations (k, 3, 3), the sigma of least
+        sample energy with the cap's angle at most ``largest_rho`` (k,).
 
-        A grid in log sigma, then golden sections around its best point. Energies equal to
-        ``_TIE`` (relative) count as equal and the larger sigma wins, so that rounding, which
-        differs with the mesh's pose, cannot pick another point of a flat stretch.
+        A grid of ``search[0]`` points in log sigma, then ``search[1]`` finer grids of
+        ``search[2]`` points around the best point so far, all lines at once. Energies equal
+        to ``_TIE`` (relative) count as equal and the larger sigma wins, so that rounding,
+        which differs with the mesh's pose, cannot pick another point of a flat stretch.
         """
         low, high = SIGMA_SEARCH
-        high = min(high, math.tan(max(largest_rho, 2.0 * math.atan(low)) / 2.0))
-        if high <= low:
-            return high
+        floor = 2.0 * math.atan(low)
+        highs = np.minimum(high, np.tan(np.maximum(largest_rho, floor) / 2.0))
+        bottom, tops = math.log(low), np.log(np.maximum(highs, low))
+        points, zooms, zoom_points = search
+        grid = bottom + np.outer(tops - bottom, np.linspace(0.0, 1.0, points))
+        energies = self._line_energies(centers, rotations, grid)
+        best_x, best_e = _best_on_grid(grid, energies)
+        step = (tops - bottom) / (points - 1)
+        for _ in range(zooms):
+            grid = best_x[:, None] + np.outer(step, np.linspace(-1.0, 1.0, zoom_points))
+            grid = np.clip(grid, bottom, tops[:, None])
+            energies = self._line_energies(centers, rotations, grid)
+            # The best so far stays in the running (the finer grid may miss it).
+            best_x, best_e = _best_on_grid(
+                np.column_stack([grid, best_x]), np.column_stack([energies, best_e])
+            )
+            step = step * 2.0 / (zoom_points - 1)
+        return np.where(highs <= low, highs, np.exp(best_x))
 
-        def energy(log_sigma: float) -> float:
-            return self.energy(_Candidate(center, rotation, math.exp(log_sigma)))
+    def _line_energies(self, centers, rotations, grid: np.ndarray) -> np.ndarray:
+        """(k, g) sample objective at ``exp(grid)`` (k, g) along each line."""
+        k, g = grid.shape
+        batch = Candidates.of(
+            np.repeat(centers, g, axis=0), np.repeat(rotations, g, axis=0), np.exp(grid).ravel()
+        )
+        return self.sample.scores(batch).objective.reshape(k, g)
 
-        grid = np.linspace(math.log(low), math.log(high), _SIGMA_GRID)
-        energies = [energy(x) for x in grid]
-        best = 0
-        for i in range(1, len(grid)):
-            if _beats(energies[i], grid[i], energies[best], grid[best]):
-                best = i
-        bracket = grid[max(best - 1, 0)], grid[min(best + 1, len(grid) - 1)]
-        return math.exp(_golden_section(energy, bracket, grid[best], energies[best]))
+    def best_sigma(self, center: np.ndarray, rotation: np.ndarray, largest_rho: float) -> float:
+        """:meth:`best_sigmas` for one centre and rotation."""
+        return float(self.best_sigmas(center[None], rotation[None], np.array([largest_rho]))[0])
 
     def slide_towards_pole(
         self,
@@ -667,24 +686,36 @@ class _Problem:
         choose_sigma: bool,
     ) -> _Candidate:
         """The best of ``start`` and centres moved along its pole by multiples of the
-        inscribed radius (``_SLIDE``), each with its best sigma, inside the kernel."""
+        inscribed radius (``_SLIDE``), each with its best sigma, up to the first that leaves
+        the kernel's depth or the region's reach. All are scored in one batch."""
         pole = start.rotation[1]
-        best, best_energy = start, self.energy(start)
-        for steps in _SLIDE:
-            center = start.center + steps * kernel.inscribed_radius * pole
-            if self.planes.depth(center) < min_depth or not self.within_reach(center):
-                break
-            try:
-                directions = self.directions(center)
-            except TransformInputError:  # the centre met a vertex
-                break
-            room = math.pi if margin is None else cap_radius(directions, pole) - margin
-            sigma = self.best_sigma(center, start.rotation, room) if choose_sigma else start.sigma
-            candidate = _Candidate(center, start.rotation, sigma)
-            energy = self.energy(candidate)
-            if energy < best_energy:
-                best, best_energy = candidate, energy
-        return best
+        centers = start.center + np.outer(_SLIDE, kernel.inscribed_radius * pole)
+        normals, offsets = self.planes.normals, self.planes.offsets
+        j = len(self.planes.faces)
+        depth = (offsets[:j] - centers @ normals[:j].T).min(axis=1)
+        away = np.linalg.norm(centers - self.planes.middle, axis=1)
+        inside = (depth >= min_depth) & (depth > 0) & (away <= _REACH * self.planes.size)
+        centers = centers[: int(np.argmin(inside)) if not inside.all() else len(inside)]
+        if len(centers) == 0:
+            return start
+        rotations = np.repeat(start.rotation[None], len(centers), axis=0)
+        if choose_sigma:
+            room = np.full(len(centers), math.pi)
+            if margin is not None:
+                room = _cap_radii(self.hull_points, centers, pole) - margin
+            sigmas = self.best_sigmas(centers, rotations, room, _SLIDE_SIGMA_SEARCH)
+        else:
+            sigmas = np.full(len(centers), _sigma_or_one(start.sigma))
+        batch = Candidates.of(np.vstack([start.center, centers]), start.rotation, 0.0)
+        batch = Candidates(
+            batch.centers, batch.rotations, np.r_[_sigma_or_one(start.sigma), sigmas]
+        )
+        energies = self.sample.scores(batch).objective
+        best = int(np.argmin(energies))
+        if not energies[best] < energies[0]:
+            return start
+        sigma = float(sigmas[best - 1]) if start.sigma is not None else None
+        return _Candidate(centers[best - 1], start.rotation, sigma)
 
     def refine(
         self,
@@ -694,55 +725,27 @@ class _Problem:
         min_depth: float,
         margin: float | None,
     ) -> _Candidate:
-        """Nelder-Mead over the free parameters (:class:`_Coordinates`). The bounds are
-        penalties."""
-        move_center = free[0]
-        # The depth on the planes that can bind near the start (the exact one is checked after).
-        planes = self.planes
-        j = len(planes.faces)
-        nearest = np.argsort(planes.offsets[:j] - planes.normals[:j] @ start.center)
-        rows = np.union1d(nearest[:_NEAR_PLANES], area_sample(planes.areas[:j], SAMPLE_FACES))
-        normals, offsets = planes.normals[rows], planes.offsets[rows]
-
-        def depth(center: np.ndarray) -> float:
-            return float((offsets - normals @ center).min())
-
+        """Quasi-Newton steps (L-BFGS-B) over the free parameters (:class:`_Coordinates`),
+        each gradient from one batch of forward differences. The bounds are quadratic
+        penalties, smooth where they start to bind; what they let slip is taken back on
+        every face after (the margin by :func:`_keep_margin`, the depth here)."""
         unit = max(kernel.inscribed_radius, 1e-3 * self.planes.size)
         coordinates = _Coordinates(start, free, unit)
-        region = self.sample_points  # the margin is checked on every face afterwards
-
-        def cost(x: np.ndarray) -> float:
-            c = coordinates.candidate(x)
-            penalty = 0.0
-            if move_center:
-                penalty += max(0.0, min_depth - depth(c.center)) / unit
-                penalty += max(0.0, -self.within_reach(c.center, slack=True)) / unit
-            units, zero = unit_rows(region - c.center)
-            if zero.any():
-                return _INFEASIBLE
-            if margin is not None:
-                rho = PoleCap.from_sigma(c.sigma).rho if c.sigma is not None else math.pi / 2
-                penalty += max(0.0, rho + margin - cap_radius(units, c.rotation[1]))
-            value = self.energy(c) + 100.0 * penalty
-            return value if math.isfinite(value) else _INFEASIBLE
-
-        x0, simplex = coordinates.start()
+        cost = _RefinementCost(self, coordinates, min_depth, margin, unit)
+        x0 = coordinates.start()
         found = minimize(
-            cost,
+            cost.value_and_gradient,
             x0,
-            method="Nelder-Mead",
-            options={
-                "xatol": 1e-4,
-                "fatol": 1e-6,
-                "maxfev": 120 * len(x0),
-                "adaptive": True,
-                "initial_simplex": simplex,
-            },
+            jac=True,
+            method="L-BFGS-B",
+            bounds=coordinates.bounds(),
+            options={"maxiter": _REFINE_STEPS, "ftol": _REFINE_TOLERANCE, "gtol": 1e-8},
         )
-        best = coordinates.candidate(found.x)
-        if cost(found.x) > cost(x0):
+        ends = cost(np.vstack([x0, found.x]))
+        if not ends[1] < ends[0]:
             return start
-        if move_center and planes.depth(best.center) < min_depth:
+        best = coordinates.candidate(found.x)
+        if free[0] and self.planes.depth(best.center) < min_depth:
             # A plane outside the subset binds: back towards the start, which is deep enough.
             best = self.back_inside(start, best, min_depth)
         return best
@@ -762,6 +765,102 @@ class _Problem:
         return _Candidate(center, best.rotation, best.sigma)
 
 
+class _RefinementCost:
+    """The refinement's cost of a batch of coordinates: the sample objective plus
+    ``_PENALTY`` times the squared shortfalls of the bounds (the kernel's depth and the
+    region's reach in units of ``unit``, the margin in radians)."""
+
+    def __init__(
+        self,
+        problem: _Problem,
+        coordinates: _Coordinates,
+        min_depth: float,
+        margin: float | None,
+        unit: float,
+    ) -> None:
+        self.problem, self.coordinates = problem, coordinates
+        self.min_depth, self.margin, self.unit = min_depth, margin, unit
+        # The depth on the planes that can bind near the start (the exact one is checked
+        # after): the nearest ones and an area-weighted sample.
+        planes, center = problem.planes, coordinates.start_candidate.center
+        j = len(planes.faces)
+        slack = planes.offsets[:j] - planes.normals[:j] @ center
+        nearest = np.argpartition(slack, _NEAR_PLANES)[:_NEAR_PLANES] if j > _NEAR_PLANES else []
+        rows = np.union1d(nearest, area_sample(planes.areas[:j], SAMPLE_FACES)).astype(np.int64)
+        self.normals, self.offsets = planes.normals[rows], planes.offsets[rows]
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """(k,) cost of the coordinates ``x`` (k, d)."""
+        batch = self.coordinates.candidates(x)
+        scores = self.problem.sample.scores(batch)
+        shortfalls = self._shortfalls(batch.centers, batch.sigmas, scores.cap_cosine)
+        value = scores.objective + _PENALTY * (shortfalls**2).sum(axis=0)
+        return np.where(np.isfinite(value), value, _INFEASIBLE)
+
+    def value_and_gradient(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """The cost at ``x`` (d,) and its gradient: through the closed-form warp
+        (:meth:`.objective.FaceEnergy.slope`), or for the separable method, whose angles
+        come from a root search, by forward differences in one batch."""
+        if self.problem.method is Method.SEPARABLE:
+            costs = self(np.vstack([x, x + _STEP * np.eye(len(x))]))
+            return float(costs[0]), (costs[1:] - costs[0]) / _STEP
+        batch = self.coordinates.candidates(x[None])
+        motion = self.coordinates.motion(x)
+        slope = self.problem.sample.slope(batch, motion)
+        value = float(slope.scores.objective[0])
+        if not math.isfinite(value):
+            return _INFEASIBLE, np.zeros(len(x))
+        cap_cosine = slope.scores.cap_cosine
+        shortfalls = self._shortfalls(batch.centers, batch.sigmas, cap_cosine)[:, 0]
+        slopes = self._shortfall_slopes(batch, cap_cosine[0], motion, slope.cap_cosine)
+        value += _PENALTY * float((shortfalls**2).sum())
+        return value, slope.energy + 2.0 * _PENALTY * (shortfalls @ slopes)
+
+    def _shortfalls(self, centers, sigmas, cap_cosine) -> np.ndarray:
+        """(3, k): by how much each candidate misses the kernel's depth and the region's
+        reach (in ``unit``) and the margin (radians); 0 where it keeps them."""
+        shortfalls = np.zeros((3, len(centers)))
+        if self.coordinates.move_center:
+            depth = (self.offsets - centers @ self.normals.T).min(axis=1)
+            shortfalls[0] = np.maximum(0.0, self.min_depth - depth) / self.unit
+            planes = self.problem.planes
+            away = np.linalg.norm(centers - planes.middle, axis=1)
+            shortfalls[1] = np.maximum(0.0, away - _REACH * planes.size) / self.unit
+        if self.margin is not None:
+            cap = np.arccos(np.clip(cap_cosine, -1.0, 1.0))
+            shortfalls[2] = np.maximum(0.0, self._cap_angle(sigmas) + self.margin - cap)
+        return shortfalls
+
+    def _shortfall_slopes(
+        self, batch: Candidates, cap_cosine: float, motion: Motion, cap_slope: np.ndarray
+    ) -> np.ndarray:
+        """(3, d): the gradients of one candidate's :meth:`_shortfalls` where they are
+        positive (the gradient of the nearest plane's depth, of the distance to the middle,
+        and of the cap's angle less the empty cap's)."""
+        center, d = batch.centers[0], len(motion.log_sigma)
+        slopes = np.zeros((3, d))
+        if self.coordinates.move_center:
+            nearest = int(np.argmin(self.offsets - self.normals @ center))
+            slopes[0] = motion.center @ self.normals[nearest] / self.unit
+            away = center - self.problem.planes.middle
+            length = float(np.linalg.norm(away))
+            if length > 0:
+                slopes[1] = motion.center @ away / (length * self.unit)
+        if self.margin is not None:
+            sigma = float(batch.sigmas[0])
+            turns = 0.0 if self.problem.method is Method.STANDARD else 1.0
+            rho_slope = turns * 2.0 * sigma / (1.0 + sigma * sigma) * motion.log_sigma
+            sine = math.sqrt(max(1.0 - cap_cosine * cap_cosine, 1e-30))
+            slopes[2] = rho_slope + cap_slope / sine
+        return slopes
+
+    def _cap_angle(self, sigmas: np.ndarray) -> np.ndarray:
+        """(k,) the cap's angle ``rho = 2 atan(sigma)`` (90 degrees for the standard method)."""
+        if self.problem.method is Method.STANDARD:
+            return np.full(len(sigmas), math.pi / 2)
+        return 2.0 * np.arctan(sigmas)
+
+
 class _Coordinates:
     """The refinement's coordinates, in the start's frame: the centre's offset (in units of
     the inscribed radius, along the start's axes), the pole's tilt (radians, towards the
@@ -771,30 +870,137 @@ class _Coordinates:
         self.start_candidate, self.unit = start, unit
         self.move_center, self.turn_pole, self.change_sigma = free
 
-    def start(self) -> tuple[np.ndarray, np.ndarray]:
-        """The start's coordinates and the initial simplex around them."""
+    def start(self) -> np.ndarray:
+        """The start's coordinates."""
         x0 = [0.0] * (3 * self.move_center + 2 * self.turn_pole)
-        steps = [0.5] * (3 * self.move_center) + [0.1] * (2 * self.turn_pole)
         if self.change_sigma:
             x0.append(math.log(self.start_candidate.sigma))
-            steps.append(0.3)
-        return np.array(x0), np.vstack([x0, np.array(x0) + np.diag(steps)])
+        return np.array(x0)
 
-    def candidate(self, x: np.ndarray) -> _Candidate:
+    def bounds(self) -> list[tuple[float | None, float | None]]:
+        """Per coordinate: only log sigma is bounded, to the search's range (a flat
+        landscape must not drift beyond it)."""
+        free = [(None, None)] * (3 * self.move_center + 2 * self.turn_pole)
+        low, high = SIGMA_SEARCH
+        return free + [(math.log(low), math.log(high))] * self.change_sigma
+
+    def candidates(self, x: np.ndarray) -> Candidates:
+        """The candidates of the coordinates ``x`` (k, d)."""
         start = self.start_candidate
         axes = start.rotation  # rows: local X, Y (the pole), Z
-        x = list(x)
-        center = start.center
+        k = len(x)
+        column = 0
+        centers = np.broadcast_to(start.center, (k, 3))
         if self.move_center:
-            center = start.center + self.unit * (np.array(x[:3]) @ axes)
-            x = x[3:]
-        rotation = start.rotation
+            centers = start.center + self.unit * (x[:, :3] @ axes)
+            column = 3
+        rotations = np.broadcast_to(start.rotation, (k, 3, 3))
         if self.turn_pole:
-            pole = axes[1] + x[0] * axes[0] + x[1] * axes[2]
-            rotation = Frame.from_pole_up(pole, axes[2]).rotation
-            x = x[2:]
-        sigma = start.sigma
+            tilt = x[:, column : column + 2]
+            poles = axes[1] + tilt[:, :1] * axes[0] + tilt[:, 1:] * axes[2]
+            rotations = _rotations_from_pole_up(poles, axes[2])
+            column += 2
+        sigmas = np.full(k, _sigma_or_one(start.sigma))
         if self.change_sigma:
-            low, high = SIGMA_SEARCH  # a flat landscape must not drift beyond the search
-            sigma = math.exp(min(max(x[0], math.log(low)), math.log(high)))
-        return _Candidate(center, rotation, sigma)
+            low, high = SIGMA_SEARCH
+            sigmas = np.exp(np.clip(x[:, column], math.log(low), math.log(high)))
+        return Candidates(centers, rotations, sigmas)
+
+    def motion(self, x: np.ndarray) -> Motion:
+        """How the candidate of the coordinates ``x`` (d,) moves with each of them."""
+        start = self.start_candidate
+        axes = start.rotation
+        d = len(x)
+        motion = Motion(np.zeros((d, 3, 3)), np.zeros((d, 3)), np.zeros(d))
+        column = 0
+        if self.move_center:
+            motion.center[:3] = self.unit * axes
+            column = 3
+        if self.turn_pole:
+            tilt = x[column : column + 2]
+            pole = axes[1] + tilt[0] * axes[0] + tilt[1] * axes[2]
+            motion.rotation[column : column + 2] = _rotation_slopes(pole, axes[2], axes[[0, 2]])
+            column += 2
+        if self.change_sigma:
+            low, high = SIGMA_SEARCH
+            motion.log_sigma[column] = float(math.log(low) < x[column] < math.log(high))
+        return motion
+
+    def candidate(self, x: np.ndarray) -> _Candidate:
+        """The candidate of the coordinates ``x`` (d,)."""
+        batch = self.candidates(x[None])
+        sigma = float(batch.sigmas[0]) if self.start_candidate.sigma is not None else None
+        return _Candidate(batch.centers[0].copy(), batch.rotations[0].copy(), sigma)
+
+
+def _rotations_from_pole_up(poles: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(k, 3, 3) world-to-local rotations with local ``+Y`` along ``poles`` (k, 3) and the
+    part of ``up`` (3,) orthogonal to it as local ``+Z``: :meth:`.Frame.from_pole_up` for a
+    batch (``up`` is the start's local Z, far from parallel to a slightly tilted pole)."""
+    y_axes = poles / np.linalg.norm(poles, axis=1, keepdims=True)
+    x_axes = _cross(y_axes, up)
+    x_axes /= np.linalg.norm(x_axes, axis=1, keepdims=True)
+    # A second pass of Gram-Schmidt, as Frame.from_pole_up does.
+    x_axes -= np.einsum("kj,kj->k", x_axes, y_axes)[:, None] * y_axes
+    x_axes /= np.linalg.norm(x_axes, axis=1, keepdims=True)
+    return np.stack([x_axes, y_axes, _cross(x_axes, y_axes)], axis=1)
+
+
+def _rotation_slopes(pole: np.ndarray, up: np.ndarray, turns: np.ndarray) -> np.ndarray:
+    """(t, 3, 3): the derivatives of :func:`_rotations_from_pole_up` of ``pole`` (3,) and
+    ``up`` (3,) as the pole moves along each of ``turns`` (t, 3)."""
+    length = np.linalg.norm(pole)
+    y_axis = pole / length
+    across = _cross(y_axis, up)
+    width = np.linalg.norm(across)
+    x_axis = across / width
+    dy = (turns - np.outer(turns @ y_axis, y_axis)) / length
+    d_across = _cross(dy, up)
+    dx = (d_across - np.outer(d_across @ x_axis, x_axis)) / width
+    dz = _cross(dx, y_axis) + _cross(x_axis, dy)
+    return np.stack([dx, dy, dz], axis=1)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of (..., 3) arrays, without its axis handling (the refinement calls it
+    on a few vectors at a time, where that handling costs more than the products)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def _cap_radii(points: np.ndarray, centers: np.ndarray, pole: np.ndarray) -> np.ndarray:
+    """(k,) angular radius of the largest cap around ``pole`` holding no direction from each
+    of ``centers`` (k, 3) to ``points`` (n, 3) (:func:`.emptycap.cap_radius` for a batch)."""
+    offsets = points[None] - centers[:, None]
+    cosine = (offsets @ pole) / np.linalg.norm(offsets, axis=2)
+    return np.arccos(np.clip(cosine.max(axis=1), -1.0, 1.0))
+
+
+def _best_on_grid(grid: np.ndarray, energies: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of ``grid`` (k, g), ascending, the point of least energy and that energy;
+    energies equal to ``_TIE`` (relative) count as equal and the larger point wins (the first
+    point where every energy is inf)."""
+    least = energies.min(axis=1, keepdims=True)
+    with np.errstate(invalid="ignore"):
+        tied = energies <= least + _TIE * np.abs(least)
+    tied &= np.isfinite(least)
+    order = np.argsort(grid, axis=1, kind="stable")
+    ranked = np.take_along_axis(tied, order, axis=1)
+    last = grid.shape[1] - 1 - np.argmax(ranked[:, ::-1], axis=1)
+    pick = np.where(np.isfinite(least[:, 0]), order[np.arange(len(grid)), last], 0)
+    rows = np.arange(len(grid))
+    return grid[rows, pick], energies[rows, pick]
+
+
+def _sigma_or_one(sigma: float | None) -> float:
+    """The sigma a batch carries: 1 (no warp) for the standard method, which has none."""
+    return 1.0 if sigma is None else float(sigma)
+
+
+def _batch(candidates: list[_Candidate]) -> Candidates:
+    return Candidates(
+        np.array([c.center for c in candidates]),
+        np.array([c.rotation for c in candidates]),
+        np.array([_sigma_or_one(c.sigma) for c in candidates]),
+    )

@@ -78,7 +78,8 @@ def write_manifest(folder: Path, scans: dict[str, Path], copies: int) -> Path:
 
 
 def run(manifest: Path, out: Path, processes: int) -> tuple[float, list[float], dict]:
-    """Wall seconds, the seconds of each scan computed (its log line's), and the summary."""
+    """Wall seconds, the CPU seconds of each scan computed (its log line's), and the
+    summary."""
     started = time.perf_counter()
     done = subprocess.run(
         [MESHFLAT, "batch", manifest, "--out", out, "--processes", str(processes)],
@@ -90,16 +91,16 @@ def run(manifest: Path, out: Path, processes: int) -> tuple[float, list[float], 
     if done.returncode != 0:
         raise SystemExit(f"meshflat batch exited {done.returncode}:\n{done.stderr[-4000:]}")
     lines = [json.loads(line) for line in done.stderr.strip().splitlines()]
-    seconds = [line["seconds"] for line in lines if line["message"] == "scan done"]
+    seconds = [line["cpu_seconds"] for line in lines if line["message"] == "scan done"]
     return wall, seconds, lines[-1]
 
 
-def row(label: str, processes: int, scans: int, wall: float, seconds: list[float]) -> str:
+def row(label: str, processes: int, scans: int, wall: float, cpu: list[float], load: float) -> str:
     per_minute = scans / wall * 60
-    each = f"{statistics.median(seconds):.2f}" if seconds else "-"
+    each = f"{statistics.mean(cpu):.2f} | {60 / statistics.mean(cpu):.0f}" if cpu else "- | -"
     return (
         f"| {label} | {processes} | {scans} | {wall:.1f} | {per_minute:.1f} | "
-        f"{per_minute / processes:.1f} | {each} |"
+        f"{per_minute / processes:.1f} | {each} | {load:.1f} |"
     )
 
 
@@ -107,18 +108,20 @@ def measure(manifest: Path, scans: int, runs: int) -> list[str]:
     rows = []
     with tempfile.TemporaryDirectory(prefix="meshflat-batch-bench-") as scratch:
         for processes in (1, 2):
-            walls, seconds = [], []
+            walls, cpu, loads = [], [], []
             for attempt in range(runs):
                 out = Path(scratch) / f"out-{processes}-{attempt}"
                 wall, each, summary = run(manifest, out, processes)
                 assert summary["done"] == scans, summary
                 walls.append(wall)
-                seconds += each
+                cpu += each
+                loads.append(os.getloadavg()[0])
                 print(f"{processes} process(es), run {attempt + 1}: {wall:.1f} s", file=sys.stderr)
-            rows.append(row("fresh folder", processes, scans, statistics.median(walls), seconds))
+            wall, load = statistics.median(walls), statistics.median(loads)
+            rows.append(row("fresh folder", processes, scans, wall, cpu, load))
         wall, each, summary = run(manifest, out, 2)
         assert summary["skipped"] == scans, summary
-        rows.append(row("rerun, every scan done (skipped)", 2, scans, wall, each))
+        rows.append(row("rerun, all done", 2, scans, wall, each, os.getloadavg()[0]))
     return rows
 
 
@@ -144,10 +147,13 @@ def main(argv: list[str] | None = None) -> int:
         f"{stamp}, {machine()}. The set: {listed}; {args.copies} copies of each, the region "
         f"alone, outputs {', '.join(OUTPUTS)}; `meshflat batch` as installed, wall time from "
         f"its start (starting its processes included) to its exit, median of {args.runs} "
-        f"runs; load average {load:.1f} before them (other work on the machine).\n\n"
+        "runs; CPU s / scan: the mean of the scans' own CPU time in their processes (their "
+        "log lines), so scans / CPU-min is what a core gives when nothing else runs on it; "
+        f"load: the 1-minute load average, {load:.1f} before the runs (a load above the "
+        "cores means other work took CPU from the batch).\n\n"
         "| run | processes | scans | wall s | scans / min | scans / min / core "
-        "| s / scan (median, in its process) |\n|---|---:|---:|---:|---:|---:|---:|\n"
-        + "\n".join(rows)
+        "| CPU s / scan | scans / CPU-min | load after |\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|\n" + "\n".join(rows)
     )
     publish("batch-bench", "Batch runs (make bench-batch)", report, args.write_docs)
     return 0

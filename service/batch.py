@@ -33,6 +33,7 @@ detail), then a summary. Nothing of a mesh goes to disk but the outputs asked fo
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import logging
 import os
@@ -114,6 +115,8 @@ class Outcome:
     status: str
     seconds: float
     problem: dict | None = None
+    #: CPU seconds of a scan done (its process's), whatever else the machine runs.
+    cpu_seconds: float | None = None
 
 
 # -- the manifest --------------------------------------------------------------------------
@@ -271,9 +274,18 @@ def shard_of(scans: list[Scan], index: int | None, count: int | None) -> list[Sc
 
 def process(scan: Scan, out: Path, settings: Settings) -> Outcome:
     """Compute ``scan`` into ``out/NAME/`` unless its digest says it is done; a failure is
-    recorded in its ``error.json`` and returned, never raised."""
-    started = time.perf_counter()
-    folder = out / scan.name
+    recorded in its ``error.json`` (when the folder can be written) and returned, never
+    raised."""
+    started, folder = time.perf_counter(), out / scan.name
+    try:
+        return _process(scan, folder, settings, started)
+    except OSError as error:  # the output folder: not writable, or full
+        detail = f"cannot write in {str(folder)!r}: {error.strerror}"
+        return _failed(scan, folder, Problem(500, detail, "output-not-written"), started)
+
+
+def _process(scan: Scan, folder: Path, settings: Settings, started: float) -> Outcome:
+    cpu = time.process_time()
     folder.mkdir(parents=True, exist_ok=True)
     try:
         data = scan.mesh.read_bytes()
@@ -288,13 +300,16 @@ def process(scan: Scan, out: Path, settings: Settings) -> Outcome:
         written = _compute(scan, data, settings, folder)
     except Problem as problem:
         return _failed(scan, folder, problem, started)
+    except OSError:
+        raise  # writing the outputs (process says so)
     except Exception as error:  # a bug: this scan fails alone, named by the error's type only
         # (its message could quote the mesh).
         problem = Problem(500, f"internal error ({type(error).__name__})", "internal-error")
         return _failed(scan, folder, problem, started)
     record = {"digest": digest, "meshflat": version("meshflat"), "outputs": written}
     _write_atomically(folder / DIGEST_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
-    return Outcome(scan, "done", time.perf_counter() - started)
+    seconds = time.perf_counter() - started
+    return Outcome(scan, "done", seconds, cpu_seconds=time.process_time() - cpu)
 
 
 def _compute(scan: Scan, data: bytes, settings: Settings, folder: Path) -> dict[str, dict]:
@@ -351,8 +366,6 @@ def _forget(folder: Path, scan: Scan) -> None:
 
 
 def _failed(scan: Scan, folder: Path, problem: Problem, started: float) -> Outcome:
-    for name, _ in scan.outputs:
-        _partial(folder / name).unlink(missing_ok=True)
     answer = orjson.loads(problem_body(problem))
     record = {
         **answer,
@@ -361,7 +374,10 @@ def _failed(scan: Scan, folder: Path, problem: Problem, started: float) -> Outco
         "mesh": str(scan.mesh),
         "meshflat": version("meshflat"),
     }
-    _write_atomically(folder / ERROR_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
+    with contextlib.suppress(OSError):  # a folder that cannot be written: the log says why
+        for name, _ in scan.outputs:
+            _partial(folder / name).unlink(missing_ok=True)
+        _write_atomically(folder / ERROR_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
     return Outcome(scan, "failed", time.perf_counter() - started, answer)
 
 
@@ -444,7 +460,10 @@ def run_batch(args: argparse.Namespace) -> int:
     settings = Settings.from_env()
     scans = shard_of(read_manifest(Path(args.manifest)), args.shard_index, args.shard_count)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise Problem(422, f"cannot make {str(out)!r}: {error.strerror}", field="--out") from None
     progress = Progress([scan.name for scan in scans], args.progress or sys.stderr.isatty())
     counts = Counter({"done": 0, "skipped": 0, "failed": 0})
     started = time.perf_counter()
@@ -464,12 +483,13 @@ def run_batch(args: argparse.Namespace) -> int:
 
 def _log(outcome: Outcome) -> None:
     where = {"scan": outcome.scan.name, "line": outcome.scan.line}
-    if outcome.problem is None:
+    if outcome.status == "skipped":
         seconds = round(outcome.seconds, 3)
-        message = (
-            "scan done" if outcome.status == "done" else "scan skipped: done before, same inputs"
-        )
-        logger.info(message, extra={**where, "seconds": seconds})
+        logger.info("scan skipped: done before, same inputs", extra={**where, "seconds": seconds})
+        return
+    if outcome.problem is None:
+        times = {"seconds": round(outcome.seconds, 3), "cpu_seconds": round(outcome.cpu_seconds, 3)}
+        logger.info("scan done", extra={**where, **times})
         return
     problem = outcome.problem
     logger.error(

@@ -190,6 +190,21 @@ def test_an_unreadable_mesh_fails_its_scan_only(tmp_path, capsys):
     assert error["field"] == "mesh" and "cannot read" in error["detail"]
 
 
+def test_a_folder_that_cannot_be_written_fails_its_scan_only(tmp_path, capsys):
+    manifest = write_manifest(tmp_path, [{**scalp(), "name": name} for name in ("a", "b")])
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "a").write_text("a file where the scan's folder would go")
+    assert batch(manifest, out, "--processes", 1) == SCANS_FAILED
+    lines = logged(capsys)
+    assert by_scan(lines) == {"a": "scan failed", "b": "scan done"}
+    failed = next(line for line in lines if line.get("scan") == "a")
+    assert "cannot write in" in failed["detail"] and str(out / "a") in failed["detail"]
+
+    assert batch(manifest, out / "a" / "below", "--processes", 1) == 2
+    assert "--out" in capsys.readouterr().err
+
+
 def test_shards_partition_the_scans(tmp_path, capsys, monkeypatch):
     names = [f"s{i}" for i in range(7)]
     line = {**scalp(), "command": "validate"}

@@ -16,6 +16,7 @@ import numpy as np
 from pydantic import BaseModel, Field, PrivateAttr
 
 from transforms import Layout, Method
+from transforms.fit import EXPLAIN_FACES
 
 from .meshio import FORMATS
 from .params import Region, choice
@@ -321,7 +322,9 @@ class SigmaEnergy(Answer):
 class Explain(Answer):
     energy_start: float = Field(
         description="Area-weighted isometric energy of the starting choice (the kernel's "
-        "deepest point, the empty cap's pole, the best sigma for it)."
+        "deepest point, the empty cap's pole, the best sigma for it), measured on every "
+        f"face of a region of up to {EXPLAIN_FACES:,} faces and on every k-th face of a "
+        "larger one (energy_end is always measured on every face)."
     )
     energy_end: float = Field(description="The same for the answer.")
     energy_end_trusted: float | None = Field(
@@ -346,7 +349,9 @@ class Explain(Answer):
         "seen from the centre."
     )
     margin_deg: float = Field(description="The margin achieved to seam and singular points.")
-    energy_at_sigma: list[SigmaEnergy] = Field(description="The energy at sigma 0.3 and 1.")
+    energy_at_sigma: list[SigmaEnergy] = Field(
+        description="The energy at sigma 0.3 and 1, measured as energy_start."
+    )
     backfacing_faces: list[int] = Field(description="Triangles seen from behind, if any.")
     notes: list[str] = Field(description="What the fit could not do, in words.")
 

@@ -231,3 +231,21 @@ def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest
     seen = flatten_region(problem.sample_points, problem.sample_faces[~behind], frame, chart)
     expected = seen.distortion.isometric.mean + BACKFACING_WEIGHT * hidden
     assert problem.energy(_Candidate(centre, rotation, 0.5)) == pytest.approx(expected, rel=1e-9)
+
+
+def test_a_large_region_explains_with_energies_measured_on_runs_of_its_faces(monkeypatch):
+    """Beyond EXPLAIN_FACES the start's energy and the reported sigmas' are estimated on
+    runs of consecutive faces; the answer's own energy stays exact."""
+    import transforms.fit as fit_module
+
+    vertices, faces = scalp()
+    exact = fit_region(vertices, faces)
+    monkeypatch.setattr(fit_module, "EXPLAIN_FACES", 400)
+    monkeypatch.setattr(fit_module, "_EXPLAIN_RUN", 16)
+    estimated = fit_region(vertices, faces)
+    e, x = estimated.explanation, exact.explanation
+    assert e.energy_end == x.energy_end
+    assert e.energy_end == estimated.region.distortion.isometric.mean
+    assert e.energy_start == pytest.approx(x.energy_start, rel=0.02)
+    for sigma, energy in x.energy_at_sigma.items():
+        assert e.energy_at_sigma[sigma] == pytest.approx(energy, rel=0.05)

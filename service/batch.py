@@ -36,6 +36,7 @@ import argparse
 import contextlib
 import hashlib
 import logging
+import math
 import os
 import re
 import sys
@@ -445,7 +446,24 @@ def _fresh_processes() -> BaseContext:
 
 
 def available_cpus() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    """The CPUs this process may use: its affinity, capped by the cgroup's CPU quota (a
+    container's CPU limit; the affinity still counts the node's cores)."""
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    quota = _cpu_quota()
+    return max(1, min(cpus or 1, math.ceil(quota))) if quota else cpus or 1
+
+
+def _cpu_quota() -> float | None:
+    """CPUs' worth of time the cgroup may use (v2 ``cpu.max``, v1 ``cpu.cfs_quota_us``), or
+    None without a limit."""
+    with contextlib.suppress(OSError, ValueError):
+        quota, period = Path("/sys/fs/cgroup/cpu.max").read_text().split()[:2]
+        return None if quota == "max" else int(quota) / int(period)
+    with contextlib.suppress(OSError, ValueError):
+        quota = int(Path("/sys/fs/cgroup/cpu/cpu.cfs_quota_us").read_text())
+        period = int(Path("/sys/fs/cgroup/cpu/cpu.cfs_period_us").read_text())
+        return quota / period if quota > 0 else None
+    return None
 
 
 def run_batch(args: argparse.Namespace) -> int:

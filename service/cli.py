@@ -253,7 +253,10 @@ def _add_batch(commands) -> None:
     )
     batch.add_argument("--out", metavar="DIR", required=True, help="a folder per scan in DIR")
     batch.add_argument(
-        "--processes", type=_positive, metavar="N", help="default: the CPUs this may use"
+        "--processes",
+        type=_positive,
+        metavar="N",
+        help="default: the CPUs this may use (within a container's CPU limit)",
     )
     batch.add_argument(
         "--shard-count", type=_positive, metavar="N", help="take the scans i with i %% N == INDEX"

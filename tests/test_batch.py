@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from service.batch import DIGEST_FILE, ERROR_FILE, SCANS_FAILED
+from service.batch import DIGEST_FILE, ERROR_FILE, SCANS_FAILED, available_cpus
 from service.cli import main
 from service.outputs import Output
 from service.samples import SAMPLES
@@ -237,6 +237,23 @@ def test_shard_options_are_checked(tmp_path, capsys, monkeypatch, options, words
     assert batch(manifest, tmp_path / "out", *options) == 2
     said = capsys.readouterr().err
     assert all(word in said for word in words), said
+
+
+@pytest.mark.parametrize(
+    ("cpu_max", "cpus"), [("max 100000", 4), ("150000 100000", 2), ("50000 100000", 1)]
+)
+def test_the_default_processes_keep_within_a_containers_cpu_limit(monkeypatch, cpu_max, cpus):
+    # In a container the affinity counts the node's cores; the CPU limit is the cgroup's quota.
+    real_read_text = Path.read_text
+
+    def read_text(path, *args, **kwargs):
+        if str(path) == "/sys/fs/cgroup/cpu.max":
+            return cpu_max + "\n"
+        return real_read_text(path, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "read_text", read_text)
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: set(range(4)))
+    assert available_cpus() == cpus
 
 
 LINE = {"mesh": "head.ply", "outputs": ["map.json"]}

@@ -39,8 +39,10 @@ from .region import FlatRegion, flatten_region
 from .sampling import area_sample
 from .viewpoint import check_center_sees_area
 
-#: Faces the search evaluates each candidate on, and vertices the pole's hull is built from.
+#: Faces the search evaluates each candidate on (the slide on fewer), and vertices the pole's
+#: hull is built from.
 SAMPLE_FACES = 1000
+COARSE_SAMPLE_FACES = 250
 HULL_VERTICES = 2000
 #: Where sigma is searched (beyond these the warp squeezes the region to a point or a line).
 SIGMA_SEARCH = (1e-3, 10.0)
@@ -231,12 +233,51 @@ def fit_region(
     refine = any(search.free) and not search.kernel.empty
     if refine:
         start = problem.refine(start, search.free, search.kernel, search.min_depth, search.margin)
+    seen = _Seen.of(problem, search, start)
+    # The kernel's planes and the region's own vertices are let go before the answer is
+    # flattened: the fit's peak is then its answer's flatten's.
+    problem.release()
     best = _keep_margin(
         problem, start, search.choose_sigma, search.margin, search.bounds.min_margin_deg
     )
     if any(search.free):
-        best = _keep_the_better(problem, search, best)
-    return _explain(problem, search, best)
+        best = _keep_the_better(problem, search, best, seen)
+    return _explain(problem, search, best, seen)
+
+
+@dataclass(frozen=True)
+class _Seen:
+    """What the explanation reads of the start and of the searched answer, measured before
+    the answer is flattened: per candidate (the start first), the depth of its centre in
+    the kernel, the empty cap around its pole in degrees, and the region's energy
+    (:meth:`_Problem.region_energies`); and the energies at :data:`REPORTED_SIGMAS` with the
+    searched answer's centre and rotation (its sigma may still narrow: they do not depend
+    on it)."""
+
+    depth: tuple[float, float]
+    empty_cap_deg: tuple[float, float]
+    energy: tuple[float, float]
+    energy_at_sigma: dict
+
+    @classmethod
+    def of(cls, problem: _Problem, search: _Search, found: _Candidate) -> _Seen:
+        first = search.initial
+        centers = np.array([first.center, found.center])
+        j = len(problem.planes.faces)
+        planes = problem.planes
+        depth = (planes.offsets[:j] - centers @ planes.normals[:j].T).min(axis=1)
+        caps = [
+            _cap_radii(problem.region_points, c.center[None], c.rotation[1])[0]
+            for c in (first, found)
+        ]
+        reported = _reported(problem, found)
+        energies = problem.region_energies([first, found, *reported])
+        return cls(
+            depth=tuple(depth.tolist()),
+            empty_cap_deg=tuple(math.degrees(c) for c in caps),
+            energy=(float(energies[0]), float(energies[1])),
+            energy_at_sigma=dict(zip(REPORTED_SIGMAS, energies[2:].tolist(), strict=False)),
+        )
 
 
 @dataclass
@@ -253,8 +294,6 @@ class _Search:
     free: list[bool]
     initial: _Candidate
     notes: list[str]
-    energy_start: float | None = None
-    energy_at_sigma: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -423,16 +462,13 @@ def _keep_margin(
     return answer
 
 
-def _keep_the_better(problem: _Problem, search: _Search, answer: _Flattened) -> _Flattened:
+def _keep_the_better(
+    problem: _Problem, search: _Search, answer: _Flattened, seen: _Seen
+) -> _Flattened:
     """The start instead of ``answer`` when, on every face, its energy is lower and it keeps
-    the margin: the search saw a sample. The start's energy is measured together with the
-    answer's and the answer's at :data:`REPORTED_SIGMAS` (one pass,
-    :meth:`_Problem.region_energies`); the start is flattened only when it may win."""
-    reported = _reported(problem, answer.candidate)
-    energies = problem.region_energies([search.initial, answer.candidate, *reported])
-    search.energy_start = float(energies[0])
-    search.energy_at_sigma = dict(zip(REPORTED_SIGMAS, energies[2:].tolist(), strict=False))
-    if not energies[0] < energies[1]:
+    the margin: the search saw a sample. The start is flattened only when its energy
+    (:class:`_Seen`) is below the answer's."""
+    if not seen.energy[0] < answer.flat.distortion.isometric.mean:
         return answer
     first = _flattened(problem, search.initial)
     keeps_margin = search.margin is None or first.margin_deg >= min(
@@ -442,7 +478,6 @@ def _keep_the_better(problem: _Problem, search: _Search, answer: _Flattened) -> 
         first.flat.distortion.isometric.mean < answer.flat.distortion.isometric.mean
         and keeps_margin
     ):
-        search.energy_at_sigma = None  # measured for the answer, which lost
         return first
     return answer
 
@@ -455,7 +490,7 @@ def _reported(problem: _Problem, best: _Candidate) -> list[_Candidate]:
     return [_Candidate(best.center, best.rotation, sigma) for sigma in REPORTED_SIGMAS]
 
 
-def _explain(problem: _Problem, search: _Search, answer: _Flattened) -> Fit:
+def _explain(problem: _Problem, search: _Search, answer: _Flattened, seen: _Seen) -> Fit:
     """The fit, with the notes on the bounds it could not keep and the energies at
     :data:`REPORTED_SIGMAS`."""
     best, flat, notes = answer.candidate, answer.flat, search.notes
@@ -465,7 +500,8 @@ def _explain(problem: _Problem, search: _Search, answer: _Flattened) -> Fit:
             f"degrees, below min_margin_deg ({search.bounds.min_margin_deg:g})"
         )
     kernel = search.kernel
-    depth = problem.planes.depth(best.center)
+    start_won = best is search.initial
+    depth = seen.depth[0 if start_won else 1]
     if not kernel.empty and depth < search.min_depth:
         notes.append(
             f"the centre is {depth:.4g} deep in the kernel, less than min_kernel_depth "
@@ -473,20 +509,18 @@ def _explain(problem: _Problem, search: _Search, answer: _Flattened) -> Fit:
             f"{kernel.inscribed_radius:.4g})"
         )
     energy_end = flat.distortion.isometric.mean
-    energy_at_sigma = search.energy_at_sigma
-    if energy_at_sigma is None:
+    energy_at_sigma = seen.energy_at_sigma
+    if start_won:  # measured for the searched answer, which lost
         reported = _reported(problem, best)
         energies = problem.region_energies(reported) if reported else []
         energy_at_sigma = dict(zip(REPORTED_SIGMAS, list(energies), strict=False))
     explanation = FitExplanation(
-        energy_start=energy_end if search.energy_start is None else search.energy_start,
+        energy_start=seen.energy[0] if any(search.free) else energy_end,
         energy_end=energy_end,
         kernel_inscribed_radius=kernel.inscribed_radius,
         kernel_empty=kernel.empty,
         center_depth=depth,
-        empty_cap_deg=math.degrees(
-            _cap_radii(problem.region_points, best.center[None], best.rotation[1])[0]
-        ),
+        empty_cap_deg=seen.empty_cap_deg[0 if start_won else 1],
         margin_deg=answer.margin_deg,
         energy_at_sigma={float(k): float(v) for k, v in energy_at_sigma.items()},
         backfacing_faces=flat.validation.backfacing_faces,
@@ -550,12 +584,12 @@ class _Problem:
         areas = np.zeros(len(faces))
         areas[self.planes.faces] = self.planes.areas[:j]
         picked = area_sample(areas, SAMPLE_FACES)
-        sample = faces[picked]
-        sample_used, compact = np.unique(sample, return_inverse=True)
-        self.sample_faces = compact.reshape(-1, 3)
-        self.sample_points = points[sample_used]
+        self.sample_points, self.sample_faces = _compacted(points, faces[picked])
         self.sample_areas = areas[picked]
         self.sample = FaceEnergy(self.sample_points, self.sample_faces, method, layout)
+        # The slide only picks the basin the refinement starts in: a coarser sample.
+        coarse = _compacted(points, faces[area_sample(areas, COARSE_SAMPLE_FACES)])
+        self.coarse = FaceEnergy(*coarse, method, layout)
         # The directions the pole's hull and the slide's caps are judged on.
         rows = np.linspace(0, len(self.region_points) - 1, min(HULL_VERTICES, len(self.used)))
         self.hull_points = self.region_points[rows.astype(np.int64)]
@@ -575,6 +609,11 @@ class _Problem:
         if fixed.center is not None:
             check_center_sees_area(points, faces, as_vector(fixed.center, "center"))
         return cls(points, faces, method, threads, Layout(layout))
+
+    def release(self) -> None:
+        """Let go of what only the search reads: the kernel's planes, the region's own
+        vertices and the hull's (the flatten and the energies read the input's arrays)."""
+        self.planes = self.region_points = self.used = self.hull_points = None
 
     @property
     def closed(self) -> bool:
@@ -656,6 +695,7 @@ class _Problem:
         rotations: np.ndarray,
         largest_rho: np.ndarray,
         search: tuple[int, int, int] = (_SIGMA_GRID, _ZOOMS, _ZOOM_POINTS),
+        coarse: bool = False,
     ) -> np.ndarray:
         """(k,) for each of ``k`` centres (k, 3) and rotations (k, 3, 3), the sigma of least
         sample energy with the cap's angle at most ``largest_rho`` (k,).
@@ -664,20 +704,22 @@ class _Problem:
         ``search[2]`` points around the best point so far, all lines at once. Energies equal
         to ``_TIE`` (relative) count as equal and the larger sigma wins, so that rounding,
         which differs with the mesh's pose, cannot pick another point of a flat stretch.
+        ``coarse``: on the coarse sample.
         """
+        sample = self.coarse if coarse else self.sample
         low, high = SIGMA_SEARCH
         floor = 2.0 * math.atan(low)
         highs = np.minimum(high, np.tan(np.maximum(largest_rho, floor) / 2.0))
         bottom, tops = math.log(low), np.log(np.maximum(highs, low))
         points, zooms, zoom_points = search
         grid = bottom + np.outer(tops - bottom, np.linspace(0.0, 1.0, points))
-        energies = self._line_energies(centers, rotations, grid)
+        energies = self._line_energies(centers, rotations, grid, sample)
         best_x, best_e = _best_on_grid(grid, energies)
         step = (tops - bottom) / (points - 1)
         for _ in range(zooms):
             grid = best_x[:, None] + np.outer(step, np.linspace(-1.0, 1.0, zoom_points))
             grid = np.clip(grid, bottom, tops[:, None])
-            energies = self._line_energies(centers, rotations, grid)
+            energies = self._line_energies(centers, rotations, grid, sample)
             # The best so far stays in the running (the finer grid may miss it).
             best_x, best_e = _best_on_grid(
                 np.column_stack([grid, best_x]), np.column_stack([energies, best_e])
@@ -685,13 +727,15 @@ class _Problem:
             step = step * 2.0 / (zoom_points - 1)
         return np.where(highs <= low, highs, np.exp(best_x))
 
-    def _line_energies(self, centers, rotations, grid: np.ndarray) -> np.ndarray:
-        """(k, g) sample objective at ``exp(grid)`` (k, g) along each line."""
+    def _line_energies(
+        self, centers, rotations, grid: np.ndarray, sample: FaceEnergy
+    ) -> np.ndarray:
+        """(k, g) objective on ``sample`` at ``exp(grid)`` (k, g) along each line."""
         k, g = grid.shape
         batch = Candidates.of(
             np.repeat(centers, g, axis=0), np.repeat(rotations, g, axis=0), np.exp(grid).ravel()
         )
-        return self.sample.scores(batch).objective.reshape(k, g)
+        return sample.scores(batch).objective.reshape(k, g)
 
     def best_sigma(self, center: np.ndarray, rotation: np.ndarray, largest_rho: float) -> float:
         """:meth:`best_sigmas` for one centre and rotation."""
@@ -723,14 +767,14 @@ class _Problem:
             room = np.full(len(centers), math.pi)
             if margin is not None:
                 room = _cap_radii(self.hull_points, centers, pole) - margin
-            sigmas = self.best_sigmas(centers, rotations, room, _SLIDE_SIGMA_SEARCH)
+            sigmas = self.best_sigmas(centers, rotations, room, _SLIDE_SIGMA_SEARCH, coarse=True)
         else:
             sigmas = np.full(len(centers), _sigma_or_one(start.sigma))
         batch = Candidates.of(np.vstack([start.center, centers]), start.rotation, 0.0)
         batch = Candidates(
             batch.centers, batch.rotations, np.r_[_sigma_or_one(start.sigma), sigmas]
         )
-        energies = self.sample.scores(batch).objective
+        energies = self.coarse.scores(batch).objective
         best = int(np.argmin(energies))
         if not energies[best] < energies[0]:
             return start
@@ -1011,6 +1055,12 @@ def _best_on_grid(grid: np.ndarray, energies: np.ndarray) -> tuple[np.ndarray, n
     pick = np.where(np.isfinite(least[:, 0]), order[np.arange(len(grid)), last], 0)
     rows = np.arange(len(grid))
     return grid[rows, pick], energies[rows, pick]
+
+
+def _compacted(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices ``faces`` use, and the faces indexing them."""
+    used, compact = np.unique(faces, return_inverse=True)
+    return points[used], compact.reshape(-1, 3)
 
 
 def _sigma_or_one(sigma: float | None) -> float:

@@ -217,7 +217,7 @@ def region_energy(
     candidates: Candidates,
     method: Method,
     layout: Layout,
-    block: int = 1 << 15,
+    block: int = 1 << 13,
 ) -> np.ndarray:
     """The area-weighted isometric energy of every face (docs/math.md, section 7) for each
     candidate: what :func:`.region.flatten_region` reports as ``distortion.isometric.mean``,
@@ -230,7 +230,8 @@ def region_energy(
     candidates : Candidates, ``k`` of them (a few: the angles of every vertex are kept
         for each)
     method, layout : as :class:`FaceEnergy`
-    block : int, faces measured at a time
+    block : int, faces (and vertices) measured at a time: the temporaries are those of a
+        block, a few MB
 
     Returns
     -------
@@ -238,12 +239,18 @@ def region_energy(
     """
     scale = _unit_scale(points)
     scaled = points * scale
-    found = _Angles.of(scaled, candidates.centers * scale, candidates, method, layout)
+    centers = candidates.centers * scale
+    plane = np.empty((len(candidates), len(points)), dtype=np.complex128)
+    at_centre = np.zeros(len(candidates), dtype=bool)
+    for start in range(0, len(points), block):
+        found = _Angles.of(scaled[start : start + block], centers, candidates, method, layout)
+        plane[:, start : start + block] = found.plane
+        at_centre |= found.at_centre
     totals = np.zeros((6, len(candidates)))
     for start in range(0, len(faces), block):
         shapes = _FaceShapes(scaled, faces[start : start + block])
-        totals += np.stack(shapes.sums(found.plane, None))
-    return _objective(tuple(totals), found.at_centre)[1]
+        totals += np.stack(shapes.sums(plane, None))
+    return _objective(tuple(totals), at_centre)[1]
 
 
 def _unit_scale(points: np.ndarray) -> float:

@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-service bench-zoo bench-batch soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -50,6 +50,11 @@ bench-zoo: $(VENV)/.installed-bench
 # 2 processes: scans per minute per core.
 bench-batch: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.batch_bench $(BENCH_ARGS)
+
+# Peak memory (VmHWM) of each mesh route on the 100k and 1.6M-face scalps, one fresh process
+# per measurement, with the service's allocator settings.
+bench-memory: $(VENV)/.installed-bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.memory_bench $(BENCH_ARGS)
 
 # Load and soak through a real server, as deployed (the test extra suffices); CI runs --short.
 soak: $(VENV)/.installed-test

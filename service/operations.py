@@ -127,6 +127,13 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
     return Selection(faces, _center(mesh, mesh.faces[faces], params.center), resolved)
 
 
+def region_faces(mesh: Mesh, selection: Selection) -> np.ndarray:
+    """(m, 3) int: the region's faces, the mesh's own array (no copy) for the whole mesh."""
+    if len(selection.faces) == len(mesh.faces):  # ascending and distinct: every face, in order
+        return mesh.faces
+    return mesh.faces[selection.faces]
+
+
 def _center(mesh: Mesh, faces: np.ndarray, center) -> np.ndarray:
     """A world point, or the centre named (``auto`` starts from the bounding-box centre)."""
     if not isinstance(center, str):
@@ -214,7 +221,7 @@ def resolve(
             return chart_of(params), frame_of(params, selection.center), None
         chosen = default_choice(
             mesh.vertices,
-            mesh.faces[selection.faces],
+            region_faces(mesh, selection),
             fixed,
             fit_bounds(params),
             method=params.method,
@@ -224,7 +231,7 @@ def resolve(
         return chosen.chart, chosen.frame, chosen
     fit = fit_region(
         mesh.vertices,
-        mesh.faces[selection.faces],
+        region_faces(mesh, selection),
         fixed_choices(params, selection.center),
         fit_bounds(params),
         method=params.method,
@@ -241,7 +248,7 @@ def flatten(mesh: Mesh, params: MeshParams, settings: Settings) -> MeshRegion:
     if fit is not None:
         flat = fit.region
     else:
-        faces = mesh.faces[selection.faces]
+        faces = region_faces(mesh, selection)
         flat = flatten_region(
             mesh.vertices, faces, frame, chart, threads=settings.threads, layout=params.layout
         )
@@ -291,7 +298,7 @@ def locate_directions(mesh: Mesh, params: LocateParams, settings: Settings) -> L
     selection = select_region(mesh, params)
     chart, frame, _ = resolve(mesh, selection, params, settings)
     directions = chart.inverse(params.theta, params.phi, 1.0)
-    faces = mesh.faces[selection.faces]
+    faces = region_faces(mesh, selection)
     # Seen edge-on from the centre, the region has nothing to hit (the flatten routes refuse
     # such a centre in the core; a fixed frame and sigma reach locate without it).
     check_center_sees_area(mesh.vertices, faces, frame.center)

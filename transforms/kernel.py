@@ -24,6 +24,7 @@ from scipy.optimize import linprog
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from .arrays import blocks
 from .errors import TransformInputError
 from .sampling import area_sample
 from .topology import region_edges
@@ -113,40 +114,76 @@ def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
     scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
     scaled = vertices * scale
     rows = np.ascontiguousarray(scaled.T)
-    ids = np.ascontiguousarray(faces.T)
-    corners = np.stack([np.take(rows[axis], ids) for axis in range(3)])  # (axis, corner, m)
-    e1 = corners[:, 1] - corners[:, 0]
-    e2 = corners[:, 2] - corners[:, 0]
-    cross = np.stack(
-        [e1[(i + 1) % 3] * e2[(i + 2) % 3] - e1[(i + 2) % 3] * e2[(i + 1) % 3] for i in range(3)]
-    )
-    double_area = np.sqrt((cross * cross).sum(axis=0))
+    # Block by block: the corners of a block, not of the region, are held at once. The
+    # arrays over kept faces are laid out face by face: numpy adds in memory order, so that
+    # layout keeps every sum as it was when every face was gathered at once.
+    m = len(faces)
+    cross, double_area = np.empty((m, 3)).T, np.empty(m)
+    low, high = np.full(3, np.inf), np.full(3, -np.inf)
+    for block in blocks(m):
+        corners = _corners(rows, faces[block])
+        cross[:, block] = block_cross = _cross(corners)
+        double_area[block] = np.sqrt((block_cross * block_cross).sum(axis=0))
+        low = np.minimum(low, corners.min(axis=(1, 2)))
+        high = np.maximum(high, corners.max(axis=(1, 2)))
     keep = np.flatnonzero(double_area > 0)
     if keep.size == 0:
         raise TransformInputError("faces", "every face of the region has zero area")
     weights = double_area[keep]
-    centroids = corners[:, :, keep].mean(axis=1)  # (axis, k)
-    middle = centroids @ weights / weights.sum()
-    spread = centroids - middle[:, None]
+    del double_area
+    kept = faces
+    if keep.size < m:
+        cross, kept = cross[:, keep], faces[keep]
+    spread = np.empty((len(keep), 3)).T  # the centroids, then their spread about the middle
+    for block in blocks(len(keep)):
+        spread[:, block] = _face_major(_corners(rows, kept[block])).mean(axis=1)
+    middle = spread @ weights / weights.sum()
+    spread -= middle[:, None]
     # The file's winding is outward when the signed volume seen from the middle is positive.
-    winding = 1 if float((cross[:, keep] * spread).sum()) >= 0 else -1
-    normals = (winding / weights) * cross[:, keep]
-    offsets = (normals * corners[:, 0, keep]).sum(axis=0)
-    normals = np.ascontiguousarray(normals.T)
-    spread_weighted = spread * weights
-    _, axes = np.linalg.eigh(spread_weighted @ spread.T)
-    reach = corners[:, :, keep] - middle[:, None, None]  # every corner, not only centroids
-    size = float(np.sqrt((reach * reach).sum(axis=0).max()))
+    winding = 1 if float((cross * spread).sum()) >= 0 else -1
+    _, axes = np.linalg.eigh((spread * weights) @ spread.T)
+    del spread
+    normals = cross
+    normals *= winding / weights  # the normals take the place of the cross products
+    offsets = np.empty(len(keep))
+    size = 0.0  # the farthest corner, not only centroid, from the middle
+    for block in blocks(len(keep)):
+        first = scaled[kept[block, 0]].T
+        offsets[block] = (normals[:, block] * first).sum(axis=0)
+        reach = _face_major(_corners(rows, kept[block])) - middle[:, None, None]
+        size = max(size, float(np.sqrt((reach * reach).sum(axis=0).max())))
+    del rows
     closing_normals, closing_offsets = _closing_planes(scaled, faces, winding)
     return KernelPlanes(
-        normals=np.concatenate([normals, closing_normals]),
+        normals=np.concatenate([normals.T, closing_normals]),
         offsets=np.concatenate([offsets, closing_offsets]) / scale,
         areas=np.concatenate([0.5 * weights, np.zeros(len(closing_offsets))]) / scale**2,
         faces=keep,
         size=size / scale,
         middle=middle / scale,
-        box_middle=(corners.min(axis=(1, 2)) + corners.max(axis=(1, 2))) / (2.0 * scale),
+        box_middle=(low + high) / (2.0 * scale),
         axes=axes.T,
+    )
+
+
+def _corners(rows: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(3, 3, k) float, ``[axis, corner, face]``: the corners of ``faces`` (k, 3) from vertex
+    rows (3, n)."""
+    ids = np.ascontiguousarray(faces.T)
+    return np.stack([np.take(rows[axis], ids) for axis in range(3)])
+
+
+def _face_major(corners: np.ndarray) -> np.ndarray:
+    """``corners`` (3, 3, k) with the same values laid out face by face in memory."""
+    return np.ascontiguousarray(corners.transpose(2, 0, 1)).transpose(1, 2, 0)
+
+
+def _cross(corners: np.ndarray) -> np.ndarray:
+    """(3, k) float: ``(c1 - c0) x (c2 - c0)`` of corners (3, 3, k)."""
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    return np.stack(
+        [e1[(i + 1) % 3] * e2[(i + 2) % 3] - e1[(i + 2) % 3] * e2[(i + 1) % 3] for i in range(3)]
     )
 
 
@@ -156,15 +193,19 @@ def _closing_planes(
     """One plane per boundary loop, ``(normals (l, 3), offsets (l,))``: through the loop's
     centroid, its outward normal against the loop's vector area (the side the region's faces
     turn away from)."""
-    used, compact = np.unique(faces, return_inverse=True)
-    compact = compact.reshape(-1, 3)
-    boundary = region_edges(compact, np.ones(len(compact), dtype=np.int8), len(used)).boundary
+    n = len(vertices)
+    boundary = region_edges(faces, np.ones(len(faces), dtype=np.int8), n).boundary
     if len(boundary) == 0:
         return np.zeros((0, 3)), np.zeros(0)
-    # Direct each boundary edge as its face runs it.
-    heads = compact.ravel()
-    tails = compact[:, [1, 2, 0]].ravel()
-    n = len(used)
+    # Direct each boundary edge as its face runs it: only half-edges between two boundary
+    # vertices can be boundary edges, so only those are looked up.
+    boundary_vertex = np.zeros(n, dtype=bool)
+    boundary_vertex[boundary.ravel()] = True
+    corner_on = boundary_vertex[faces]
+    half_edges = np.flatnonzero(corner_on & corner_on[:, [1, 2, 0]])  # (face, corner) runs
+    del corner_on
+    heads = faces.ravel()[half_edges].astype(np.int64)
+    tails = faces.ravel()[half_edges - half_edges % 3 + (half_edges + 1) % 3].astype(np.int64)
     keys = np.minimum(heads, tails) * n + np.maximum(heads, tails)
     boundary_keys = np.sort(boundary[:, 0] * n + boundary[:, 1])
     spot = np.minimum(np.searchsorted(boundary_keys, keys), len(boundary_keys) - 1)
@@ -174,8 +215,7 @@ def _closing_planes(
     _, labels = connected_components(graph, directed=False)
     loop = labels[starts]
     loops = np.unique(loop)
-    points = vertices[used]
-    a, b = points[starts], points[ends]
+    a, b = vertices[starts], vertices[ends]
     vector_area = np.zeros((len(loops), 3))
     np.add.at(vector_area, np.searchsorted(loops, loop), 0.5 * winding * np.cross(a, b))
     centroid = np.zeros((len(loops), 3))

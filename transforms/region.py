@@ -95,16 +95,22 @@ def flatten_region(
         position = np.empty(len(vertices), dtype=faces.dtype)  # int32 where the ids fit
         position[vertex_ids] = np.arange(len(vertex_ids))
         compact, used = position[faces], vertices[vertex_ids]
+        del position
+    # What is done with is let go as soon as it is (faces, used, rows): the validation's
+    # edge classification, the peak of the call, then runs beside less.
+    del faces
     # The local rows come out of the same pass as the angles; measured without checking
     # again, since everything here was made checked.
     rows = np.empty((3, len(used)))
     theta, phi, r = chart.forward_checked(
         used, frame, threads, ("vertices", "vertex", vertex_ids), rows_out=rows
     )
+    del used
     layout = Layout(layout)
     measures = measure_checked(
         rows, compact, measured_second(theta, layout), phi, chart.cap, threads
     )
+    del rows  # the measures hold their own, scaled
     validation, metrics, trusted, flagged = _judge(measures, winding, threads)
     x, y = layout_xy(theta, phi, layout)
     return FlatRegion(

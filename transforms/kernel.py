@@ -30,7 +30,7 @@ from .sampling import area_sample
 from .topology import region_edges
 
 #: Faces in the first linear program, and the most violated faces added per round.
-_FIRST_FACES = 4096
+_FIRST_FACES = 512
 _ADDED_FACES = 4096
 _ROUNDS = 30
 #: Faces in the least-back-facing programs when the kernel is empty, and their rounds.
@@ -55,6 +55,7 @@ class KernelPlanes:
     middle : (3,) float, the area-weighted centroid of the region
     box_middle : (3,) float, the centre of its bounding box
     axes : (3, 3) float, the region's inertia axes (rows)
+    boundary_vertices : (b,) int, ascending: the vertices on the region's boundary
     """
 
     normals: np.ndarray
@@ -65,6 +66,7 @@ class KernelPlanes:
     middle: np.ndarray
     box_middle: np.ndarray
     axes: np.ndarray
+    boundary_vertices: np.ndarray
 
     def depth(self, center: np.ndarray) -> float:
         """Distance from ``center`` to the nearest face plane (the closing planes left out),
@@ -98,6 +100,12 @@ class Kernel:
 def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
     """The half-spaces of a region's kernel.
 
+    One pass over blocks of faces gives each face's plane and the region's moments: the
+    area-weighted sums of the centroids and of their outer products (the middle and the
+    inertia, ``sum w (c - m)(c - m)^T = sum w c c^T - W m m^T``), and the sums that fix the
+    winding (``sum n . (c - m) = sum n . c - m . sum n``); the winding's sign then flips the
+    planes, which is exact.
+
     Parameters
     ----------
     vertices : (n, 3) float, world coordinates
@@ -114,56 +122,70 @@ def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
     scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
     scaled = vertices * scale
     rows = np.ascontiguousarray(scaled.T)
-    # Block by block: the corners of a block, not of the region, are held at once. The
-    # arrays over kept faces are laid out face by face: numpy adds in memory order, so that
-    # layout keeps every sum as it was when every face was gathered at once.
     m = len(faces)
-    cross, double_area = np.empty((m, 3)).T, np.empty(m)
-    low, high = np.full(3, np.inf), np.full(3, -np.inf)
+    normals, offsets, double_area = np.empty((m, 3)), np.empty(m), np.empty(m)
+    moments = _Moments()
     for block in blocks(m):
         corners = _corners(rows, faces[block])
-        cross[:, block] = block_cross = _cross(corners)
-        double_area[block] = np.sqrt((block_cross * block_cross).sum(axis=0))
-        low = np.minimum(low, corners.min(axis=(1, 2)))
-        high = np.maximum(high, corners.max(axis=(1, 2)))
+        cross = _cross(corners)
+        area = np.sqrt(_dot(cross, cross))
+        double_area[block] = area
+        moments.add(corners, cross, area)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            unit = cross / area
+        normals[block] = unit.T
+        offsets[block] = _dot(unit, corners[:, 0])
     keep = np.flatnonzero(double_area > 0)
     if keep.size == 0:
         raise TransformInputError("faces", "every face of the region has zero area")
-    weights = double_area[keep]
-    del double_area
-    kept = faces
     if keep.size < m:
-        cross, kept = cross[:, keep], faces[keep]
-    spread = np.empty((len(keep), 3)).T  # the centroids, then their spread about the middle
-    for block in blocks(len(keep)):
-        spread[:, block] = _face_major(_corners(rows, kept[block])).mean(axis=1)
-    middle = spread @ weights / weights.sum()
-    spread -= middle[:, None]
-    # The file's winding is outward when the signed volume seen from the middle is positive.
-    winding = 1 if float((cross * spread).sum()) >= 0 else -1
-    _, axes = np.linalg.eigh((spread * weights) @ spread.T)
-    del spread
-    normals = cross
-    normals *= winding / weights  # the normals take the place of the cross products
-    offsets = np.empty(len(keep))
-    size = 0.0  # the farthest corner, not only centroid, from the middle
-    for block in blocks(len(keep)):
-        first = scaled[kept[block, 0]].T
-        offsets[block] = (normals[:, block] * first).sum(axis=0)
-        reach = _face_major(_corners(rows, kept[block])) - middle[:, None, None]
-        size = max(size, float(np.sqrt((reach * reach).sum(axis=0).max())))
-    del rows
-    closing_normals, closing_offsets = _closing_planes(scaled, faces, winding)
+        normals, offsets, double_area = normals[keep], offsets[keep], double_area[keep]
+    middle, axes, winding = moments.middle_axes_winding()
+    if winding < 0:  # the file's winding is inward: every plane turns round
+        np.negative(normals, out=normals)
+        np.negative(offsets, out=offsets)
+    used = scaled[np.bincount(faces.ravel(), minlength=len(scaled)) > 0]
+    reach = used - middle
+    size = float(np.sqrt(_dot(reach.T, reach.T).max()))
+    boundary, closing_normals, closing_offsets = _closing_planes(scaled, faces, winding)
     return KernelPlanes(
-        normals=np.concatenate([normals.T, closing_normals]),
+        normals=np.concatenate([normals, closing_normals]),
         offsets=np.concatenate([offsets, closing_offsets]) / scale,
-        areas=np.concatenate([0.5 * weights, np.zeros(len(closing_offsets))]) / scale**2,
+        areas=np.concatenate([0.5 * double_area, np.zeros(len(closing_offsets))]) / scale**2,
         faces=keep,
         size=size / scale,
         middle=middle / scale,
-        box_middle=(low + high) / (2.0 * scale),
+        box_middle=(used.min(axis=0) + used.max(axis=0)) / (2.0 * scale),
         axes=axes.T,
+        boundary_vertices=boundary,
     )
+
+
+class _Moments:
+    """The area-weighted moments of the faces' centroids, summed block by block."""
+
+    def __init__(self) -> None:
+        self.weight, self.first, self.second = 0.0, np.zeros(3), np.zeros((3, 3))
+        self.normal, self.normal_at = np.zeros(3), 0.0
+
+    def add(self, corners: np.ndarray, cross: np.ndarray, area: np.ndarray) -> None:
+        """``corners`` (3, 3, k), ``cross`` (3, k) twice the faces' vector areas, ``area``
+        (k,) their lengths (the weights)."""
+        centroids = corners.sum(axis=1) / 3.0  # (axis, k)
+        weighted = centroids * area
+        self.weight += float(area.sum())
+        self.first += weighted.sum(axis=1)
+        self.second += weighted @ centroids.T
+        self.normal += cross.sum(axis=1)
+        self.normal_at += float(_dot(cross, centroids).sum())
+
+    def middle_axes_winding(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """The area-weighted middle (3,), the inertia axes (columns) and the winding: +1
+        when the signed volume seen from the middle is positive (the normals point out)."""
+        middle = self.first / self.weight
+        _, axes = np.linalg.eigh(self.second - self.weight * np.outer(middle, middle))
+        volume = self.normal_at - float(middle @ self.normal)
+        return middle, axes, 1 if volume >= 0 else -1
 
 
 def _corners(rows: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -171,11 +193,6 @@ def _corners(rows: np.ndarray, faces: np.ndarray) -> np.ndarray:
     rows (3, n)."""
     ids = np.ascontiguousarray(faces.T)
     return np.stack([np.take(rows[axis], ids) for axis in range(3)])
-
-
-def _face_major(corners: np.ndarray) -> np.ndarray:
-    """``corners`` (3, 3, k) with the same values laid out face by face in memory."""
-    return np.ascontiguousarray(corners.transpose(2, 0, 1)).transpose(1, 2, 0)
 
 
 def _cross(corners: np.ndarray) -> np.ndarray:
@@ -187,16 +204,21 @@ def _cross(corners: np.ndarray) -> np.ndarray:
     )
 
 
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(k,) row-wise dot product of (3, k) arrays."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
 def _closing_planes(
     vertices: np.ndarray, faces: np.ndarray, winding: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """One plane per boundary loop, ``(normals (l, 3), offsets (l,))``: through the loop's
-    centroid, its outward normal against the loop's vector area (the side the region's faces
-    turn away from)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The boundary's vertices (b,) and one plane per boundary loop, ``(normals (l, 3),
+    offsets (l,))``: through the loop's centroid, its outward normal against the loop's
+    vector area (the side the region's faces turn away from)."""
     n = len(vertices)
     boundary = region_edges(faces, np.ones(len(faces), dtype=np.int8), n).boundary
     if len(boundary) == 0:
-        return np.zeros((0, 3)), np.zeros(0)
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
     # Direct each boundary edge as its face runs it: only half-edges between two boundary
     # vertices can be boundary edges, so only those are looked up.
     boundary_vertex = np.zeros(n, dtype=bool)
@@ -226,7 +248,8 @@ def _closing_planes(
     length = np.linalg.norm(vector_area, axis=1)
     keep = length > 0
     normals = -vector_area[keep] / length[keep, None]
-    return normals, np.einsum("ij,ij->i", normals, centroid[keep])
+    on_boundary = np.flatnonzero(boundary_vertex)
+    return on_boundary, normals, np.einsum("ij,ij->i", normals, centroid[keep])
 
 
 def chebyshev_center(planes: KernelPlanes) -> Kernel:
@@ -306,6 +329,9 @@ def _deepest(planes: KernelPlanes, rows: np.ndarray) -> tuple[np.ndarray, float]
         b_ub=scaled,
         bounds=[*_IN_THE_BOX, (None, 2.0)],
         method="highs",
+        # Four unknowns and dense rows: presolve finds nothing to remove and costs as much
+        # as the solve itself.
+        options={"presolve": False},
     )
     if found.status != 0:
         return planes.middle.copy(), 0.0

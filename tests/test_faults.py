@@ -25,8 +25,10 @@ from .test_serve import REGION, running
 
 
 def subdivided_head() -> bytes:
-    """fsaverage-head.ply subdivided once (16,248 faces): its fit takes about a second."""
-    vertices, faces = subdivide(*load_sample("fsaverage-head.ply"))
+    """fsaverage-head.ply subdivided twice (64,992 faces): the separable fit of its top (the
+    slowest fit: its angles come from a root search, its gradients from differences)
+    takes about a second."""
+    vertices, faces = subdivide(*subdivide(*load_sample("fsaverage-head.ply")))
     return trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply")
 
 
@@ -76,7 +78,7 @@ def fit_of_head(client: httpx.Client) -> httpx.Response:
     return client.post(
         "/v1/fit",
         files={"mesh": ("head.ply", HEAD)},
-        data={"params": json.dumps(REGION)},
+        data={"params": json.dumps(REGION | {"method": "separable"})},
     )
 
 

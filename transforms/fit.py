@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
-from .arrays import as_direction, as_faces, as_points, as_vector, unit_rows
+from .arrays import as_direction, as_faces, as_points, as_vector, blocks, unit_rows
 from .cap import PoleCap
 from .chart import Chart, Method
 from .emptycap import cap_radius, largest_empty_cap
@@ -262,10 +262,7 @@ class _Seen:
     @classmethod
     def of(cls, problem: _Problem, search: _Search, found: _Candidate) -> _Seen:
         first = search.initial
-        centers = np.array([first.center, found.center])
-        j = len(problem.planes.faces)
-        planes = problem.planes
-        depth = (planes.offsets[:j] - centers @ planes.normals[:j].T).min(axis=1)
+        depth = np.array([problem.planes.depth(c.center) for c in (first, found)])
         caps = [
             _cap_radii(problem.region_points, c.center[None], c.rotation[1])[0]
             for c in (first, found)
@@ -756,9 +753,7 @@ class _Problem:
         the kernel's depth or the region's reach. All are scored in one batch."""
         pole = start.rotation[1]
         centers = start.center + np.outer(_SLIDE, kernel.inscribed_radius * pole)
-        normals, offsets = self.planes.normals, self.planes.offsets
-        j = len(self.planes.faces)
-        depth = (offsets[:j] - centers @ normals[:j].T).min(axis=1)
+        depth = np.array([self.planes.depth(center) for center in centers])
         away = np.linalg.norm(centers - self.planes.middle, axis=1)
         inside = (depth >= min_depth) & (depth > 0) & (away <= _REACH * self.planes.size)
         centers = centers[: int(np.argmin(inside)) if not inside.all() else len(inside)]
@@ -1037,10 +1032,14 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _cap_radii(points: np.ndarray, centers: np.ndarray, pole: np.ndarray) -> np.ndarray:
     """(k,) angular radius of the largest cap around ``pole`` holding no direction from each
-    of ``centers`` (k, 3) to ``points`` (n, 3) (:func:`.emptycap.cap_radius` for a batch)."""
-    offsets = points[None] - centers[:, None]
-    cosine = (offsets @ pole) / np.linalg.norm(offsets, axis=2)
-    return np.arccos(np.clip(cosine.max(axis=1), -1.0, 1.0))
+    of ``centers`` (k, 3) to ``points`` (n, 3) (:func:`.emptycap.cap_radius` for a batch),
+    block by block."""
+    largest = np.full(len(centers), -1.0)
+    for block in blocks(len(points)):
+        offsets = points[None, block] - centers[:, None]
+        cosine = (offsets @ pole) / np.linalg.norm(offsets, axis=2)
+        np.maximum(largest, cosine.max(axis=1), out=largest)
+    return np.arccos(np.clip(largest, -1.0, 1.0))
 
 
 def _best_on_grid(grid: np.ndarray, energies: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -122,36 +122,45 @@ def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
     scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
     scaled = vertices * scale
     rows = np.ascontiguousarray(scaled.T)
-    m = len(faces)
-    normals, offsets, double_area = np.empty((m, 3)), np.empty(m), np.empty(m)
+    # The closing planes first (their side flips with the winding, found last), so that
+    # every plane is written once into arrays of the final size.
+    boundary, closing_normals, closing_offsets = _closing_planes(scaled, faces)
+    m, loops = len(faces), len(closing_offsets)
+    normals, offsets, areas = np.empty((m + loops, 3)), np.empty(m + loops), np.zeros(m + loops)
+    normals[m:], offsets[m:] = closing_normals, closing_offsets
     moments = _Moments()
     for block in blocks(m):
         corners = _corners(rows, faces[block])
         cross = _cross(corners)
         area = np.sqrt(_dot(cross, cross))
-        double_area[block] = area
+        areas[block] = area
         moments.add(corners, cross, area)
         with np.errstate(divide="ignore", invalid="ignore"):
             unit = cross / area
         normals[block] = unit.T
         offsets[block] = _dot(unit, corners[:, 0])
-    keep = np.flatnonzero(double_area > 0)
+    del rows
+    measured = areas[:m] > 0
+    keep = np.flatnonzero(measured)
     if keep.size == 0:
         raise TransformInputError("faces", "every face of the region has zero area")
-    if keep.size < m:
-        normals, offsets, double_area = normals[keep], offsets[keep], double_area[keep]
+    if keep.size < m:  # degenerate faces have no plane
+        rows_kept = np.concatenate([measured, np.ones(loops, dtype=bool)])
+        normals, offsets, areas = normals[rows_kept], offsets[rows_kept], areas[rows_kept]
     middle, axes, winding = moments.middle_axes_winding()
     if winding < 0:  # the file's winding is inward: every plane turns round
         np.negative(normals, out=normals)
         np.negative(offsets, out=offsets)
     used = scaled[np.bincount(faces.ravel(), minlength=len(scaled)) > 0]
+    del scaled
     reach = used - middle
     size = float(np.sqrt(_dot(reach.T, reach.T).max()))
-    boundary, closing_normals, closing_offsets = _closing_planes(scaled, faces, winding)
+    offsets /= scale
+    areas *= 0.5 / scale**2  # the closing planes' stay 0
     return KernelPlanes(
-        normals=np.concatenate([normals, closing_normals]),
-        offsets=np.concatenate([offsets, closing_offsets]) / scale,
-        areas=np.concatenate([0.5 * double_area, np.zeros(len(closing_offsets))]) / scale**2,
+        normals=normals,
+        offsets=offsets,
+        areas=areas,
         faces=keep,
         size=size / scale,
         middle=middle / scale,
@@ -210,11 +219,12 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _closing_planes(
-    vertices: np.ndarray, faces: np.ndarray, winding: int
+    vertices: np.ndarray, faces: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The boundary's vertices (b,) and one plane per boundary loop, ``(normals (l, 3),
-    offsets (l,))``: through the loop's centroid, its outward normal against the loop's
-    vector area (the side the region's faces turn away from)."""
+    offsets (l,))``: through the loop's centroid, its normal against the loop's vector area
+    (outward, the side the region's faces turn away from, when the faces are wound
+    outward; the caller turns them round otherwise)."""
     n = len(vertices)
     boundary = region_edges(faces, np.ones(len(faces), dtype=np.int8), n).boundary
     if len(boundary) == 0:
@@ -239,7 +249,7 @@ def _closing_planes(
     loops = np.unique(loop)
     a, b = vertices[starts], vertices[ends]
     vector_area = np.zeros((len(loops), 3))
-    np.add.at(vector_area, np.searchsorted(loops, loop), 0.5 * winding * np.cross(a, b))
+    np.add.at(vector_area, np.searchsorted(loops, loop), 0.5 * np.cross(a, b))
     centroid = np.zeros((len(loops), 3))
     count = np.zeros(len(loops))
     np.add.at(centroid, np.searchsorted(loops, loop), a)

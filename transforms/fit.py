@@ -41,7 +41,7 @@ from .viewpoint import check_center_sees_area
 
 #: Faces the search evaluates each candidate on (the slide on fewer), and vertices the pole's
 #: hull is built from.
-SAMPLE_FACES = 1000
+SAMPLE_FACES = 600
 COARSE_SAMPLE_FACES = 250
 HULL_VERTICES = 2000
 #: Where sigma is searched (beyond these the warp squeezes the region to a point or a line).
@@ -81,8 +81,8 @@ REPORTED_SIGMAS = (0.3, 1.0)
 #: Faces the explanation's energies (the start's and at ``REPORTED_SIGMAS``) are measured
 #: on: every face of a region up to this many, beyond it every k-th (the answer's own
 #: energy is always measured on every face).
-EXPLAIN_FACES = 65536
-_EXPLAIN_RUN = 256
+EXPLAIN_FACES = 32768
+_EXPLAIN_RUN = 128
 
 
 @dataclass(frozen=True)
@@ -249,14 +249,14 @@ def fit_region(
 class _Seen:
     """What the explanation reads of the start and of the searched answer, measured before
     the answer is flattened: per candidate (the start first), the depth of its centre in
-    the kernel, the empty cap around its pole in degrees, and the region's energy
-    (:meth:`_Problem.region_energies`); and the energies at :data:`REPORTED_SIGMAS` with the
-    searched answer's centre and rotation (its sigma may still narrow: they do not depend
-    on it)."""
+    the kernel and the empty cap around its pole in degrees; the start's energy and those at
+    :data:`REPORTED_SIGMAS` with the searched answer's centre and rotation (its sigma may
+    still narrow: they do not depend on it), as :meth:`_Problem.region_energies` measures
+    them."""
 
     depth: tuple[float, float]
     empty_cap_deg: tuple[float, float]
-    energy: tuple[float, float]
+    energy_start: float
     energy_at_sigma: dict
 
     @classmethod
@@ -268,12 +268,12 @@ class _Seen:
             for c in (first, found)
         ]
         reported = _reported(problem, found)
-        energies = problem.region_energies([first, found, *reported])
+        energies = problem.region_energies([first, *reported])
         return cls(
             depth=tuple(depth.tolist()),
             empty_cap_deg=tuple(math.degrees(c) for c in caps),
-            energy=(float(energies[0]), float(energies[1])),
-            energy_at_sigma=dict(zip(REPORTED_SIGMAS, energies[2:].tolist(), strict=False)),
+            energy_start=float(energies[0]),
+            energy_at_sigma=dict(zip(REPORTED_SIGMAS, energies[1:].tolist(), strict=False)),
         )
 
 
@@ -467,7 +467,7 @@ def _keep_the_better(
     """The start instead of ``answer`` when, on every face, its energy is lower and it keeps
     the margin: the search saw a sample. The start is flattened only when its energy
     (:class:`_Seen`) is below the answer's."""
-    if not seen.energy[0] < answer.flat.distortion.isometric.mean:
+    if not seen.energy_start < answer.flat.distortion.isometric.mean:
         return answer
     first = _flattened(problem, search.initial)
     keeps_margin = search.margin is None or first.margin_deg >= min(
@@ -514,7 +514,7 @@ def _explain(problem: _Problem, search: _Search, answer: _Flattened, seen: _Seen
         energies = problem.region_energies(reported) if reported else []
         energy_at_sigma = dict(zip(REPORTED_SIGMAS, list(energies), strict=False))
     explanation = FitExplanation(
-        energy_start=seen.energy[0] if any(search.free) else energy_end,
+        energy_start=seen.energy_start if any(search.free) else energy_end,
         energy_end=energy_end,
         kernel_inscribed_radius=kernel.inscribed_radius,
         kernel_empty=kernel.empty,

@@ -43,7 +43,7 @@ from .viewpoint import check_center_sees_area
 #: hull is built from.
 SAMPLE_FACES = 600
 COARSE_SAMPLE_FACES = 250
-HULL_VERTICES = 2000
+HULL_VERTICES = 500
 #: Where sigma is searched (beyond these the warp squeezes the region to a point or a line).
 SIGMA_SEARCH = (1e-3, 10.0)
 #: Planes nearest the start whose depth the refinement watches (besides the sampled ones).
@@ -73,7 +73,7 @@ _INFEASIBLE = 1e100
 _REFINE_STEPS = 60
 #: Relative decrease of the cost below which the refinement stops: far below the energy
 #: differences a plan can see, and below the sample's own noise.
-_REFINE_TOLERANCE = 1e-14
+_REFINE_TOLERANCE = 1e-10
 _STEP = 1e-7
 _PENALTY = 1e4
 #: Sigmas whose energy the explanation reports.
@@ -800,7 +800,7 @@ class _Problem:
             jac=True,
             method="L-BFGS-B",
             bounds=coordinates.bounds(),
-            options={"maxiter": _REFINE_STEPS, "ftol": _REFINE_TOLERANCE, "gtol": 1e-8},
+            options={"maxiter": _REFINE_STEPS, "ftol": _REFINE_TOLERANCE, "gtol": 1e-6},
         )
         ends = cost(np.vstack([x0, found.x]))
         if not ends[1] < ends[0]:

@@ -262,7 +262,7 @@ class _Seen:
     @classmethod
     def of(cls, problem: _Problem, search: _Search, found: _Candidate) -> _Seen:
         first = search.initial
-        depth = np.array([problem.planes.depth(c.center) for c in (first, found)])
+        depth = problem.planes.depths(np.array([first.center, found.center]))
         caps = [
             _cap_radii(problem.region_points, c.center[None], c.rotation[1])[0]
             for c in (first, found)
@@ -753,7 +753,7 @@ class _Problem:
         the kernel's depth or the region's reach. All are scored in one batch."""
         pole = start.rotation[1]
         centers = start.center + np.outer(_SLIDE, kernel.inscribed_radius * pole)
-        depth = np.array([self.planes.depth(center) for center in centers])
+        depth = self.planes.depths(centers)
         away = np.linalg.norm(centers - self.planes.middle, axis=1)
         inside = (depth >= min_depth) & (depth > 0) & (away <= _REACH * self.planes.size)
         centers = centers[: int(np.argmin(inside)) if not inside.all() else len(inside)]

@@ -74,6 +74,15 @@ class KernelPlanes:
         j = len(self.faces)
         return float((self.offsets[:j] - self.normals[:j] @ center).min())
 
+    def depths(self, centers: np.ndarray) -> np.ndarray:
+        """(k,) :meth:`depth` of each of ``centers`` (k, 3), in one pass over the planes
+        (block by block, so the (k, faces) distances are never held at once)."""
+        nearest = np.full(len(centers), np.inf)
+        for block in blocks(len(self.faces)):
+            distances = self.offsets[block] - centers @ self.normals[block].T
+            np.minimum(nearest, distances.min(axis=1), out=nearest)
+        return nearest
+
     def backfacing_area(self, center: np.ndarray) -> float:
         """Area of the faces whose plane ``center`` is not strictly inside of."""
         j = len(self.faces)

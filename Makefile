@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-locate bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -36,6 +36,11 @@ bench: $(VENV)/.installed-bench
 # BLAS on one thread, as in the service (service/__init__.py).
 bench-fit: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.fit_bench $(BENCH_ARGS)
+
+# A click on the map (/v1/locate) end to end through a real server, and the locate index's
+# queries per second against the k-d trees it replaced. Needs curl besides the bench extra.
+bench-locate: $(VENV)/.installed-bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.locate_bench $(BENCH_ARGS)
 
 # Needs curl (the end-to-end client) besides the bench extra.
 bench-service: $(VENV)/.installed-bench

@@ -104,7 +104,7 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
     region, n_faces = params.region, len(mesh.faces)
     if region is not None and region.cone is not None:
         cone = region.cone
-        center = _center(mesh, mesh.faces, params.center)
+        center = _center(mesh, None, params.center)
         if cone.apex is not None:
             apex = np.asarray(cone.apex, dtype=np.float64)
         elif params.center in ("bbox_center", "auto"):
@@ -124,7 +124,7 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
         faces = mesh.group_faces(region.groups)
     faces = select.nonempty(faces)
     resolved = None if region is None else region.model_dump(exclude_unset=True)
-    return Selection(faces, _center(mesh, mesh.faces[faces], params.center), resolved)
+    return Selection(faces, _center(mesh, faces, params.center), resolved)
 
 
 def region_faces(mesh: Mesh, selection: Selection) -> np.ndarray:
@@ -134,11 +134,13 @@ def region_faces(mesh: Mesh, selection: Selection) -> np.ndarray:
     return mesh.faces[selection.faces]
 
 
-def _center(mesh: Mesh, faces: np.ndarray, center) -> np.ndarray:
-    """A world point, or the centre named (``auto`` starts from the bounding-box centre)."""
+def _center(mesh: Mesh, face_ids: np.ndarray | None, center) -> np.ndarray:
+    """A world point, or the centre named (``auto`` starts from the bounding-box centre) of
+    the faces ``face_ids`` (None: all), which are copied out only then."""
     if not isinstance(center, str):
         return np.asarray(center, dtype=np.float64)
     name = "bbox_center" if center == "auto" else center
+    faces = mesh.faces if face_ids is None else mesh.faces[face_ids]
     return select.named_center(mesh.vertices, faces, name)
 
 
@@ -302,8 +304,12 @@ def locate_directions(mesh: Mesh, params: LocateParams, settings: Settings) -> L
     # Seen edge-on from the centre, the region has nothing to hit (the flatten routes refuse
     # such a centre in the core; a fixed frame and sigma reach locate without it).
     check_center_sees_area(mesh.vertices, faces, frame.center)
-    # Every vertex given, so that an error names the file's vertex ids.
-    hits = locate(frame.to_local(mesh.vertices), faces, directions)
+    # Every vertex given, so that an error names the file's vertex ids. A rotation keeps the
+    # triangle a ray meets, the weights and the depth: the rays turn to the world's axes
+    # instead of every vertex to the frame's, and the few hit points back.
+    rotation = frame.rotation
+    hits = locate(mesh.vertices - frame.center, faces, directions @ rotation)
+    hits = Hits(hits.faces, hits.barycentric, hits.points @ rotation.T)
     return Located(chart, frame, selection, hits, params.layout, mesh.format)
 
 

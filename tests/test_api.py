@@ -20,6 +20,7 @@ from service.settings import Settings
 from transforms import Chart, Frame, PoleCap, flatten_region, world_to_angles
 
 from .conftest import grid_mesh, load_sample
+from .test_locate import brute_force
 
 pytestmark = pytest.mark.anyio
 
@@ -817,6 +818,39 @@ async def test_locate_through_the_api_inverts_flatten(client):
         np.testing.assert_allclose(hit["point"], vertices[corner[0]], atol=1e-6)
         assert max(hit["barycentric"]) == pytest.approx(1.0, abs=1e-6)
     assert hits[-1] is None  # theta = 0 is a singular point's direction, in the cap
+
+
+@pytest.mark.anyio
+@pytest.mark.parametrize("count", [5, 60])  # without the index, and with it
+async def test_locate_answers_the_first_hits_brute_force_finds(client, count):
+    params = {
+        "region": SCALP_REGION,
+        "center": "bbox_center",
+        "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+        "sigma": 0.3,
+    }
+    rng = np.random.default_rng(count)
+    # Over the scalp (theta 1.15 to 2.0, phi -2.0 to -1.14) and beside it.
+    theta, phi = rng.uniform(1.0, 2.1, count), rng.uniform(-2.2, -1.0, count)
+    answer = await post(
+        client, "/v1/locate", {**params, "theta": theta.tolist(), "phi": phi.tolist()}
+    )
+    assert answer.status_code == 200, answer.text
+    hits = answer.json()["hits"]
+    vertices, faces = load_sample("fsaverage-head.ply")
+    flat = (await post(client, "/v1/flatten", params)).json()
+    ids = np.array(flat["faces"]["ids"])
+    frame = Frame.from_pole_up([0, 0, -1], [0, 1, 0], flat["params"]["center"])
+    directions = Chart.distorted(PoleCap.from_sigma(0.3)).inverse(theta, phi, 1.0)
+    nearest, tied = brute_force(frame.to_local(vertices), faces[ids], directions)
+    assert 0 < sum(hit is None for hit in hits) < count  # some rays miss the scalp
+    for hit, depth, near, direction in zip(hits, nearest, tied, directions, strict=True):
+        if hit is None:
+            assert not np.isfinite(depth)
+            continue
+        assert hit["face"] in ids[near]
+        local = depth * direction / np.linalg.norm(direction)
+        np.testing.assert_allclose(hit["point"], frame.to_world(local[None])[0], atol=1e-9)
 
 
 @pytest.mark.anyio

@@ -22,7 +22,7 @@ from .faces import DEGENERATE_RTOL, FaceMeasures, measure_faces
 from .fit import Fit, FitBounds, FitExplanation, FitFixed, default_choice, fit_region
 from .frames import Frame, check_rotation
 from .layouts import Layout, layout_xy
-from .locate import Hits, locate
+from .locate import Hits, LocateIndex, locate
 from .margins import arcs_to_point, arcs_to_seam
 from .metrics import (
     Distortion,
@@ -63,6 +63,7 @@ __all__ = [
     "Frame",
     "Hits",
     "Layout",
+    "LocateIndex",
     "Method",
     "PoleCap",
     "RegionEdges",

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.docs import publish
-from benchmarks.transforms_bench import machine, subdivided
+from benchmarks.transforms_bench import machine
 
 #: Targets from the issue: a flatten's temporaries per face, and a fit's peak against the
 #: flatten's on the same region.
@@ -56,11 +56,11 @@ FIT_AGAINST = {"fit": "flatten", "/v1/fit": "/v1/flatten"}
 
 
 def region(times: int) -> tuple[np.ndarray, np.ndarray]:
-    """The fsaverage scalp subdivided ``times`` times, compacted (:mod:`benchmarks.fit_bench`)."""
-    from benchmarks.fit_bench import compact, scalp_of
+    """The fsaverage scalp subdivided ``times`` times, compacted (a rung of
+    :mod:`benchmarks.fit_bench`'s ladder)."""
+    from benchmarks.fit_bench import ladder_rung
 
-    vertices, faces = subdivided("fsaverage-head.ply", times)
-    return compact(vertices, scalp_of(vertices, faces, "fsaverage-head.ply"))
+    return ladder_rung(times)
 
 
 def fixed_params(vertices: np.ndarray) -> dict:

@@ -159,6 +159,7 @@ def in_process(scalp: Scalp, queries: int, runs: int) -> dict:
     click_ours = timed(lambda: check(locate(local, scalp.faces, one).faces, picked[:1]), runs)
     click_peer = timed(lambda: check(kdtree_locate(local, scalp.faces, one), picked[:1]), runs)
     few_ours = timed(lambda: check(locate(local, scalp.faces, few).faces, picked[: len(few)]), runs)
+    arrays = (index.levels, index.cell_start, index.entry_face, index.entry_box)
     return dict(
         build=build,
         ours=ours,
@@ -169,9 +170,7 @@ def in_process(scalp: Scalp, queries: int, runs: int) -> dict:
         few_ours=few_ours,
         entries=len(index.entry_face),
         cells=len(index.cell_start) - 1,
-        index_bytes=sum(
-            a.nbytes for a in (index.levels, index.cell_start, index.entry_face, index.entry_box)
-        ),
+        index_bytes=sum(array.nbytes for array in arrays),
     )
 
 

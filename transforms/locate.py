@@ -52,8 +52,8 @@ _SPAN = 2
 _CELLS_PER_TRIANGLE = 2.0
 #: A box is stored on the first level whose cells exceed it by this part.
 _FIT = 1.0 - 1e-6
-#: Up to this many queries, testing every triangle costs less than building the index: one
-#: direct pass per query costs about 1/25 of a build on 100k and on 1.6M faces
+#: Up to this many queries, testing every triangle costs no more than building the index: a
+#: build costs about as much as 15 to 18 direct passes on 100k and on 1.6M faces
 #: (docs/benchmarks.md, locate).
 DIRECT_QUERIES = 16
 #: (query, triangle) pairs handled at a time.
@@ -82,8 +82,9 @@ def locate(vertices_local, faces, directions) -> Hits:
     """The region triangle each ray from the centre (the local origin) meets first.
 
     Builds a :class:`LocateIndex` unless there are at most ``DIRECT_QUERIES`` queries, which
-    are tested against every triangle directly (both cost a few passes over the faces; the
-    index pays off from a few queries on). Same answers either way.
+    are tested against every triangle directly (a pass over the vertices and the faces per
+    query; the build costs about as much as ``DIRECT_QUERIES`` of them). Same answers either
+    way (docs/math.md, section 10).
 
     Parameters
     ----------
@@ -184,16 +185,16 @@ class LocateIndex:
         ordered, cube, u, v = _rows(rays, order), cube[order], u[order], v[order]
         # Chunks of queries such that their pairs with the everyone list stay bounded.
         per_chunk = max(1, _QUERIES // (1 + len(self.everyone) // 16))
-        found = [
-            self._query_chunk(ordered[part], cube[part], u[part], v[part])
-            for part in blocks(k, per_chunk)
-        ]
-        if not found:  # no queries
-            return Hits(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
-        hit_face, weights, depth = map(np.concatenate, zip(*found, strict=True))
-        back = np.empty_like(order)
-        back[order] = np.arange(k)
-        return _hits(rays, hit_face[back], _rows(weights, back), depth[back])
+        hits = Hits(np.empty(k, dtype=np.int64), np.empty((k, 3)), np.empty((k, 3)))
+        for part in blocks(k, per_chunk):
+            found = self._query_chunk(ordered[part], cube[part], u[part], v[part])
+            # Each chunk's answers straight to their queries' rows (np.put: fast for rows).
+            mine = order[part]
+            hits.faces[mine] = found[0]
+            row_items = (3 * mine[:, None] + np.arange(3)).ravel()
+            np.put(hits.barycentric, row_items, found[1])
+            np.put(hits.points, row_items, found[2][:, None] * ordered[part])
+        return hits
 
     def _query_chunk(self, rays, cube, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         k = len(rays)
@@ -491,9 +492,10 @@ def _direct_pairs(points, faces, rays) -> Iterator[tuple[np.ndarray, np.ndarray]
         projected = points[part] @ basis  # (B, 3k)
         x, y, w = projected[:, :k], projected[:, k : 2 * k], projected[:, 2 * k :]
         slack = _SIDE * (np.abs(x) + np.abs(y) + np.abs(w))
-        codes[part] = (
-            (x >= -slack) * 1 + (x <= slack) * 2 + (y >= -slack) * 4 + (y <= slack) * 8
-        ) + (w >= -slack) * 16
+        code = codes[part]
+        for bit, side in enumerate((x >= -slack, x <= slack, y >= -slack, y <= slack)):
+            code |= side.view(np.uint8) << bit
+        code |= (w >= -slack).view(np.uint8) << 4
     for part in blocks(len(faces)):
         corner = _rows(codes, faces[part].ravel()).reshape(-1, 3, k)
         face, query = np.nonzero((corner[:, 0] | corner[:, 1] | corner[:, 2]) == 31)

@@ -14,25 +14,11 @@ from pathlib import Path
 
 import httpx
 import pytest
-import trimesh
-from trimesh.remesh import subdivide
 
 from service.samples import SAMPLES
 
-from .conftest import load_sample
 from .test_operations import families, sample
-from .test_serve import REGION, running
-
-
-def subdivided_head() -> bytes:
-    """fsaverage-head.ply subdivided twice (64,992 faces): the separable fit of its top (the
-    slowest fit: its angles come from a root search, its gradients from differences)
-    takes about a second."""
-    vertices, faces = subdivide(*subdivide(*load_sample("fsaverage-head.ply")))
-    return trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply")
-
-
-HEAD = subdivided_head()
+from .test_serve import HEAD, REGION, SLOW_FIT, running
 
 
 @pytest.fixture
@@ -78,7 +64,7 @@ def fit_of_head(client: httpx.Client) -> httpx.Response:
     return client.post(
         "/v1/fit",
         files={"mesh": ("head.ply", HEAD)},
-        data={"params": json.dumps(REGION | {"method": "separable"})},
+        data={"params": json.dumps(SLOW_FIT)},
     )
 
 

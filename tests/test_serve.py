@@ -19,13 +19,26 @@ from pathlib import Path
 
 import httpx
 import pytest
+import trimesh
+from trimesh.remesh import subdivide
 
-from service.samples import SAMPLES
-
+from .conftest import load_sample
 from .test_operations import families, sample
 
 KEY = "serve-test-key"
 REGION = {"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}}
+
+
+def subdivided_head() -> bytes:
+    """fsaverage-head.ply subdivided twice (64,992 faces): the separable fit of its top (the
+    slowest fit: its angles come from a root search, its gradients from differences)
+    takes about a second, long enough to signal or kill the worker while it computes."""
+    vertices, faces = subdivide(*subdivide(*load_sample("fsaverage-head.ply")))
+    return trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply")
+
+
+HEAD = subdivided_head()
+SLOW_FIT = REGION | {"method": "separable"}
 
 
 def free_port() -> int:
@@ -103,7 +116,6 @@ def two_workers():
 
 def test_two_workers_share_their_metrics_and_stop_gracefully_on_sigterm(two_workers):
     server, headers = two_workers, {"X-API-Key": KEY}
-    data = SAMPLES["fsaverage-head.ply"].path.read_bytes()
     with httpx.Client(base_url=server.url, timeout=60) as c:
         for _ in range(6):  # spread over both workers by the kernel
             assert c.get("/v1/samples", headers=headers).status_code == 200
@@ -123,8 +135,8 @@ def test_two_workers_share_their_metrics_and_stop_gracefully_on_sigterm(two_work
         def fit():
             answer["response"] = c.post(
                 "/v1/fit",
-                files={"mesh": ("head.ply", data)},
-                data={"params": json.dumps(REGION)},
+                files={"mesh": ("head.ply", HEAD)},
+                data={"params": json.dumps(SLOW_FIT)},
                 headers=headers | {"X-Request-ID": "fit-during-stop"},
             )
 

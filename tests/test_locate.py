@@ -218,3 +218,17 @@ def test_locate_refuses_a_zero_direction_and_a_vertex_at_the_centre():
     with pytest.raises(TransformInputError) as error:
         LocateIndex.build(np.concatenate([points, [[0.0, 0.0, 0.0]]]), [[0, 1, len(points)]])
     assert error.value.field == "vertices"
+
+
+def test_no_rays_and_no_triangles_give_empty_answers():
+    points, faces = closed_surface(np.random.default_rng(9), 20, 0.0)
+    no_faces = np.zeros((0, 3), dtype=np.int64)
+    for region in (faces, no_faces):
+        for count in (0, 1, DIRECT_QUERIES + 1):
+            directions = np.random.default_rng(count).normal(size=(count, 3))
+            for hits in (
+                locate(points, region, directions),
+                LocateIndex.build(points, region).query(directions),
+            ):
+                assert hits.faces.shape == (count,) and hits.points.shape == (count, 3)
+                assert (hits.faces >= 0).all() if len(region) else (hits.faces == -1).all()

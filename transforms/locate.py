@@ -483,6 +483,8 @@ def _direct_pairs(points, faces, rays) -> Iterator[tuple[np.ndarray, np.ndarray]
     query, face : (p,) int each
     """
     k = len(rays)
+    if k == 0:
+        return
     across = np.eye(3)[np.abs(rays).argmin(axis=1)]
     side_a, _ = unit_rows(np.cross(rays, across))
     side_b = np.cross(rays, side_a)

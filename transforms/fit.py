@@ -81,7 +81,7 @@ REPORTED_SIGMAS = (0.3, 1.0)
 #: Faces the explanation's energies (the start's and at ``REPORTED_SIGMAS``) are measured
 #: on: every face of a region up to this many, beyond it every k-th (the answer's own
 #: energy is always measured on every face).
-EXPLAIN_FACES = 32768
+EXPLAIN_FACES = 16384
 _EXPLAIN_RUN = 128
 
 

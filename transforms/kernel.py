@@ -30,7 +30,7 @@ from .sampling import area_sample
 from .topology import region_edges
 
 #: Faces in the first linear program, and the most violated faces added per round.
-_FIRST_FACES = 4096
+_FIRST_FACES = 2048
 _ADDED_FACES = 4096
 _ROUNDS = 30
 #: Faces in the least-back-facing programs when the kernel is empty, and their rounds.

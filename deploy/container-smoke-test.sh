@@ -133,10 +133,14 @@ echo "healthy"
 
 step "stop with SIGTERM while a fit is computing"
 # podman says it cannot schedule the health check without systemd; `healthcheck run` above
-# ran it directly.
-curl -s -o "$work/fit" -w '%{http_code}' -H "X-API-Key: $KEY" -F "mesh=@$work/head.ply" \
-  -F 'params={"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}}' \
-  "$url/v1/fit" > "$work/fit-status" &
+# ran it directly. The slowest fit of a bundled sample, the separable method's on the whole
+# Nefertiti bust (70,000 faces), computes for most of a second: long enough to stop the
+# container while it does.
+check "GET /v1/samples/nefertiti-lowres.obj" 200 -H "X-API-Key: $KEY" \
+  "$url/v1/samples/nefertiti-lowres.obj"
+cp "$work/body" "$work/bust.obj"
+curl -s -o "$work/fit" -w '%{http_code}' -H "X-API-Key: $KEY" -F "mesh=@$work/bust.obj" \
+  -F 'params={"method": "separable"}' "$url/v1/fit" > "$work/fit-status" &
 fitting=$!
 computing=no
 for _ in $(seq 200); do  # until the fit is computing

@@ -18,7 +18,7 @@ cd "$(dirname "$0")/.."
 
 IMAGE=${SMOKE_IMAGE:-localhost/meshflat:smoke}
 PORT=${SMOKE_PORT:-18080}
-MEMORY=${SMOKE_MEMORY:-1g}
+MEMORY=${SMOKE_MEMORY:-1536m}
 NAME=meshflat-smoke-$$
 KEY=smoke-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')
 BASE=$(sed -n 's/^ARG PYTHON_IMAGE=//p' Dockerfile)
@@ -134,8 +134,9 @@ echo "healthy"
 step "stop with SIGTERM while a fit is computing"
 # podman says it cannot schedule the health check without systemd; `healthcheck run` above
 # ran it directly. The slowest fit of a bundled sample, the separable method's on the whole
-# Nefertiti bust (70,000 faces), computes for most of a second: long enough to stop the
-# container while it does.
+# Nefertiti bust (70,000 faces, an estimated 136 MiB: within a worker's budget of 1536m
+# shared by two), computes for most of a second: long enough to stop the container while
+# it does.
 check "GET /v1/samples/nefertiti-lowres.obj" 200 -H "X-API-Key: $KEY" \
   "$url/v1/samples/nefertiti-lowres.obj"
 cp "$work/body" "$work/bust.obj"

@@ -44,7 +44,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from benchmarks.docs import publish
-from benchmarks.memory_bench import status_bytes
+from benchmarks.server import status_bytes
 from benchmarks.transforms_bench import machine, subdivided
 from service.allocator import keep_large_blocks
 from transforms import Chart, Frame, PoleCap, fit_region, flatten_region

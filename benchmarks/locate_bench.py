@@ -28,16 +28,15 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
 from benchmarks.docs import publish
-from benchmarks.fit_bench import compact, scalp_of
-from benchmarks.server import serving
-from benchmarks.transforms_bench import machine, subdivided
+from benchmarks.fit_bench import ladder_rung
+from benchmarks.server import serving, status_bytes
+from benchmarks.transforms_bench import machine
 from service.allocator import keep_large_blocks
 from service.examples import MULTIPART, multipart_body
 from transforms import Chart, Frame, LocateIndex, PoleCap, locate
@@ -61,8 +60,7 @@ class Scalp:
 
     @classmethod
     def of(cls, subdivisions: int) -> Scalp:
-        vertices, faces = subdivided("fsaverage-head.ply", subdivisions)
-        vertices, faces = compact(vertices, scalp_of(vertices, faces, "fsaverage-head.ply"))
+        vertices, faces = ladder_rung(subdivisions)
         centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
         frame = Frame.from_pole_up(ROTATION["pole"], ROTATION["up"], centre)
         return cls(subdivisions, vertices, faces, frame, Chart.distorted(PoleCap.from_sigma(SIGMA)))
@@ -83,13 +81,6 @@ def progress(text: str) -> None:
 
 
 # -- one click through a real server ---------------------------------------------------------
-
-
-def peak_rss_mib(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 def curl_post(url: str, body: bytes) -> tuple[float, bytes, str]:
@@ -123,13 +114,13 @@ def click(scalp: Scalp, runs: int) -> dict:
     glb = trimesh.Trimesh(scalp.vertices, scalp.faces, process=False).export(file_type="glb")
     body = multipart_body(params, "scalp.glb", glb)
     with serving({}, own_limits=True) as served:
-        idle = peak_rss_mib(served.process.pid)
+        idle = status_bytes("VmHWM", served.process.pid) / 2**20
         seconds, timing = [], ""
         for _ in range(runs + 1):
             took, answer, timing = curl_post(f"{served.url}/v1/locate", body)
             seconds.append(took)
             assert f'"face":{int(picked[0])},'.encode() in answer, answer[:300]
-        peak = peak_rss_mib(served.process.pid)
+        peak = status_bytes("VmHWM", served.process.pid) / 2**20
     return dict(seconds=seconds[1:], timing=timing, idle=idle, peak=peak, upload=len(glb))
 
 

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.docs import publish
+from benchmarks.server import status_bytes
 from benchmarks.transforms_bench import machine
 
 #: Targets from the issue: a flatten's temporaries per face, and a fit's peak against the
@@ -74,14 +75,6 @@ def fixed_params(vertices: np.ndarray) -> dict:
 
 
 # -- the child: one call measured ----------------------------------------------------------
-
-
-def status_bytes(key: str) -> int:
-    """A ``/proc/self/status`` entry (VmRSS, VmHWM), bytes."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith(f"{key}:"):
-            return int(line.split()[1]) * 1024
-    raise KeyError(key)
 
 
 def held_bytes(value) -> int:

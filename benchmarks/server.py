@@ -23,14 +23,20 @@ def children_of(pid: int) -> list[int]:
     return [int(child) for child in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
 
 
-def rss_bytes(pid: int) -> int:
-    """The process's resident memory (VmRSS), bytes; 0 once it has ended."""
+def status_bytes(key: str, pid: int | str = "self") -> int:
+    """An entry of the process's ``/proc/PID/status`` in bytes (VmRSS: resident now, VmHWM:
+    its peak); 0 once it has ended."""
     try:
         status = Path(f"/proc/{pid}/status").read_text()
     except FileNotFoundError:
         return 0
-    line = next(line for line in status.splitlines() if line.startswith("VmRSS:"))
+    line = next(line for line in status.splitlines() if line.startswith(f"{key}:"))
     return int(line.split()[1]) * 1024
+
+
+def rss_bytes(pid: int) -> int:
+    """The process's resident memory (VmRSS), bytes; 0 once it has ended."""
+    return status_bytes("VmRSS", pid)
 
 
 def cpu_seconds(pid: int) -> float:

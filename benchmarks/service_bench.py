@@ -31,14 +31,13 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
-from pathlib import Path
 
 import httpx
 import numpy as np
 import trimesh
 
 from benchmarks.docs import publish
-from benchmarks.server import free_port, wait_ready
+from benchmarks.server import free_port, status_bytes, wait_ready
 from benchmarks.transforms_bench import machine, subdivided
 from service.allocator import keep_large_blocks
 from service.capabilities import MESH_COMMANDS
@@ -60,13 +59,6 @@ def mesh_files(subdivisions: int) -> dict[str, bytes]:
         "head.glb": mesh.export(file_type="glb"),
         "head.obj": obj.getvalue().encode(),
     }
-
-
-def peak_rss_mib(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 _held: dict = {}
@@ -174,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
                 row, reading = _measure(worker, client, base, name, data, args.runs)
                 rows.append(row)
                 readers.append((name, *reading))
-            rss = peak_rss_mib(server.pid)
+            rss = status_bytes("VmHWM", server.pid) / 2**20
     finally:
         worker.shutdown()
         server.terminate()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .errors import TransformInputError, listed_rows
@@ -227,6 +229,23 @@ def as_faces(faces, n_vertices: int, field: str = "faces") -> np.ndarray:
 #: Rows handled at a time by the blocked passes: temporaries stay in cache and are reused by
 #: the allocator instead of touching fresh pages (see docs/benchmarks.md).
 BLOCK_ROWS = 32768
+
+
+def unit_scale(largest: float) -> float:
+    """The power of two that takes ``largest`` (a magnitude) below 1: scaling by it is exact,
+    and no square or product of a few scaled coordinates over- or underflows (1 when
+    ``largest`` is 0)."""
+    return 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
+
+
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise ``a x b`` of (..., 3) arrays that broadcast (``np.cross`` copies its inputs
+    and handles axes, which costs more than the products on a few rows)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def blocks(n: int, size: int | None = None):

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .arrays import as_angles, as_faces, as_points
+from .arrays import as_angles, as_faces, as_points, unit_scale
 from .cap import PoleCap
 from .errors import TransformInputError
 from .parallel import map_blocks
@@ -153,7 +153,7 @@ def measure_checked(
     (n,) finite float64. For callers that made them (:func:`.region.flatten_region`, the
     fit's energy), so that nothing is checked twice."""
     largest = float(np.abs(rows).max())
-    scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
+    scale = unit_scale(largest)
     unscaled_rows, rows = rows, rows * scale
 
     m = len(faces)

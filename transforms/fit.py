@@ -22,11 +22,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from scipy.optimize import minimize
 
-from .arrays import as_direction, as_faces, as_points, as_vector, blocks, unit_rows
+from .arrays import as_direction, as_faces, as_points, as_vector, blocks, cross_rows, unit_rows
 from .cap import PoleCap
 from .chart import Chart, Method
 from .emptycap import cap_radius, largest_empty_cap
@@ -586,9 +587,7 @@ class _Problem:
         self.sample_points, self.sample_faces = _compacted(points, faces[picked])
         self.sample_areas = areas[picked]
         self.sample = FaceEnergy(self.sample_points, self.sample_faces, method, layout)
-        # The slide only picks the basin the refinement starts in: a coarser sample.
-        coarse = _compacted(points, faces[area_sample(areas, COARSE_SAMPLE_FACES)])
-        self.coarse = FaceEnergy(*coarse, method, layout)
+        self.areas = areas
         # The rows of region_points the pole's hull and the slide's caps are judged on.
         self.hull_rows = _hull_rows(self.used, self.planes.boundary_vertices)
         self.hull_points = self.region_points[self.hull_rows]
@@ -608,6 +607,13 @@ class _Problem:
         if fixed.center is not None:
             check_center_sees_area(points, faces, as_vector(fixed.center, "center"))
         return cls(points, faces, method, threads, Layout(layout))
+
+    @cached_property
+    def coarse(self) -> FaceEnergy:
+        """The slide's sample: it only picks the basin the refinement starts in, so fewer
+        faces do (made when a fit slides; the default choice never does)."""
+        picked = area_sample(self.areas, COARSE_SAMPLE_FACES)
+        return FaceEnergy(*_compacted(self.points, self.faces[picked]), self.method, self.layout)
 
     def release(self) -> None:
         """Let go of what only the search reads: the kernel's planes, the region's own
@@ -999,12 +1005,12 @@ def _rotations_from_pole_up(poles: np.ndarray, up: np.ndarray) -> np.ndarray:
     part of ``up`` (3,) orthogonal to it as local ``+Z``: :meth:`.Frame.from_pole_up` for a
     batch (``up`` is the start's local Z, far from parallel to a slightly tilted pole)."""
     y_axes = poles / np.linalg.norm(poles, axis=1, keepdims=True)
-    x_axes = _cross(y_axes, up)
+    x_axes = cross_rows(y_axes, up)
     x_axes /= np.linalg.norm(x_axes, axis=1, keepdims=True)
     # A second pass of Gram-Schmidt, as Frame.from_pole_up does.
     x_axes -= np.einsum("kj,kj->k", x_axes, y_axes)[:, None] * y_axes
     x_axes /= np.linalg.norm(x_axes, axis=1, keepdims=True)
-    return np.stack([x_axes, y_axes, _cross(x_axes, y_axes)], axis=1)
+    return np.stack([x_axes, y_axes, cross_rows(x_axes, y_axes)], axis=1)
 
 
 def _rotation_slopes(pole: np.ndarray, up: np.ndarray, turns: np.ndarray) -> np.ndarray:
@@ -1012,22 +1018,14 @@ def _rotation_slopes(pole: np.ndarray, up: np.ndarray, turns: np.ndarray) -> np.
     ``up`` (3,) as the pole moves along each of ``turns`` (t, 3)."""
     length = np.linalg.norm(pole)
     y_axis = pole / length
-    across = _cross(y_axis, up)
+    across = cross_rows(y_axis, up)
     width = np.linalg.norm(across)
     x_axis = across / width
     dy = (turns - np.outer(turns @ y_axis, y_axis)) / length
-    d_across = _cross(dy, up)
+    d_across = cross_rows(dy, up)
     dx = (d_across - np.outer(d_across @ x_axis, x_axis)) / width
-    dz = _cross(dx, y_axis) + _cross(x_axis, dy)
+    dz = cross_rows(dx, y_axis) + cross_rows(x_axis, dy)
     return np.stack([dx, dy, dz], axis=1)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.cross`` of (..., 3) arrays, without its axis handling (the refinement calls it
-    on a few vectors at a time, where that handling costs more than the products)."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _cap_radii(points: np.ndarray, centers: np.ndarray, pole: np.ndarray) -> np.ndarray:

@@ -15,7 +15,6 @@ with the faces it violates added until it holds for every face.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +23,7 @@ from scipy.optimize import linprog
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .arrays import blocks
+from .arrays import blocks, unit_scale
 from .errors import TransformInputError
 from .sampling import area_sample
 from .topology import region_edges
@@ -127,8 +126,7 @@ def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
     """
     # In units where the largest coordinate is below 1 (a power of two: exact), so that no
     # square or product of coordinates over- or underflows; the planes are scaled back.
-    largest = float(np.abs(vertices).max())
-    scale = 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
+    scale = unit_scale(float(np.abs(vertices).max()))
     scaled = vertices * scale
     rows = np.ascontiguousarray(scaled.T)
     # The closing planes first (their side flips with the winding, found last), so that

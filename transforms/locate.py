@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .arrays import as_faces, as_points, blocks, unit_rows
+from .arrays import as_faces, as_points, blocks, cross_rows, unit_rows
 from .errors import TransformInputError, listed_rows
 
 #: A direction counts as inside when each edge's determinant is above this (relative) amount.
@@ -552,8 +552,8 @@ def _pair_hits(points, faces, rays, query, face):
     q = _rows(rays, query)
     corners = _rows(faces, face)
     c0, c1, c2 = (_rows(points, corners[:, i]) for i in range(3))
-    across = _cross(c1, c2)
-    e0, e1, e2 = _dot(q, across), _dot(q, _cross(c2, c0)), _dot(q, _cross(c0, c1))
+    across = cross_rows(c1, c2)
+    e0, e1, e2 = _dot(q, across), _dot(q, cross_rows(c2, c0)), _dot(q, cross_rows(c0, c1))
     total = e0 + e1 + e2  # q . n with n = (c1 - c0) x (c2 - c0)
     slack = _INSIDE * (np.abs(e0) + np.abs(e1) + np.abs(e2))
     side = np.sign(total)
@@ -564,15 +564,6 @@ def _pair_hits(points, faces, rays, query, face):
     rows = np.flatnonzero(inside)
     weights = np.stack([e0[rows], e1[rows], e2[rows]], axis=1) / total[rows, None]
     return query[rows], face[rows], depth[rows], weights
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise ``a x b`` of (p, 3) arrays (np.cross copies its inputs)."""
-    out = np.empty_like(a)
-    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
-    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
-    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    return out
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -22,11 +22,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .arrays import unit_scale
 from .chart import Method
 from .faces import DEGENERATE_RTOL
 from .layouts import MERCATOR_THETA_MARGIN, Layout, measured_second
 from .separable import separable_angles
 from .spherical import MIN_RADIUS, angles
+from .warp import plus_minus
 
 #: What a candidate pays for each unit of the fraction of the area it sees from behind
 #: (1% costs 10, more than any energy difference the faces seen from the front make).
@@ -254,10 +256,8 @@ def region_energy(
 
 
 def _unit_scale(points: np.ndarray) -> float:
-    """The power of two that takes the largest coordinate below 1 (exact), so no product of
-    four coordinates underflows or overflows; the energy has no unit."""
-    largest = float(np.abs(points).max()) if len(points) else 0.0
-    return 2.0 ** -math.frexp(largest)[1] if largest > 0 else 1.0
+    """:func:`.arrays.unit_scale` of the largest coordinate: the energy has no unit."""
+    return unit_scale(float(np.abs(points).max()) if len(points) else 0.0)
 
 
 def _objective(sums: tuple, at_centre: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -328,7 +328,7 @@ class _Warped:
         r = np.sqrt(x * x + y * y + z * z)
         at_centre = bool((r < MIN_RADIUS).any())
         r[r < MIN_RADIUS] = 1.0
-        plus, minus = _plus_minus(x, y, z, r)
+        plus, minus = plus_minus(x, y, z, r)
         warped = np.stack([2.0 * sigma * x, sigma * sigma * plus - minus, 2.0 * sigma * z])
         theta, phi = angles(*warped)
         plane = np.empty(len(r), dtype=np.complex128)
@@ -401,22 +401,10 @@ def _chart_angles(x, y, z, r, sigmas, method: Method) -> tuple[np.ndarray, np.nd
     # warp.warped_angles with a sigma per row, times r > 0 (which changes no angle):
     # (2 sigma x, sigma^2 (r + y) - (r - y), 2 sigma z), the sums without cancellation.
     sigma = sigmas[:, None]
-    plus, minus = _plus_minus(x, y, z, r)
+    plus, minus = plus_minus(x, y, z, r)
     plus *= sigma * sigma
     plus -= minus
     return angles(2.0 * sigma * x, plus, 2.0 * sigma * z)
-
-
-def _plus_minus(x, y, z, r) -> tuple[np.ndarray, np.ndarray]:
-    """``r + y`` and ``r - y`` without cancellation: the one that cancels is the other's
-    complement ``(x^2 + z^2) / (r +- y)`` (as :func:`.warp._plus_minus` on unit vectors)."""
-    exact = np.abs(y)
-    exact += r
-    complement = x * x
-    complement += z * z
-    complement /= exact
-    negative = y < 0.0
-    return np.where(negative, complement, exact), np.where(negative, exact, complement)
 
 
 class _FaceShapes:

@@ -46,7 +46,7 @@ def pole_warp(directions, sigma: float) -> np.ndarray:
         raise TransformInputError("directions", f"{text}: zero vector has no direction", rows)
     x, y, z = u.T
     s2 = sigma * sigma
-    one_plus_y, one_minus_y = _plus_minus(x, y, z)
+    one_plus_y, one_minus_y = plus_minus(x, y, z)
     denominator = s2 * one_plus_y + one_minus_y  # >= 2 min(sigma^2, 1) > 0 on the sphere
     warped = (
         np.stack([2.0 * sigma * x, s2 * one_plus_y - one_minus_y, 2.0 * sigma * z], axis=1)
@@ -107,7 +107,7 @@ def warped_angles(
     unit_y = y * to_unit
     if sigma == 1.0:
         return angles(a, unit_y, c)
-    plus, minus = _plus_minus(a, unit_y, c)
+    plus, minus = plus_minus(a, unit_y, c)
     plus *= sigma * sigma
     plus -= minus
     a *= 2.0 * sigma
@@ -115,15 +115,16 @@ def warped_angles(
     return angles(a, plus, c)
 
 
-def _plus_minus(x, y, z) -> tuple[np.ndarray, np.ndarray]:
-    """``1 + y`` and ``1 - y`` without cancellation, for a unit ``(x, y, z)``.
+def plus_minus(x, y, z, r=1.0) -> tuple[np.ndarray, np.ndarray]:
+    """``r + y`` and ``r - y`` without cancellation, for ``(x, y, z)`` of length ``r`` (a
+    unit vector by default).
 
     Near ``-Y`` the sum cancels and near ``+Y`` the difference; there each is the other's
-    complement ``(x^2 + z^2) / (1 -+ y)`` (their product is ``x^2 + z^2``), exact to rounding.
-    The one without cancellation is ``1 + |y|``.
+    complement ``(x^2 + z^2) / (r -+ y)`` (their product is ``x^2 + z^2``), exact to rounding.
+    The one without cancellation is ``r + |y|``.
     """
     exact = np.abs(y)
-    exact += 1.0
+    exact += r
     complement = x * x
     complement += z * z
     complement /= exact

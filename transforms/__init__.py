@@ -23,6 +23,7 @@ from .fit import Fit, FitBounds, FitExplanation, FitFixed, default_choice, fit_r
 from .frames import Frame, check_rotation
 from .layouts import Layout, layout_xy
 from .locate import Hits, LocateIndex, locate
+from .mapping import MapTriangles
 from .margins import arcs_to_point, arcs_to_seam
 from .metrics import (
     Distortion,
@@ -41,6 +42,7 @@ from .topology import RegionEdges, region_edges
 from .untangle import Untangled, untangle
 from .validation import RegionValidation, validate
 from .warp import distorted_forward, distorted_inverse, pole_warp
+from .zones import Polyline, ZoneCover, cover_zone, lift_curve
 
 __all__ = [
     "DEGENERATE_RTOL",
@@ -64,13 +66,16 @@ __all__ = [
     "Hits",
     "Layout",
     "LocateIndex",
+    "MapTriangles",
     "Method",
     "PoleCap",
+    "Polyline",
     "RegionEdges",
     "RegionValidation",
     "Summary",
     "TransformInputError",
     "Untangled",
+    "ZoneCover",
     "angles_to_world",
     "arcs_to_point",
     "arcs_to_seam",
@@ -79,6 +84,7 @@ __all__ = [
     "check_rho",
     "check_rotation",
     "check_sigma",
+    "cover_zone",
     "default_choice",
     "distorted_forward",
     "distorted_inverse",
@@ -87,6 +93,7 @@ __all__ = [
     "fit_region",
     "flatten_region",
     "layout_xy",
+    "lift_curve",
     "locate",
     "measure_faces",
     "orient3d_sign",

@@ -55,13 +55,14 @@ def _kind_name(array: np.ndarray) -> str:
     return names.get(array.dtype.kind, str(array.dtype))
 
 
-def as_points(points, field: str = "points") -> np.ndarray:
-    """Return ``points`` as a C-contiguous ``(n, 3)`` float64 array of finite coordinates.
+def as_points(points, field: str = "points", dims: int = 3) -> np.ndarray:
+    """Return ``points`` as a C-contiguous ``(n, dims)`` float64 array of finite coordinates.
 
     Parameters
     ----------
-    points : array_like, (n, 3)
+    points : array_like, (n, dims)
     field : name used in error messages.
+    dims : 3 for space, 2 for the map
 
     Raises
     ------
@@ -69,9 +70,9 @@ def as_points(points, field: str = "points") -> np.ndarray:
         Wrong shape, a NaN or Inf coordinate, or a magnitude above ``MAX_ABS_COORDINATE``;
         the message lists the offending rows.
     """
-    array = numeric_array(points, field, "an (n, 3) array of numbers")
-    if array.ndim != 2 or array.shape[1] != 3:
-        raise TransformInputError(field, f"must have shape (n, 3), got {array.shape}")
+    array = numeric_array(points, field, f"an (n, {dims}) array of numbers")
+    if array.ndim != 2 or array.shape[1] != dims:
+        raise TransformInputError(field, f"must have shape (n, {dims}), got {array.shape}")
     # One pass on the happy path: NaN fails the comparison, Inf exceeds the bound.
     if not (np.abs(array) <= MAX_ABS_COORDINATE).all():
         finite = np.isfinite(array).all(axis=1)

@@ -17,12 +17,13 @@ from .encoding import Timings, encode
 from .jobs import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE
 from .meshio import Mesh
 from .outputs import Output
-from .outputs.render import RENDERERS
+from .outputs.render import MEASURE_RENDERERS, RENDERERS
 from .params import (
     FitParams,
     FlattenParams,
     InverseRequest,
     LocateParams,
+    MeasureParams,
     MeshParams,
     PointsRequest,
 )
@@ -32,6 +33,7 @@ from .schemas import (
     FlattenResponse,
     InverseResponse,
     LocateResponse,
+    MeasureResponse,
     PointsResponse,
     ValidateResponse,
 )
@@ -189,12 +191,38 @@ MESH_CAPABILITIES = (
         summary="Find the surface points of directions on the map",
         description="Multipart like /v1/flatten; `params` also holds the queries, `theta` and "
         "`phi` (radians, in the frame the other params resolve to). Answers, per query, the "
-        "region triangle the ray from the centre in that direction meets first, the "
+        "region triangle the ray from the centre in that direction meets first (`via: ray`, "
+        "the default) or the region triangle whose image on the map holds the layout's point "
+        "of those angles (`via: map`: the point a picture or the GLB's UVs show there), the "
         "barycentric weights of the hit (of the triangle's vertices in file order) and the hit "
-        "point (world coordinates), or null where the ray misses the region.",
+        "point (world coordinates), or null where the ray misses the region or no triangle "
+        "holds the map point.",
         params=LocateParams,
         operation=operations.locate_directions,
         response=LocateResponse,
+    ),
+    MeshCapability(
+        name="measure",
+        path="/v1/measure",
+        summary="Measure zones and curves drawn on the map",
+        description="Multipart like /v1/flatten; `params` also holds `zones` (an outer ring "
+        "and holes each, in the layout's coordinates: the vertices.x and vertices.y of a "
+        "flatten answer, straight edges in that plane), `curves` (polylines in the same plane) "
+        "and `units`. The map is linear inside each region triangle, as the GLB's UVs and the "
+        "pictures draw it: a map point in a triangle's image stands for the surface point "
+        "with the same barycentric weights (docs/math.md, section 12). Answers, per zone, its "
+        "surface area (in cm² too with units), the part on flagged triangles, the map area no "
+        "triangle covers, the surface perimeter, the triangles wholly inside and the cut ones "
+        "with the share of each inside, and the outline lifted onto the surface; per curve, "
+        "the lifted polyline (its points and every crossing of a triangle edge, with face "
+        "ids) and its surface length; and the area each pair of overlapping zones shares. "
+        "Exact: a zone covering the whole map has the region's area, zones tiling the map sum "
+        "to it. Or, by the Accept header or params.output, the map with the zones filled, "
+        "named and labelled with their areas, and the curves (SVG or PNG).",
+        params=MeasureParams,
+        operation=operations.measure,
+        response=MeasureResponse,
+        renderers=MEASURE_RENDERERS,
     ),
 )
 

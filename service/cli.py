@@ -9,6 +9,7 @@
     meshflat validate MESH ... [--out FILE.json]
     meshflat fit MESH ... [--out FILE.json]
     meshflat locate MESH ... --params '{"theta": [...], "phi": [...]}'
+    meshflat measure MESH ... --zones zones.json [--out FILE.json|.svg|.png]
     meshflat batch MANIFEST.jsonl --out DIR [--processes N] [--shard-count N [--shard-index I]]
 
 One command per mesh route of :mod:`service.capabilities`, running the same operation: the
@@ -128,7 +129,31 @@ def params_of(args: argparse.Namespace) -> dict:
         if not (args.pole and args.up):
             raise Problem(422, "--pole, --up: give both", field="--pole")
         params["rotation"] = {"pole": _vector(args.pole, "--pole"), "up": _vector(args.up, "--up")}
+    if getattr(args, "zones", None):
+        params.update(_drawn(args.zones))
     return params
+
+
+def _drawn(path: str) -> dict:
+    """The params a ``--zones`` file holds: a list of zones, or an object of params (zones,
+    curves, units)."""
+    try:
+        drawn = json.loads(Path(path).read_bytes())
+    except OSError as error:
+        raise Problem(
+            422, f"--zones: cannot read {path!r}: {error.strerror}", field="--zones"
+        ) from None
+    except ValueError as error:
+        raise Problem(422, f"--zones: {path!r} is not JSON ({error})", field="--zones") from None
+    if isinstance(drawn, list):
+        return {"zones": drawn}
+    if not isinstance(drawn, dict):
+        raise Problem(
+            422,
+            "--zones: a list of zones, or an object with zones, curves and units",
+            field="--zones",
+        )
+    return drawn
 
 
 def _cone(text: str) -> dict:
@@ -236,6 +261,12 @@ def parser() -> argparse.ArgumentParser:
         command.add_argument("--up", metavar="X,Y,Z", help="world direction towards local +Z")
         command.add_argument("--layout", choices=[layout.value for layout in Layout])
         command.add_argument("--params", metavar="JSON", help="any of the API's params")
+        if "zones" in capability.params.model_fields:
+            command.add_argument(
+                "--zones",
+                metavar="FILE",
+                help="JSON: a list of zones, or an object with zones, curves and units",
+            )
         command.add_argument("--out", metavar="FILE", help="default: JSON on stdout")
         command.add_argument("--progress", action="store_true", help="a progress bar always")
     return top

@@ -26,27 +26,40 @@ from transforms import (
     Frame,
     Hits,
     Layout,
+    MapTriangles,
     Method,
     PoleCap,
+    Polyline,
     Untangled,
+    ZoneCover,
     angles_to_world,
+    cover_zone,
     default_choice,
     fit_region,
     flatten_region,
+    layout_xy,
+    lift_curve,
     locate,
     untangle,
     world_to_angles,
 )
 from transforms import selection as select
+from transforms.region import flagged_mask
 from transforms.viewpoint import check_center_sees_area
 
+from .jobs import MAP_BYTES_PER_FACE, charge
 from .meshio import Mesh, format_of, read_mesh
+from .outlines import Outline, checked_curve, checked_zone, overlaps
 from .params import (
     DEFAULT_SIGMA,
     AutoPole,
     ChartParams,
     InverseRequest,
+    KnownDistance,
+    LengthUnit,
     LocateParams,
+    LocateVia,
+    MeasureParams,
     MeshParams,
     PointsRequest,
     PoleUp,
@@ -259,12 +272,26 @@ def flatten(mesh: Mesh, params: MeshParams, settings: Settings) -> MeshRegion:
 
 
 def untangle_layout(mesh: Mesh, flat: FlatRegion) -> Untangled:
-    """The region's layout made fold-free (:func:`transforms.untangle`), in the returned
-    ``(x, y)`` plane, whose second axis runs against theta for Mercator."""
-    s_sign = 1 if flat.layout is Layout.THETA_PHI else -1
-    orientation = LAYOUT_ORIENTATION * flat.validation.winding * s_sign
+    """The region's layout made fold-free (:func:`transforms.untangle`)."""
     shapes = mesh.vertices[flat.vertex_ids]
-    return untangle(flat.x, flat.y, flat.faces, shapes, orientation)
+    return untangle(flat.x, flat.y, flat.faces, shapes, front_orientation(flat))
+
+
+def front_orientation(flat: FlatRegion) -> int:
+    """The sign of a front-facing triangle's signed area in the returned ``(x, y)`` plane,
+    whose second axis runs against theta for Mercator."""
+    s_sign = 1 if flat.layout is Layout.THETA_PHI else -1
+    return LAYOUT_ORIENTATION * flat.validation.winding * s_sign
+
+
+def map_triangles(region: MeshRegion) -> MapTriangles:
+    """The region's triangles on its answered map (untangled when asked) and on the
+    surface: the correspondence of docs/math.md, section 12."""
+    flat = region.flat
+    charge(MAP_BYTES_PER_FACE * len(flat.faces))
+    x, y = region.layout
+    surface = region.mesh.vertices[flat.vertex_ids]
+    return MapTriangles.of(x, y, surface, flat.faces, front_orientation(flat))
 
 
 @dataclass(frozen=True)
@@ -297,6 +324,8 @@ def locate_directions(mesh: Mesh, params: LocateParams, settings: Settings) -> L
     """For each ``(theta, phi)`` of ``params``, the region triangle the ray from the centre
     meets first (:func:`transforms.locate`)."""
     check_count(len(params.theta), settings.max_points, "params.theta")
+    if params.via is LocateVia.MAP:
+        return _locate_on_map(mesh, params, settings)
     selection = select_region(mesh, params)
     chart, frame, _ = resolve(mesh, selection, params, settings)
     directions = chart.inverse(params.theta, params.phi, 1.0)
@@ -311,6 +340,106 @@ def locate_directions(mesh: Mesh, params: LocateParams, settings: Settings) -> L
     hits = locate(mesh.vertices - frame.center, faces, directions @ rotation)
     hits = Hits(hits.faces, hits.barycentric, hits.points @ rotation.T)
     return Located(chart, frame, selection, hits, params.layout, mesh.format)
+
+
+def _locate_on_map(mesh: Mesh, params: LocateParams, settings: Settings) -> Located:
+    """For each ``(theta, phi)`` of ``params``, the point the map shows there: the layout's
+    point of those angles in the region triangle that holds it, lifted with the same
+    barycentric weights (:meth:`transforms.MapTriangles.locate`)."""
+    region = flatten(mesh, params, settings)
+    triangles = map_triangles(region)
+    x, y = layout_xy(np.asarray(params.theta), np.asarray(params.phi), params.layout)
+    faces, weights = triangles.locate(np.column_stack([x, y]))
+    found = faces >= 0
+    points = np.full((len(faces), 3), np.nan)
+    points[found] = triangles.lift(faces[found], weights[found])
+    local = region.frame.to_local(points[found])
+    hits = Hits(faces, weights, np.full((len(faces), 3), np.nan))
+    hits.points[found] = local
+    selection = region.selection
+    return Located(region.chart, region.frame, selection, hits, params.layout, mesh.format)
+
+
+# -- zones and curves ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Measured:
+    """What was drawn on a region's map, measured on its surface.
+
+    Attributes
+    ----------
+    region : MeshRegion, the region flattened
+    triangles : MapTriangles, its map and surface
+    flagged : (m,) bool, the region's faces the validation flags
+    zones : tuple of (Outline, ZoneCover)
+    curves : tuple of (name, Polyline)
+    overlaps : tuple of (i, j, area): the surface area zones i and j share
+    mm_per_unit : float or None, from params.units
+    """
+
+    region: MeshRegion
+    triangles: MapTriangles
+    flagged: np.ndarray
+    zones: tuple[tuple[Outline, ZoneCover], ...]
+    curves: tuple[tuple[str, Polyline], ...]
+    overlaps: tuple[tuple[int, int, float], ...]
+    mm_per_unit: float | None
+
+
+def measure(mesh: Mesh, params: MeasureParams, settings: Settings) -> Measured:
+    """The zones and curves of ``params``, drawn on the map of the region it names, measured
+    on the surface (:func:`transforms.cover_zone`, :func:`transforms.lift_curve`)."""
+    drawn = sum(len(z.outer.x) + sum(len(h.x) for h in z.holes) for z in params.zones)
+    drawn += sum(len(curve.x) for curve in params.curves)
+    check_count(drawn, settings.max_drawn_points, "params.zones", "MESHFLAT_MAX_DRAWN_POINTS")
+    outlines = [checked_zone(zone, k) for k, zone in enumerate(params.zones)]
+    curves = [checked_curve(curve, k) for k, curve in enumerate(params.curves)]
+    mm_per_unit = _mm_per_unit(params.units)
+    region = flatten(mesh, params, settings)
+    triangles = map_triangles(region)
+    covers = [cover_zone(triangles, outline.rings) for outline in outlines]
+    shared = tuple(
+        (i, j, sum(cover_zone(triangles, rings).total(triangles.surface_area) for rings in parts))
+        for i, j, parts in overlaps(outlines)
+    )
+    return Measured(
+        region,
+        triangles,
+        flagged_mask(region.flat.validation, len(triangles)),
+        tuple(zip(outlines, covers, strict=True)),
+        tuple(
+            (curve.name, lift_curve(triangles, points))
+            for curve, points in zip(params.curves, curves, strict=True)
+        ),
+        shared,
+        mm_per_unit,
+    )
+
+
+def _mm_per_unit(units: LengthUnit | KnownDistance | None) -> float | None:
+    """Millimetres per mesh unit, from ``params.units``.
+
+    Raises
+    ------
+    Problem
+        422 when the two points of a known distance coincide.
+    """
+    if units is None:
+        return None
+    if isinstance(units, KnownDistance):
+        start, end = (np.asarray(point, dtype=np.float64) for point in units.between)
+        distance = float(np.linalg.norm(end - start))
+        if not distance > 0:
+            raise Problem(
+                422,
+                "params.units.between: the two points coincide; give two points the known "
+                "distance apart",
+                "invalid-request",
+                "params.units.between",
+            )
+        return units.mm / distance
+    return LengthUnit(units).mm
 
 
 # -- points --------------------------------------------------------------------------------
@@ -345,12 +474,12 @@ def angles_to_points(request: InverseRequest, settings: Settings) -> np.ndarray:
     return angles_to_world(request.theta, request.phi, r, frame, chart)
 
 
-def check_count(count: int, limit: int, field: str) -> None:
-    """Refuse more than ``limit`` query points (413, naming ``field``)."""
+def check_count(count: int, limit: int, field: str, setting: str = "MESHFLAT_MAX_POINTS") -> None:
+    """Refuse more than ``limit`` query points (413, naming ``field`` and the ``setting``)."""
     if count > limit:
         raise Problem(
             413,
-            f"{field}: {count:,} items; the limit is {limit:,} (MESHFLAT_MAX_POINTS)",
+            f"{field}: {count:,} items; the limit is {limit:,} ({setting})",
             "too-many-points",
             field,
         )

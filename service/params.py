@@ -352,6 +352,13 @@ class FitParams(MeshParams):
         return True
 
 
+class LocateVia(StrEnum):
+    """How /v1/locate finds the surface point of a query (docs/math.md, section 12)."""
+
+    RAY = "ray"
+    MAP = "map"
+
+
 class LocateParams(MeshParams):
     """The JSON of the ``params`` field of /v1/locate: a region and its frame as for
     /v1/flatten (``"auto"`` allowed), and the query directions."""
@@ -362,6 +369,14 @@ class LocateParams(MeshParams):
     )
     phi: Annotated[list[Number], Field(min_length=1, fail_fast=True)] = Field(
         description="Azimuths, radians, in [-pi, pi]; one per theta."
+    )
+    via: choice(LocateVia) = Field(
+        LocateVia.RAY,
+        description="ray: the point the ray from the centre in direction (theta, phi) meets "
+        "first. map: the point the map shows at (theta, phi): the layout's (x, y) of those "
+        "angles (the answered layout, untangled when untangle is set) in the region triangle "
+        "that holds it, lifted with the same barycentric weights (the map is linear inside "
+        "each triangle, as the GLB's UVs and the pictures draw it).",
     )
 
     model_config = ConfigDict(
@@ -380,17 +395,23 @@ class LocateParams(MeshParams):
         return self
 
 
-class FlattenParams(MeshParams):
-    """The JSON of the ``params`` field of /v1/flatten: as for /v1/validate, and the form of
-    the answer."""
+def output_choice(outputs: tuple[Output, ...], description: str):
+    """The type of the ``output`` parameter of a route that answers in ``outputs``: one of
+    their names (held as the :class:`Output`) or null, ``description`` saying what each is."""
+    values = tuple(output.value for output in outputs)
+    return Annotated[
+        Literal[values] | None,
+        AfterValidator(lambda value: None if value is None else Output(value)),
+        Field(
+            description=f"The answer's form, for clients that cannot set Accept: {description} "
+            "Default: from the Accept header, JSON without one."
+        ),
+    ]
 
-    output: choice(Output) | None = Field(
-        None,
-        description="The answer's form, for clients that cannot set Accept: json "
-        "(application/json), glb (model/gltf-binary: the region with TEXCOORD_0 from the "
-        "layout), svg (image/svg+xml) or png (image/png): a picture of the map. Default: "
-        "from the Accept header, JSON without one.",
-    )
+
+class PictureParams(_Strict):
+    """The size of a picture answer."""
+
     image_width: int = Field(
         1200, ge=480, le=4096, description="Width of an SVG or PNG answer, pixels."
     )
@@ -398,4 +419,127 @@ class FlattenParams(MeshParams):
         800, ge=360, le=4096, description="Height of an SVG or PNG answer, pixels."
     )
 
+
+class FlattenParams(MeshParams, PictureParams):
+    """The JSON of the ``params`` field of /v1/flatten: as for /v1/validate, and the form of
+    the answer."""
+
+    output: output_choice(
+        tuple(Output),
+        "json (application/json), glb (model/gltf-binary: the region with TEXCOORD_0 from the "
+        "layout), svg (image/svg+xml) or png (image/png): a picture of the map.",
+    ) = None
+
     model_config = ConfigDict(json_schema_extra={"examples": [MESH_PARAMS_EXAMPLE]})
+
+
+class LengthUnit(StrEnum):
+    """The length units a mesh may be in."""
+
+    MM = "mm"
+    CM = "cm"
+    M = "m"
+
+    @property
+    def mm(self) -> float:
+        """Millimetres in one unit."""
+        return {"mm": 1.0, "cm": 10.0, "m": 1000.0}[self.value]
+
+
+#: A name of a zone or a curve: what the answer and the picture label it with.
+Name = Annotated[str, Field(min_length=1, max_length=120)]
+#: Coordinates on the map: the layout's x or y of a flatten answer.
+MapCoordinates = Annotated[list[Coordinate], Field(fail_fast=True)]
+
+
+class Ring(_Strict):
+    """A closed ring on the map, in the layout's coordinates (``vertices.x`` and
+    ``vertices.y`` of a flatten answer): straight edges from each point to the next and from
+    the last back to the first (which need not be repeated)."""
+
+    x: MapCoordinates = Field(min_length=3)
+    y: MapCoordinates = Field(min_length=3)
+
+    @model_validator(mode="after")
+    def _one_y_per_x(self) -> Ring:
+        if len(self.x) != len(self.y):
+            raise ValueError(f"x, y: one y per x; got {len(self.x)} x and {len(self.y)} y")
+        return self
+
+
+class Zone(_Strict):
+    """An area drawn on the map: an outer ring and the holes cut out of it."""
+
+    name: Name
+    outer: Ring
+    holes: Annotated[list[Ring], Field(max_length=256)] = Field(
+        [], description="Rings inside the outer one, apart from each other."
+    )
+
+
+class Curve(_Strict):
+    """A polyline drawn on the map (a hairline, an incision), in the layout's coordinates."""
+
+    name: Name
+    x: MapCoordinates = Field(min_length=2)
+    y: MapCoordinates = Field(min_length=2)
+
+    @model_validator(mode="after")
+    def _one_y_per_x(self) -> Curve:
+        if len(self.x) != len(self.y):
+            raise ValueError(f"x, y: one y per x; got {len(self.x)} x and {len(self.y)} y")
+        return self
+
+
+class KnownDistance(_Strict):
+    """The mesh's scale from a distance known in millimetres."""
+
+    between: Annotated[list[Vector3], Field(min_length=2, max_length=2)] = Field(
+        description="Two world points of the mesh, [[x, y, z], [x, y, z]] (the pupils, say)."
+    )
+    mm: PositiveNumber = Field(description="Their distance in millimetres.")
+
+
+class MeasureParams(MeshParams, PictureParams):
+    """The JSON of the ``params`` field of /v1/measure: a region and its frame as for
+    /v1/flatten (``"auto"`` allowed), and what was drawn on its map."""
+
+    zones: Annotated[list[Zone], Field(max_length=256)] = Field(
+        [], description="Areas drawn on the map; they may overlap."
+    )
+    curves: Annotated[list[Curve], Field(max_length=256)] = Field(
+        [], description="Polylines drawn on the map."
+    )
+    units: choice(LengthUnit) | KnownDistance | None = Field(
+        None,
+        description="The mesh's length unit (mm, cm or m), or its scale from a known "
+        "distance. Without it, lengths and areas are in mesh units and no cm2 are given.",
+    )
+    output: output_choice(
+        (Output.JSON, Output.SVG, Output.PNG),
+        "json (application/json), svg (image/svg+xml) or png (image/png): the map with each "
+        "zone filled, named and labelled with its area, and the curves.",
+    ) = None
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    **MESH_PARAMS_EXAMPLE,
+                    "zones": [
+                        {
+                            "name": "crown",
+                            "outer": {
+                                "x": [-1.8, -1.35, -1.35, -1.8],
+                                "y": [1.4, 1.4, 1.75, 1.75],
+                            },
+                        }
+                    ],
+                    "curves": [
+                        {"name": "hairline", "x": [-2.0, -1.57, -1.1], "y": [1.45, 1.35, 1.45]}
+                    ],
+                    "units": "mm",
+                }
+            ]
+        }
+    )

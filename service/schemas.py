@@ -22,7 +22,7 @@ from .meshio import FORMATS
 from .params import Region, choice
 
 if TYPE_CHECKING:
-    from .operations import Angles, Located, MeshRegion
+    from .operations import Angles, Located, Measured, MeshRegion
 
 
 class Answer(BaseModel):
@@ -410,6 +410,159 @@ class LocateResponse(Answer):
             located.chart, located.frame, located.layout, located.selection, format=located.format
         )
         return cls.build(params=params, hits=answers)
+
+
+class LiftedLine(Answer):
+    points: list[list[float]] = Field(
+        description="World points along the line on the surface: its own points and every "
+        "crossing of a triangle edge, in order."
+    )
+    map_points: list[list[float]] = Field(description="The same points on the map, [x, y].")
+    faces: list[int | None] = Field(
+        description="Per piece between consecutive points, the file's id of the triangle it "
+        "runs over; null where the line leaves the region (that piece is not on the surface)."
+    )
+
+    @classmethod
+    def of(cls, line, region_faces: np.ndarray) -> LiftedLine:
+        faces = np.where(line.faces >= 0, region_faces[np.maximum(line.faces, 0)], -1)
+        return cls.build(
+            points=line.surface_points,
+            map_points=line.map_points,
+            faces=[None if face < 0 else face for face in faces.tolist()],
+        )
+
+
+def _in_mm(length: float, mm_per_unit: float | None) -> float | None:
+    """A length in mm, None without units."""
+    return None if mm_per_unit is None else length * mm_per_unit
+
+
+def _cm2(area: float, mm_per_unit: float | None) -> float | None:
+    """An area in cm², None without units."""
+    return None if mm_per_unit is None else area * mm_per_unit**2 / 100.0
+
+
+class ZoneMeasure(Answer):
+    name: str
+    area: float = Field(description="Surface area inside the outline minus the holes, mesh units².")
+    area_cm2: float | None = Field(description="The same in cm² (with params.units; else null).")
+    area_flagged: float = Field(
+        description="The part of area on triangles the validation flags (seam, singular point, "
+        "folded, back-facing, degenerate), mesh units²."
+    )
+    area_outside_region: float = Field(
+        description="The outline's map area (layout units²) that no region triangle covers "
+        "(front-facing triangles count positive, back-facing negative: exact on a fold-free map)."
+    )
+    map_area: float = Field(description="The zone's area on the map, layout units².")
+    perimeter: float = Field(
+        description="Surface length of the outer ring and the holes where they run over the "
+        "region, mesh units."
+    )
+    perimeter_mm: float | None = Field(description="The same in mm (with params.units).")
+    faces: list[int] = Field(description="File ids of the triangles wholly inside, ascending.")
+    partial_faces: list[int] = Field(description="File ids of the triangles the outline cuts.")
+    partial_fraction: list[float] = Field(
+        description="Per partial face, the share of its area inside (the map is linear in each "
+        "triangle, so the share of its map area is the share of its surface area)."
+    )
+    outline: list[LiftedLine] = Field(
+        description="The rings lifted onto the surface, the outer one first (each closed: "
+        "its last point is its first)."
+    )
+
+    @classmethod
+    def of(cls, measured: Measured, number: int) -> ZoneMeasure:
+        outline, cover = measured.zones[number]
+        triangles, faces = measured.triangles, measured.region.faces
+        area = cover.total(triangles.surface_area)
+        scale = measured.mm_per_unit
+        return cls.build(
+            name=outline.name,
+            area=area,
+            area_cm2=_cm2(area, scale),
+            area_flagged=cover.total(np.where(measured.flagged, triangles.surface_area, 0.0)),
+            area_outside_region=_outside(cover),
+            map_area=cover.map_area,
+            perimeter=cover.perimeter,
+            perimeter_mm=_in_mm(cover.perimeter, scale),
+            faces=faces[cover.inside],
+            partial_faces=faces[cover.partial],
+            partial_fraction=cover.share,
+            outline=[LiftedLine.of(ring, faces) for ring in cover.outline],
+        )
+
+
+#: Map areas below this share of the zone's are rounding (the sums of many triangles).
+_OUTSIDE_SLACK = 1e-9
+
+
+def _outside(cover) -> float:
+    outside = cover.map_area - cover.covered_map_area
+    return 0.0 if outside <= _OUTSIDE_SLACK * cover.map_area else outside
+
+
+class CurveMeasure(LiftedLine):
+    name: str
+    length: float = Field(
+        description="Surface length where the curve runs over the region, mesh units."
+    )
+    length_mm: float | None = Field(description="The same in mm (with params.units).")
+
+    @classmethod
+    def of(cls, measured: Measured, number: int) -> CurveMeasure:
+        name, line = measured.curves[number]
+        lifted = LiftedLine.of(line, measured.region.faces)
+        return cls.build(
+            name=name,
+            length=line.length,
+            length_mm=_in_mm(line.length, measured.mm_per_unit),
+            points=lifted.points,
+            map_points=lifted.map_points,
+            faces=lifted.faces,
+        )
+
+
+class Overlap(Answer):
+    zones: list[str] = Field(description="The two zones' names.")
+    indices: list[int] = Field(description="Their positions in params.zones.")
+    area: float = Field(description="The surface area they share, mesh units².")
+    area_cm2: float | None = Field(description="The same in cm² (with params.units).")
+
+
+class Units(Answer):
+    mm_per_unit: float = Field(description="Millimetres per mesh unit, as params.units gives it.")
+
+
+class MeasureResponse(Answer):
+    params: ResolvedParams
+    units: Units | None = Field(description="The scale used; null without params.units.")
+    zones: list[ZoneMeasure]
+    curves: list[CurveMeasure]
+    overlaps: list[Overlap] = Field(
+        description="Every pair of zones that share area, with the area they share."
+    )
+
+    @classmethod
+    def of(cls, measured: Measured) -> MeasureResponse:
+        names = [outline.name for outline, _ in measured.zones]
+        scale = measured.mm_per_unit
+        return cls.build(
+            params=ResolvedParams.of_region(measured.region),
+            units=None if scale is None else Units.build(mm_per_unit=scale),
+            zones=[ZoneMeasure.of(measured, k) for k in range(len(measured.zones))],
+            curves=[CurveMeasure.of(measured, k) for k in range(len(measured.curves))],
+            overlaps=[
+                Overlap.build(
+                    zones=[names[i], names[j]],
+                    indices=[i, j],
+                    area=area,
+                    area_cm2=_cm2(area, scale),
+                )
+                for i, j, area in measured.overlaps
+            ],
+        )
 
 
 class PointsResponse(Answer):

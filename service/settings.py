@@ -25,6 +25,8 @@ class Settings:
         buffer); beyond it the answer is 413, decided while the body streams in
     max_vertices, max_faces : MESHFLAT_MAX_VERTICES, MESHFLAT_MAX_FACES, per mesh
     max_points : MESHFLAT_MAX_POINTS, per /v1/points or /v1/locate request
+    max_drawn_points : MESHFLAT_MAX_DRAWN_POINTS, the points of all the zones' rings and the
+        curves of a /v1/measure request (an outline a surgeon draws has hundreds)
     threads : MESHFLAT_THREADS, threads one request's computation may use
     max_jobs : MESHFLAT_MAX_JOBS, jobs computed at once per process
     max_waiting : MESHFLAT_MAX_WAITING, jobs queued for a slot beyond those (their bodies in);
@@ -52,6 +54,7 @@ class Settings:
     max_vertices: int = Limits.max_vertices
     max_faces: int = Limits.max_faces
     max_points: int = 5_000_000
+    max_drawn_points: int = 100_000
     threads: int = 1
     max_jobs: int = 2
     max_waiting: int = 1

@@ -12,6 +12,7 @@ from PIL import Image, ImageDraw, ImageFont
 from .picture import (
     BOUNDARY,
     COLOURS,
+    CURVE_KEY,
     FILL,
     OUTLINE,
     SEAM_COLOUR,
@@ -73,10 +74,34 @@ def to_svg(picture: Picture) -> bytes:
             f'y2="{row:.1f}" stroke="{SINGULAR_COLOUR}" stroke-width="2" '
             f'stroke-dasharray="3 4"/>'
         )
+    parts += _svg_overlays(p)
     parts.append("</g>")
     parts += _svg_frame(p)
     parts.append("</svg>")
     return "\n".join(parts).encode()
+
+
+def _svg_overlays(p: Picture) -> list[str]:
+    """The zones (filled, the holes left open) and the curves, each labelled."""
+    parts = []
+    for overlay in p.overlays:
+        colour = overlay.colour
+        if overlay.closed:
+            d = "".join("M" + _rows(ring, "%.1f %.1fL")[:-1] + "Z" for ring in overlay.rings)
+            style = f'fill="{colour}" fill-opacity="0.3" fill-rule="evenodd"'
+            kind = "zone"
+        else:
+            d = "M" + _rows(overlay.rings[0], "%.1f %.1fL")[:-1]
+            style, kind = 'fill="none"', "curve"
+        x, y = overlay.anchor
+        parts.append(
+            f'<g class="{kind}"><path {style} stroke="{colour}" stroke-width="2" '
+            f'stroke-linejoin="round" d="{d}"/><text x="{x:.1f}" y="{y:.1f}" '
+            f'text-anchor="middle" {_FONT} font-size="13" font-weight="bold" fill="{colour}" '
+            f'stroke="#ffffff" stroke-width="3" paint-order="stroke">'
+            f"{escape(overlay.name)}</text></g>"
+        )
+    return parts
 
 
 def _decimated_fill(p: Picture, include_boundary: bool) -> list[str]:
@@ -137,7 +162,12 @@ def _svg_frame(p: Picture) -> list[str]:
     parts.append('<g class="legend">')
     for i, (label, colour, words) in enumerate(p.legend):
         row = y + 20 * i
-        if label < 0:  # a line: the seam or the singular points
+        if label == CURVE_KEY:
+            parts.append(
+                f'<line x1="{x}" y1="{row + 6}" x2="{x + 14}" y2="{row + 6}" stroke="{colour}" '
+                'stroke-width="2"/>'
+            )
+        elif label < 0:  # a line: the seam or the singular points
             parts.append(
                 f'<line x1="{x}" y1="{row + 6}" x2="{x + 14}" y2="{row + 6}" stroke="{colour}" '
                 'stroke-width="2" stroke-dasharray="4 2"/>'
@@ -176,8 +206,10 @@ def to_png(picture: Picture) -> bytes:
     canvas = Image.new("RGB", (p.width, p.height), "#ffffff")
     fill = palette[p.raster(1.0)]
     canvas.paste(Image.fromarray(fill, "RGB"), (left, top))
-    draw = ImageDraw.Draw(canvas)
     font = ImageFont.load_default(size=13)
+    if p.overlays:
+        canvas = _png_overlays(canvas, p, font)
+    draw = ImageDraw.Draw(canvas)
     for column in p.seam_columns:
         _dashed(draw, (column, top), (column, bottom), SEAM_COLOUR, 2, 8, 5)
     for row, _ in p.singular_rows:
@@ -191,19 +223,64 @@ def to_png(picture: Picture) -> bytes:
         draw.text((left - 8, row), label, fill="#222222", font=font, anchor="rm")
     draw.text(((left + right) / 2, bottom + 28), p.x_title, fill="#222222", font=font, anchor="mt")
     draw.text((left, top - 8), p.y_title, fill="#222222", font=font, anchor="ls")
-    x, y = right + 20, top
-    for i, (label, colour, words) in enumerate(p.legend):
-        row = y + 20 * i
-        if label < 0:
-            _dashed(draw, (x, row + 6), (x + 14, row + 6), colour, 2, 4, 2)
-        else:
-            draw.rectangle((x, row, x + 14, row + 12), fill=colour, outline="#444444")
-        draw.text((x + 20, row + 6), words, fill="#222222", font=font, anchor="lm")
+    _png_legend(draw, p, font)
     for i, line in enumerate(p.caption):
         draw.text((left, p.height - 34 + 18 * i), line, fill="#222222", font=font, anchor="ls")
     out = io.BytesIO()
     canvas.save(out, format="PNG", optimize=False, compress_level=6)
     return out.getvalue()
+
+
+def _png_legend(draw: ImageDraw.ImageDraw, p: Picture, font) -> None:
+    x, y = p.plot[2] + 20, p.plot[1]
+    for i, (label, colour, words) in enumerate(p.legend):
+        row = y + 20 * i
+        if label == CURVE_KEY:
+            draw.line((x, row + 6, x + 14, row + 6), fill=colour, width=2)
+        elif label < 0:
+            _dashed(draw, (x, row + 6), (x + 14, row + 6), colour, 2, 4, 2)
+        else:
+            draw.rectangle((x, row, x + 14, row + 12), fill=colour, outline="#444444")
+        # The default font has no superscripts.
+        words = words.replace("²", "2")
+        draw.text((x + 20, row + 6), words, fill="#222222", font=font, anchor="lm")
+
+
+def _png_overlays(canvas: Image.Image, p: Picture, font) -> Image.Image:
+    """The canvas with the zones filled (30 % opaque, the holes left open), their outlines,
+    the curves and the names, clipped to the plot."""
+    left, top, right, bottom = p.plot
+    size, origin = (right - left, bottom - top), np.array([left, top], dtype=np.float64)
+    layer = Image.new("RGBA", size, (0, 0, 0, 0))
+    draw = ImageDraw.Draw(layer)
+    for overlay in p.overlays:
+        if overlay.closed:
+            zone = Image.new("RGBA", size, (0, 0, 0, 0))
+            fill = ImageDraw.Draw(zone)
+            fill.polygon(_points(overlay.rings[0] - origin), fill=(*_rgb(overlay.colour), 77))
+            for hole in overlay.rings[1:]:
+                fill.polygon(_points(hole - origin), fill=(0, 0, 0, 0))
+            layer.alpha_composite(zone)
+    for overlay in p.overlays:
+        for ring in overlay.rings:
+            points = _points(ring - origin)
+            draw.line(points + points[:1] * overlay.closed, fill=overlay.colour, width=2)
+        draw.text(
+            tuple(np.asarray(overlay.anchor) - origin),
+            overlay.name,
+            fill=overlay.colour,
+            font=font,
+            anchor="mm",
+            stroke_width=2,
+            stroke_fill="#ffffff",
+        )
+    canvas = canvas.convert("RGBA")
+    canvas.alpha_composite(layer, (left, top))
+    return canvas.convert("RGB")
+
+
+def _points(ring: np.ndarray) -> list[tuple[float, float]]:
+    return [(float(x), float(y)) for x, y in ring]
 
 
 def _dashed(draw, start, end, colour, width, dash, gap) -> None:

@@ -46,6 +46,43 @@ COLOURS = {
     BOUNDARY: "#1f3b57",
 }
 SEAM_COLOUR, SINGULAR_COLOUR = "#cc79a7", "#000000"
+#: Colours of the zones and curves drawn over the map, in turn (a palette that stays apart
+#: from the flags' and reads for colour-blind eyes).
+OVERLAY_COLOURS = ("#0072b2", "#009e73", "#56b4e9", "#e41a1c", "#6a3d9a", "#b15928")
+
+
+@dataclass(frozen=True)
+class Drawn:
+    """A zone or a curve to draw over the map, in the layout's coordinates.
+
+    Attributes
+    ----------
+    rings : tuple of (n, 2) float: a zone's outer ring then its holes, or a curve's points
+    closed : bool, a zone (filled) rather than a curve
+    name : str, written on it
+    measure : str, its area or length, for the legend
+    """
+
+    rings: tuple[np.ndarray, ...]
+    closed: bool
+    name: str
+    measure: str
+
+
+@dataclass(frozen=True)
+class Overlay:
+    """A :class:`Drawn` in canvas pixels, with its colour and where its name goes (the
+    outer ring's mean point or the curve's first, kept inside the plot)."""
+
+    rings: tuple[np.ndarray, ...]
+    closed: bool
+    name: str
+    colour: str
+    anchor: tuple[float, float]
+
+
+#: Legend keys of the zones (a filled swatch) and the curves (a line).
+ZONE_KEY, CURVE_KEY = 100, -3
 
 
 @dataclass(frozen=True)
@@ -69,6 +106,7 @@ class Picture:
     x_title, y_title : str
     legend : (label, colour, text) rows
     caption : lines of text
+    overlays : zones and curves drawn over the map
     """
 
     width: int
@@ -87,6 +125,7 @@ class Picture:
     y_title: str
     legend: tuple[tuple[int, str, str], ...]
     caption: tuple[str, ...]
+    overlays: tuple[Overlay, ...] = ()
 
     def raster(self, scale: float = 1.0, include_boundary: bool = True) -> np.ndarray:
         """(h, w) uint8 labels of the plotting box at ``scale`` pixels per canvas pixel:
@@ -133,8 +172,9 @@ def describe(
     face_count: int,
     width: int,
     height: int,
+    drawn: tuple[Drawn, ...] = (),
 ) -> Picture:
-    """The picture of a flattened region.
+    """The picture of a flattened region, with zones and curves over it.
 
     Parameters
     ----------
@@ -142,10 +182,12 @@ def describe(
     params : dict, the resolved parameters (method, sigma, pole_angle_deg, layout)
     face_count : int, the region's triangles
     width, height : int, the canvas in pixels
+    drawn : zones and curves to draw over the map
     """
     x = flat.x
     # Grows with theta, downwards: the layout's y, against theta for Mercator.
-    s = flat.y if flat.layout is Layout.THETA_PHI else -flat.y
+    s_sign = 1.0 if flat.layout is Layout.THETA_PHI else -1.0
+    s = s_sign * flat.y
     margin_left, margin_top, margin_right = 70, 48, 270
     margin_bottom = 96
     box = (margin_left, margin_top, width - margin_right, height - margin_bottom)
@@ -193,6 +235,17 @@ def describe(
         for theta, name in ((0.0, "north"), (math.pi, "south"))
         if math.isfinite(value := _second_of(theta, flat.layout)) and in_s(value)
     )
+    overlays = []
+    for k, item in enumerate(drawn):
+        rings = tuple(
+            np.stack([column(r[:, 0]), row(s_sign * r[:, 1])], axis=1) for r in item.rings
+        )
+        colour = OVERLAY_COLOURS[k % len(OVERLAY_COLOURS)]
+        anchor = rings[0].mean(axis=0) if item.closed else rings[0][0]
+        anchor = np.clip(anchor, [plot[0] + 30, plot[1] + 10], [plot[2] - 30, plot[3] - 10])
+        overlays.append(Overlay(rings, item.closed, item.name, colour, tuple(anchor.tolist())))
+        key = ZONE_KEY if item.closed else CURVE_KEY
+        legend.append((key, colour, f"{item.name}: {item.measure}"))
     if seam:
         legend.append((-1, SEAM_COLOUR, "seam (phi +-180 deg)"))
     if singular:
@@ -214,6 +267,7 @@ def describe(
         y_title="theta (degrees)",
         legend=tuple(legend),
         caption=_caption(flat, params, face_count),
+        overlays=tuple(overlays),
     )
 
 

@@ -13,16 +13,16 @@ from transforms import Layout
 
 from ..encoding import plain
 from ..jobs import charge, picture_bytes
-from ..params import FlattenParams
+from ..params import FlattenParams, MeasureParams, PictureParams
 from ..problems import Problem
 from ..schemas import Metrics, ResolvedParams, Validation
 from . import Output
 from .draw import to_png, to_svg
 from .glb import layout_uv, region_glb
-from .picture import describe
+from .picture import Drawn, describe
 
 if TYPE_CHECKING:
-    from ..operations import MeshRegion
+    from ..operations import Measured, MeshRegion
 
 #: Vertex ids travel in the GLB as float32 (glTF allows no 32-bit integer attributes).
 FLOAT32_EXACT = 2**24
@@ -83,12 +83,56 @@ def png(region: MeshRegion, params: FlattenParams) -> bytes:
     return to_png(_picture(region, params))
 
 
-def _picture(region: MeshRegion, params: FlattenParams):
+def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...] = ()):
     resolved = plain(ResolvedParams.of_region(region))
     x, y = region.layout  # repaired when untangled
     flat = replace(region.flat, x=x, y=y)
-    return describe(flat, resolved, len(region.faces), params.image_width, params.image_height)
+    return describe(
+        flat, resolved, len(region.faces), params.image_width, params.image_height, drawn
+    )
 
 
 #: The forms of a flattened region besides JSON, by :class:`Output`.
 RENDERERS = {Output.GLB: glb, Output.SVG: svg, Output.PNG: png}
+
+
+def measured_svg(measured: Measured, params: MeasureParams) -> bytes:
+    """The region's map with the zones filled, named and labelled with their areas, and the
+    curves with their lengths, as SVG."""
+    return to_svg(_picture(measured.region, params, _drawn(measured)))
+
+
+def measured_png(measured: Measured, params: MeasureParams) -> bytes:
+    """The same picture as PNG (its raster charged first, as for /v1/flatten)."""
+    region = measured.region
+    charge(picture_bytes(params.image_width, params.image_height, len(region.mesh.faces)))
+    return to_png(_picture(region, params, _drawn(measured)))
+
+
+def _drawn(measured: Measured) -> tuple[Drawn, ...]:
+    scale, area = measured.mm_per_unit, measured.triangles.surface_area
+    zones = tuple(
+        Drawn(outline.rings, True, outline.name, _area_text(cover.total(area), scale))
+        for outline, cover in measured.zones
+    )
+    curves = tuple(
+        Drawn((line.map_points,), False, name, _length_text(line.length, scale))
+        for name, line in measured.curves
+    )
+    return zones + curves
+
+
+def _area_text(area: float, mm_per_unit: float | None) -> str:
+    if mm_per_unit is None:
+        return f"{area:.4g} units²"
+    return f"{area * mm_per_unit**2 / 100.0:.2f} cm²"
+
+
+def _length_text(length: float, mm_per_unit: float | None) -> str:
+    if mm_per_unit is None:
+        return f"{length:.4g} units"
+    return f"{length * mm_per_unit:.1f} mm"
+
+
+#: The forms of measured zones besides JSON, by :class:`Output`.
+MEASURE_RENDERERS = {Output.SVG: measured_svg, Output.PNG: measured_png}

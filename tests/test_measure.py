@@ -1,0 +1,365 @@
+"""``POST /v1/measure`` (zones and curves drawn on the map, measured on the surface) and
+``/v1/locate`` with ``via: map``, through the API; ``meshflat measure`` on the command line.
+The core's exactness is pinned in tests/test_zones.py; here, that the answers carry it."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import httpx
+import numpy as np
+import pytest
+
+from service.app import create_app
+from service.cli import main
+from service.samples import SAMPLES
+from service.settings import Settings
+
+from .test_api import flatten, problem
+
+pytestmark = pytest.mark.anyio
+
+NAME = "fsaverage-head.ply"
+#: The scalp of the fsaverage head, seen from the box centre with the pole at the chin.
+PARAMS = {
+    "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}},
+    "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+    "sigma": 0.3,
+}
+
+
+async def measure(client, params: dict, name: str = NAME) -> httpx.Response:
+    return await flatten(client, name, {**PARAMS, **params}, endpoint="/v1/measure")
+
+
+async def flat_map(client) -> dict:
+    """The flatten answer of the scalp, and its triangles' surface areas by position."""
+    answer = (await flatten(client, NAME, PARAMS)).json()
+    ids = np.asarray(answer["vertices"]["ids"])
+    position = {vertex: k for k, vertex in enumerate(ids.tolist())}
+    corners = np.vectorize(position.get)(np.asarray(answer["faces"]["vertices"]))
+    x, y = np.asarray(answer["vertices"]["x"]), np.asarray(answer["vertices"]["y"])
+    vertices, _ = _sample_vertices()
+    p = vertices[ids][corners]
+    areas = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    return {"answer": answer, "x": x, "y": y, "corners": corners, "areas": areas}
+
+
+def _sample_vertices():
+    from .conftest import load_sample
+
+    return load_sample(NAME)
+
+
+def rectangle(name: str, x0: float, x1: float, y0: float, y1: float) -> dict:
+    return {"name": name, "outer": {"x": [x0, x1, x1, x0], "y": [y0, y0, y1, y1]}}
+
+
+def ring(points: np.ndarray) -> dict:
+    return {"x": points[:, 0].tolist(), "y": points[:, 1].tolist()}
+
+
+async def test_a_zone_over_the_whole_map_has_the_regions_surface_area(client):
+    scalp = await flat_map(client)
+    x, y = scalp["x"], scalp["y"]
+    zone = rectangle("all", x.min() - 1, x.max() + 1, y.min() - 1, y.max() + 1)
+    response = await measure(client, {"zones": [zone]})
+    assert response.status_code == 200, response.text
+    measured = response.json()["zones"][0]
+    expected = math.fsum(scalp["areas"])
+    assert measured["area"] == pytest.approx(expected, rel=1e-9)
+    assert measured["faces"] == sorted(scalp["answer"]["faces"]["ids"])
+    assert measured["partial_faces"] == []
+    assert measured["area_flagged"] == 0.0
+    assert measured["area_cm2"] is None and measured["perimeter"] == 0.0
+    # The rectangle's map area outside the region's triangles.
+    covered = 0.5 * np.abs(_map_areas(scalp)).sum()
+    assert measured["area_outside_region"] == pytest.approx(measured["map_area"] - covered)
+
+
+def _map_areas(scalp: dict) -> np.ndarray:
+    c = np.stack([scalp["x"], scalp["y"]], axis=1)[scalp["corners"]]
+    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+    return e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+
+
+async def test_zones_that_tile_the_map_sum_to_the_regions_area(client):
+    scalp = await flat_map(client)
+    x, y = scalp["x"], scalp["y"]
+    xs = [x.min() - 1, x.mean() - 0.1, x.mean() + 0.13, x.max() + 1]
+    ys = [y.min() - 1, y.mean() + 0.07, y.max() + 1]
+    tiles = [
+        rectangle(f"tile {i}{j}", xs[i], xs[i + 1], ys[j], ys[j + 1])
+        for i in range(3)
+        for j in range(2)
+    ]
+    response = await measure(client, {"zones": tiles})
+    assert response.status_code == 200, response.text
+    answer = response.json()
+    total = math.fsum(zone["area"] for zone in answer["zones"])
+    assert total == pytest.approx(math.fsum(scalp["areas"]), rel=1e-9)
+    # Tiles that share only edges overlap nowhere.
+    assert answer["overlaps"] == []
+
+
+async def test_a_zone_that_is_one_triangles_image_has_that_triangles_area(client):
+    scalp = await flat_map(client)
+    k = 123
+    corners = np.stack([scalp["x"], scalp["y"]], axis=1)[scalp["corners"][k]]
+    response = await measure(client, {"zones": [{"name": "one", "outer": ring(corners)}]})
+    measured = response.json()["zones"][0]
+    assert measured["faces"] == [scalp["answer"]["faces"]["ids"][k]]
+    assert measured["partial_faces"] == []
+    assert measured["area"] == pytest.approx(scalp["areas"][k], rel=1e-9)
+
+
+async def test_results_do_not_depend_on_the_rings_orientation_or_start(client):
+    scalp = await flat_map(client)
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    points = np.stack(
+        [scalp["x"].mean() + 0.2 * np.cos(t), scalp["y"].mean() + 0.15 * np.sin(t)], axis=1
+    )
+    variants = [points, points[::-1], np.roll(points, 7, axis=0), np.roll(points[::-1], 3, axis=0)]
+    zones = [{"name": f"v{k}", "outer": ring(v)} for k, v in enumerate(variants)]
+    answer = (await measure(client, {"zones": zones})).json()
+    first = answer["zones"][0]
+    for zone in answer["zones"][1:]:
+        assert zone["area"] == pytest.approx(first["area"], rel=1e-12)
+        assert zone["perimeter"] == pytest.approx(first["perimeter"], rel=1e-12)
+        assert zone["faces"] == first["faces"]
+        assert zone["partial_faces"] == first["partial_faces"]
+    # Identical zones overlap by their whole area.
+    assert all(o["area"] == pytest.approx(first["area"], rel=1e-9) for o in answer["overlaps"])
+    assert len(answer["overlaps"]) == 6
+
+
+async def test_a_hole_takes_its_area_out_and_overlaps_are_measured(client):
+    scalp = await flat_map(client)
+    cx, cy = scalp["x"].mean(), scalp["y"].mean()
+    outer = rectangle("outer", cx - 0.3, cx + 0.3, cy - 0.2, cy + 0.2)
+    hole = rectangle("hole", cx - 0.1, cx + 0.1, cy - 0.1, cy + 0.1)
+    with_hole = {**outer, "name": "ring", "holes": [hole["outer"]]}
+    answer = (await measure(client, {"zones": [outer, hole, with_hole]})).json()
+    area = {zone["name"]: zone["area"] for zone in answer["zones"]}
+    assert area["ring"] == pytest.approx(area["outer"] - area["hole"], rel=1e-9)
+    overlaps = {tuple(o["zones"]): o["area"] for o in answer["overlaps"]}
+    assert overlaps[("outer", "hole")] == pytest.approx(area["hole"], rel=1e-9)
+    assert overlaps[("outer", "ring")] == pytest.approx(area["ring"], rel=1e-9)
+    assert ("hole", "ring") not in overlaps  # they share only the hole's boundary
+
+
+async def test_a_zone_off_the_region_measures_nothing_and_says_so(client):
+    zone = rectangle("far", 10.0, 10.5, 10.0, 10.2)
+    answer = (await measure(client, {"zones": [zone]})).json()
+    measured = answer["zones"][0]
+    assert measured["area"] == 0.0 and measured["faces"] == [] and measured["perimeter"] == 0.0
+    assert measured["area_outside_region"] == pytest.approx(0.1)
+    assert measured["outline"][0]["points"] == []
+
+
+async def test_units_give_square_centimetres_and_millimetres(client):
+    scalp = await flat_map(client)
+    cx, cy = scalp["x"].mean(), scalp["y"].mean()
+    zone = rectangle("crown", cx - 0.2, cx + 0.2, cy - 0.2, cy + 0.2)
+    curve = {"name": "line", "x": [cx - 0.3, cx + 0.3], "y": [cy, cy + 0.05]}
+    answers = {}
+    for units in ("mm", "cm", {"between": [[0, 0, 0], [0, 0, 31]], "mm": 62.0}):
+        response = await measure(client, {"zones": [zone], "curves": [curve], "units": units})
+        answers[json.dumps(units)] = response.json()
+    mm = answers['"mm"']
+    area, length = mm["zones"][0]["area"], mm["curves"][0]["length"]
+    assert mm["units"] == {"mm_per_unit": 1.0}
+    assert mm["zones"][0]["area_cm2"] == pytest.approx(area / 100)
+    assert answers['"cm"']["zones"][0]["area_cm2"] == pytest.approx(area)
+    assert answers['"cm"']["curves"][0]["length_mm"] == pytest.approx(10 * length)
+    known = answers[json.dumps({"between": [[0, 0, 0], [0, 0, 31]], "mm": 62.0})]
+    assert known["units"]["mm_per_unit"] == pytest.approx(2.0)
+    assert known["zones"][0]["perimeter_mm"] == pytest.approx(2 * mm["zones"][0]["perimeter"])
+
+
+async def test_a_curve_is_lifted_through_its_points_and_every_edge_it_crosses(client):
+    scalp = await flat_map(client)
+    cx, cy = scalp["x"].mean(), scalp["y"].mean()
+    x = [cx - 0.3, cx, cx + 0.3]
+    y = [cy, cy + 0.1, cy]
+    answer = (await measure(client, {"curves": [{"name": "hairline", "x": x, "y": y}]})).json()
+    curve = answer["curves"][0]
+    points, faces = np.asarray(curve["points"]), curve["faces"]
+    assert len(faces) == len(points) - 1 > 10
+    assert None not in faces  # the curve stays on the region
+    map_points = np.asarray(curve["map_points"])
+    for own in zip(x, y, strict=True):
+        assert np.min(np.linalg.norm(map_points - own, axis=1)) < 1e-12
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    assert curve["length"] == pytest.approx(steps.sum(), rel=1e-9)
+    # Each piece's surface points lie on the face the answer names.
+    vertices, mesh_faces = _sample_vertices()
+    for k in range(len(faces)):
+        corners = vertices[mesh_faces[faces[k]]]
+        for point in points[k : k + 2]:
+            normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
+            assert abs(np.dot(point - corners[0], normal)) <= 1e-6 * np.linalg.norm(normal)
+
+
+@pytest.mark.parametrize(
+    ("zone", "field", "words"),
+    [
+        (
+            {"name": "bow", "outer": {"x": [0, 1, 0, 1], "y": [0, 1, 1, 0]}},
+            "params.zones.0.outer",
+            "crosses or touches itself near (0.5, 0.5)",
+        ),
+        (
+            {"name": "flat", "outer": {"x": [0, 1, 0, 1], "y": [0, 1, 0, 1]}},
+            "params.zones.0.outer",
+            "at least three distinct points",
+        ),
+        (
+            {
+                "name": "holed",
+                "outer": {"x": [0, 1, 1, 0], "y": [0, 0, 1, 1]},
+                "holes": [{"x": [2, 3, 3], "y": [0, 0, 1]}],
+            },
+            "params.zones.0.holes.0",
+            "must lie inside the outer ring",
+        ),
+        (
+            {
+                "name": "bad hole",
+                "outer": {"x": [0, 1, 1, 0], "y": [0, 0, 1, 1]},
+                "holes": [{"x": [0.2, 0.4, 0.2, 0.4], "y": [0.2, 0.4, 0.4, 0.2]}],
+            },
+            "params.zones.0.holes.0",
+            "crosses or touches itself",
+        ),
+        (
+            {"name": "short", "outer": {"x": [0, 1, 1, 0], "y": [0, 0, 1]}},
+            "params.zones.0.outer",
+            "one y per x",
+        ),
+    ],
+)
+async def test_a_bad_ring_is_a_422_naming_the_zone_and_the_ring(client, zone, field, words):
+    response = await measure(client, {"zones": [rectangle("fine", 0, 1, 0, 1), zone]})
+    body = problem(response, 422)
+    expected = field.replace("zones.0", "zones.1")
+    assert body["field"].startswith(expected), body
+    assert words in body["detail"]
+    if "one y per x" not in words:
+        assert repr(zone["name"]) in body["detail"]
+
+
+async def test_bad_curves_and_units_are_422s(client):
+    curve = {"name": "dot", "x": [0.5, 0.5], "y": [0.2, 0.2]}
+    body = problem(await measure(client, {"curves": [curve]}), 422, "params.curves.0")
+    assert "two distinct points" in body["detail"]
+    units = {"between": [[1, 2, 3], [1, 2, 3]], "mm": 62.0}
+    problem(await measure(client, {"units": units}), 422, "params.units.between")
+    problem(await measure(client, {"units": "inch"}), 422)
+    body = await measure(client, {"zones": [{"name": "", "outer": {"x": [0], "y": [0]}}]})
+    problem(body, 422)
+
+
+async def test_too_many_drawn_points_is_a_413():
+    app = create_app(Settings(max_drawn_points=10))
+    async with app.router.lifespan_context(app):
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as client:
+            t = np.linspace(0, 6, 11, endpoint=False)
+            zone = {"name": "many", "outer": ring(np.stack([np.cos(t), np.sin(t)], axis=1))}
+            body = problem(await measure(client, {"zones": [zone]}), 413, "params.zones")
+            assert "the limit is 10 (MESHFLAT_MAX_DRAWN_POINTS)" in body["detail"]
+
+
+@pytest.mark.parametrize("output", ["svg", "png"])
+async def test_the_picture_shows_each_zone_named_with_its_area(client, output):
+    scalp = await flat_map(client)
+    cx, cy = scalp["x"].mean(), scalp["y"].mean()
+    zones = [rectangle("crown", cx - 0.2, cx + 0.2, cy - 0.2, cy + 0.2)]
+    curves = [{"name": "hairline", "x": [cx - 0.3, cx + 0.3], "y": [cy + 0.25, cy + 0.25]}]
+    params = {"zones": zones, "curves": curves, "units": "mm", "output": output}
+    response = await measure(client, params)
+    assert response.status_code == 200
+    assert response.headers["content-type"] == f"image/{'svg+xml' if output == 'svg' else 'png'}"
+    area = (await measure(client, {**params, "output": "json"})).json()["zones"][0]["area_cm2"]
+    if output == "svg":
+        text = response.text
+        assert 'class="zone"' in text and 'class="curve"' in text
+        assert f"crown: {area:.2f} cm²" in text and "hairline: " in text
+    else:
+        assert response.content.startswith(b"\x89PNG")
+    glb = await measure(client, {**params, "output": "glb"})
+    problem(glb, 422, "params.output")
+
+
+async def test_locate_via_map_finds_the_point_the_map_shows(client):
+    scalp = await flat_map(client)
+    answer = scalp["answer"]
+    vertices, _ = _sample_vertices()
+    rng = np.random.default_rng(4)
+    picked = rng.integers(0, len(scalp["corners"]), 20)
+    weights = rng.dirichlet([2, 2, 2], 20)
+    plane = np.stack([scalp["x"], scalp["y"]], axis=1)
+    points = np.einsum("kc,kcd->kd", weights, plane[scalp["corners"][picked]])
+    # theta_phi: x is phi, y is theta.
+    params = {**PARAMS, "theta": points[:, 1].tolist(), "phi": points[:, 0].tolist()}
+    hits = (await flatten(client, NAME, {**params, "via": "map"}, endpoint="/v1/locate")).json()[
+        "hits"
+    ]
+    ids = np.asarray(answer["vertices"]["ids"])
+    expected = np.einsum("kc,kcd->kd", weights, vertices[ids][scalp["corners"][picked]])
+    faces = np.asarray(answer["faces"]["ids"])[picked]
+    assert [hit["face"] for hit in hits] == faces.tolist()
+    np.testing.assert_allclose([hit["point"] for hit in hits], expected, atol=1e-9)
+    np.testing.assert_allclose([hit["barycentric"] for hit in hits], weights, atol=1e-9)
+    # Off the map: no hit; the default is still the ray.
+    off = {**PARAMS, "theta": [0.05], "phi": [3.0], "via": "map"}
+    assert (await flatten(client, NAME, off, endpoint="/v1/locate")).json()["hits"] == [None]
+    ray = (await flatten(client, NAME, params, endpoint="/v1/locate")).json()
+    assert ray["hits"][0]["point"] != hits[0]["point"]
+
+
+async def test_the_command_line_measures_zones_from_a_file(client, tmp_path, capsys):
+    scalp = await flat_map(client)
+    cx, cy = scalp["x"].mean(), scalp["y"].mean()
+    zones = [rectangle("crown", cx - 0.2, cx + 0.2, cy - 0.2, cy + 0.2)]
+    path = tmp_path / "zones.json"
+    path.write_text(json.dumps(zones))
+    args = ["--region-cone", "0,0,1:70", "--pole", "0,0,-1", "--up", "0,1,0", "--sigma", "0.3"]
+    out = tmp_path / "zones.out.json"
+    assert (
+        main(["measure", str(SAMPLES[NAME].path), *args, "--zones", str(path), "--out", str(out)])
+        == 0
+    )
+    expected = (await measure(client, {"zones": zones})).json()
+    assert json.loads(out.read_bytes()) == expected
+    assert main(["measure", str(SAMPLES[NAME].path), "--zones", str(tmp_path / "none.json")]) == 2
+    assert "--zones: cannot read" in capsys.readouterr().err
+
+
+async def test_the_flagged_part_of_a_zone_is_the_area_on_flagged_faces(client):
+    # The whole head: a closed mesh, so some triangles cross the seam or hold a singular point.
+    params = {"rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]}, "sigma": 0.3}
+    answer = (await flatten(client, NAME, params)).json()
+    validation = answer["validation"]
+    flagged = set()
+    for key in ("singular_point_faces", "seam_faces", "folded_faces", "backfacing_faces"):
+        flagged.update(validation[key])
+    flagged.update(validation["degenerate_faces"])
+    assert flagged
+    vertices, faces = _sample_vertices()
+    p = vertices[faces[sorted(flagged)]]
+    expected = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    x, y = np.asarray(answer["vertices"]["x"]), np.asarray(answer["vertices"]["y"])
+    zone = rectangle("all", x.min() - 1, x.max() + 1, y.min() - 1, y.max() + 1)
+    response = await flatten(client, NAME, {**params, "zones": [zone]}, endpoint="/v1/measure")
+    measured = response.json()["zones"][0]
+    # Faces that wrap around the map cover it more than once: the zone counts each face's
+    # image, so the flagged area is that of the flagged faces wholly inside or cut.
+    inside = set(measured["faces"]) | set(measured["partial_faces"])
+    shares = dict(zip(measured["partial_faces"], measured["partial_fraction"], strict=True))
+    by_face = dict(zip(sorted(flagged), expected, strict=True))
+    total = sum(area * shares.get(face, 1.0) for face, area in by_face.items() if face in inside)
+    assert measured["area_flagged"] == pytest.approx(total, rel=1e-9)
+    assert measured["area_flagged"] > 0

@@ -14,7 +14,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .arrays import as_faces, as_points, cross_rows
+from .arrays import as_faces, as_points, triangle_areas
 from .cellgrid import CellGrid, CellIndex
 from .errors import TransformInputError
 
@@ -87,11 +87,7 @@ class MapTriangles:
     @cached_property
     def surface_area(self) -> np.ndarray:
         """(m,) float: each triangle's area on the surface."""
-        corners = [self.surface_points[:, k][self.faces.T] for k in range(3)]
-        u = [c[1] - c[0] for c in corners]
-        v = [c[2] - c[0] for c in corners]
-        normal = cross_rows(np.stack(u, axis=-1), np.stack(v, axis=-1))
-        return 0.5 * np.sqrt(np.einsum("ij,ij->i", normal, normal))
+        return triangle_areas(self.surface_points, self.faces)
 
     @cached_property
     def bounds(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

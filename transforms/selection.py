@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from .arrays import as_direction, unit_rows
+from .arrays import as_direction, triangle_areas, unit_rows
 from .errors import TransformInputError
 
 #: The named centres: the area-weighted centroid or the bounding-box centre of the faces.
@@ -145,13 +145,10 @@ def area_centroid(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     TransformInputError
         (``center``) The triangles have no area.
     """
-    corners = vertices[faces]  # (m, 3 corners, 3)
-    areas = 0.5 * np.linalg.norm(
-        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-    )
+    areas = triangle_areas(vertices, faces)
     if not areas.sum() > 0:
         raise TransformInputError("center", "'centroid' needs faces with area")
-    return (corners.mean(axis=1) * areas[:, None]).sum(axis=0) / areas.sum()
+    return (vertices[faces].mean(axis=1) * areas[:, None]).sum(axis=0) / areas.sum()
 
 
 def named_center(vertices: np.ndarray, faces: np.ndarray, name: str) -> np.ndarray:

@@ -138,11 +138,12 @@ class Trace:
         near = index.any_in(boxes)
         owner, piece = index.pairs(boxes.take(np.flatnonzero(near)))
         triangle = candidates[near][owner]
-        t0, t1 = clip_to_triangles(
-            counter_clockwise(triangles.corners(triangle)), piece_a[piece], piece_b[piece]
-        )
+        corners = counter_clockwise(triangles.corners(triangle))
+        t0, t1, ceded = clip_to_triangles(corners, piece_a[piece], piece_b[piece])
         flat = triangles.signed_map_area[triangle] == 0
         t1[flat] = t0[flat]
+        # Along the region's border no triangle lies across the edge to take the piece.
+        t1[(ceded >= 0) & ~_unclaimed(piece, corners, ceded, t0 < t1)] = -1.0
         return cls(
             grid, index, piece_a, piece_b, segment, s0, s1, candidates, boxes, near, owner,
             piece, t0, t1,
@@ -200,22 +201,57 @@ def clip_to_triangles(corners: np.ndarray, a: np.ndarray, b: np.ndarray):
     -------
     t0, t1 : (p,) float, the inside part is ``a + t (b - a)`` for ``t0 <= t <= t1`` (empty
         when ``t0 >= t1``)
+    ceded : (p,) int, the corner ``i`` whose edge ``i -> i + 1`` the segment runs along
+        while the tie-break gives it to the other side (-1 for none); ``t0``, ``t1`` are
+        then the part the triangle would have without that rule
     """
     t0, t1 = np.zeros(len(a)), np.ones(len(a))
+    ceded = np.full(len(a), -1)
     for i in range(3):
         start, edge = corners[:, i], corners[:, (i + 1) % 3] - corners[:, i]
         fa, fb = _cross(edge, a - start), _cross(edge, b - start)
         along = fa == fb
         shifted = np.where(edge[:, 1] != 0, -edge[:, 1], edge[:, 0])
-        outside = along & ((fa < 0) | ((fa == 0) & (shifted <= 0)))
-        t1[outside] = -1.0
+        t1[along & (fa < 0)] = -1.0
+        ceded[along & (fa == 0) & (shifted <= 0)] = i
         with np.errstate(divide="ignore", invalid="ignore"):
             crossing = fa / (fa - fb)
         entering = ~along & (fb > fa)
         leaving = ~along & (fb < fa)
         t0 = np.where(entering, np.maximum(t0, crossing), t0)
         t1 = np.where(leaving, np.minimum(t1, crossing), t1)
-    return t0, t1
+    return t0, t1, ceded
+
+
+def _unclaimed(piece, corners, ceded, inside) -> np.ndarray:
+    """(p,) bool: the pairs whose piece runs along their ceded edge (``ceded``, as from
+    :func:`clip_to_triangles`) while no other triangle over the same piece has that edge
+    and a part of the piece (``inside``): the edge is on the region's border.
+
+    ``piece`` : (p,) int; ``corners`` : (p, 3, 2) float, counter-clockwise; ``inside`` :
+    (p,) bool.
+    """
+    found = np.zeros(len(piece), dtype=bool)
+    tied = np.flatnonzero(ceded >= 0)
+    if len(tied) == 0:
+        return found
+    rivals = np.flatnonzero(np.isin(piece, piece[tied]) & (ceded < 0) & inside)
+    keys = [_edge_keys(piece[tied], corners[tied], ceded[tied])]
+    keys += [_edge_keys(piece[rivals], corners[rivals], np.full(len(rivals), i)) for i in range(3)]
+    _, label = np.unique(np.concatenate(keys), axis=0, return_inverse=True)
+    label = label.ravel()
+    found[tied] = ~np.isin(label[: len(tied)], label[len(tied) :])
+    return found
+
+
+def _edge_keys(piece, corners, corner) -> np.ndarray:
+    """(p, 5) float: ``(piece, x, y, x', y')`` for the edge ``corner -> corner + 1`` of each
+    triangle (``corners`` (p, 3, 2)), its ends in lexicographic order."""
+    rows = np.arange(len(piece))
+    p, q = corners[rows, corner], corners[rows, (corner + 1) % 3]
+    swap = (p[:, 0] > q[:, 0]) | ((p[:, 0] == q[:, 0]) & (p[:, 1] > q[:, 1]))
+    low, high = np.where(swap[:, None], q, p), np.where(swap[:, None], p, q)
+    return np.column_stack([piece.astype(np.float64), low, high])
 
 
 @dataclass(frozen=True)
@@ -248,6 +284,9 @@ def lift_polyline(triangles: MapTriangles, trace: Trace, segments: np.ndarray) -
     s0, s1 = trace.s0[piece], trace.s1[piece]
     start = np.where(t0 == 0, s0, s0 + t0 * (s1 - s0))
     stop = np.where(t1 == 1, s1, s0 + t1 * (s1 - s0))
+    # A triangle that the segment only grazes (at a corner) would be sorted out of turn.
+    kept = stop - start > GRAZE
+    piece, triangle, start, stop = piece[kept], triangle[kept], start[kept], stop[kept]
     segment = trace.segment[piece]
     if len(segment) == 0:
         return Polyline(np.empty((0, 2)), np.empty((0, 3)), np.empty(0, dtype=np.int64), 0.0)
@@ -306,6 +345,9 @@ def _segment_ends(trace: Trace) -> np.ndarray:
     ends[trace.segment[last]] = trace.piece_b[last]
     return ends
 
+
+#: Parts of a segment this short (as a share of it) are a corner grazed, not a piece.
+GRAZE = 1e-12
 
 #: Pieces whose ends are this close along their segments are joined (a crossing of a
 #: triangle edge, found from the triangles on both sides of it).

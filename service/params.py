@@ -452,19 +452,26 @@ Name = Annotated[str, Field(min_length=1, max_length=120)]
 MapCoordinates = Annotated[list[Coordinate], Field(fail_fast=True)]
 
 
-class Ring(_Strict):
+class _MapPoints(_Strict):
+    """Points on the map: as many ``y`` as ``x``."""
+
+    x: MapCoordinates
+    y: MapCoordinates
+
+    @model_validator(mode="after")
+    def _one_y_per_x(self) -> _MapPoints:
+        if len(self.x) != len(self.y):
+            raise ValueError(f"x, y: one y per x; got {len(self.x)} x and {len(self.y)} y")
+        return self
+
+
+class Ring(_MapPoints):
     """A closed ring on the map, in the layout's coordinates (``vertices.x`` and
     ``vertices.y`` of a flatten answer): straight edges from each point to the next and from
     the last back to the first (which need not be repeated)."""
 
     x: MapCoordinates = Field(min_length=3)
     y: MapCoordinates = Field(min_length=3)
-
-    @model_validator(mode="after")
-    def _one_y_per_x(self) -> Ring:
-        if len(self.x) != len(self.y):
-            raise ValueError(f"x, y: one y per x; got {len(self.x)} x and {len(self.y)} y")
-        return self
 
 
 class Zone(_Strict):
@@ -477,18 +484,12 @@ class Zone(_Strict):
     )
 
 
-class Curve(_Strict):
+class Curve(_MapPoints):
     """A polyline drawn on the map (a hairline, an incision), in the layout's coordinates."""
 
     name: Name
     x: MapCoordinates = Field(min_length=2)
     y: MapCoordinates = Field(min_length=2)
-
-    @model_validator(mode="after")
-    def _one_y_per_x(self) -> Curve:
-        if len(self.x) != len(self.y):
-            raise ValueError(f"x, y: one y per x; got {len(self.x)} x and {len(self.y)} y")
-        return self
 
 
 class KnownDistance(_Strict):

@@ -1,11 +1,13 @@
 """End to end in a real browser: headless Chromium opens the demo page served by a real
 uvicorn that requires an API key, enters the key, flattens a bundled scan, then the default
-sample in automatic mode, and the test checks what the page shows. The screenshots are kept
-in ``artifacts/demo.png`` and ``artifacts/demo-auto.png``."""
+sample in automatic mode, and the test checks what the page shows; then draws a zone on the
+map, which the page measures (/v1/measure) and lifts onto the 3D view. The screenshots are
+kept in ``artifacts/demo.png``, ``artifacts/demo-auto.png`` and ``artifacts/demo-zone.png``."""
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 from pathlib import Path
@@ -125,6 +127,197 @@ def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
             assert automatic.startswith("seam-free"), automatic
             assert "0 folded after" in automatic, automatic
             page.screenshot(path=str(ARTIFACTS / "demo-auto.png"), full_page=True)
+        finally:
+            browser.close()
+    assert not problems, problems
+
+
+#: Pixels of the 3D view that differ from those kept by the last call with ``true``.
+CHANGED_PIXELS = """(keep) => {
+    const canvas = document.getElementById('view');
+    const gl = canvas.getContext('webgl2') || canvas.getContext('webgl');
+    const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
+    const pixels = new Uint8Array(w * h * 4);
+    gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, pixels);
+    const kept = window.keptPixels;
+    if (keep) window.keptPixels = pixels;
+    let changed = 0;
+    for (let i = 0; kept && i < pixels.length; i += 4)
+        if (Math.max(...[0, 1, 2].map((c) => Math.abs(pixels[i + c] - kept[i + c]))) > 40)
+            changed++;
+    return changed;
+}"""
+
+
+def post(server: str, route: str, params: dict) -> dict:
+    """The JSON answer of a mesh route for the sample, with the key."""
+    response = httpx.post(
+        f"{server}{route}",
+        files={"mesh": (SAMPLE, SAMPLES[SAMPLE].path.read_bytes())},
+        data={"params": json.dumps(params)},
+        headers={"X-API-Key": KEY},
+        timeout=60,
+    )
+    assert response.status_code == 200, response.text
+    return response.json()
+
+
+def flattened_page(browser, server: str, problems: list[str]):
+    """A page of the demo with the key entered and the sample flattened (the preset)."""
+    page = browser.new_page(viewport={"width": 1600, "height": 900})
+    page.on(
+        "console",
+        lambda m: m.type == "error" and "401" not in m.text and problems.append(m.text),
+    )
+    page.on("pageerror", lambda e: problems.append(str(e)))
+    page.on("requestfailed", lambda r: problems.append(f"{r.url}: {r.failure}"))
+    page.goto(server, wait_until="load")
+    page.wait_for_selector("body[data-state=ready]", timeout=30_000)
+    assert page.locator("#draw").is_disabled()  # no map to draw on yet
+    page.fill("#apikey", KEY)
+    page.locator("#apikey").blur()
+    page.wait_for_selector(f"#sample option[value='{SAMPLE}']", state="attached")
+    page.select_option("#sample", SAMPLE)
+    page.click("#go")
+    page.wait_for_selector("body[data-state=shown]", timeout=60_000)
+    return page
+
+
+def on_screen(page, flat: dict, ring: list[tuple[float, float]]):
+    """Where the page shows the layout's points of ``ring`` (a theta_phi map), in the
+    viewport's pixels, as the picture draws the layout (service/outputs/picture.py,
+    ``describe``): its box padded by 4 % of its larger side, scaled into the plot box inside
+    the margins (70, 48, 270, 96 pixels) and centred there. Also answers a pixel of the
+    picture and one of the screen in layout units: how closely the page can read a click."""
+    svg = page.locator("#map svg")
+    svg.scroll_into_view_if_needed()
+    _, _, width, height = map(float, svg.get_attribute("viewBox").split())
+    xs, ys = flat["vertices"]["x"], flat["vertices"]["y"]
+    pad = 0.04 * max(max(xs) - min(xs), max(ys) - min(ys))
+    x_low, y_low = min(xs) - pad, min(ys) - pad
+    view_w, view_h = max(xs) + pad - x_low, max(ys) + pad - y_low
+    box_w, box_h = width - 70 - 270, height - 48 - 96
+    scale = min(box_w / view_w, box_h / view_h)
+    left, top = round(70 + (box_w - view_w * scale) / 2), round(48 + (box_h - view_h * scale) / 2)
+    bounds = svg.bounding_box()
+    points = [
+        (
+            bounds["x"] + (left + (x - x_low) * scale) * bounds["width"] / width,
+            bounds["y"] + (top + (y - y_low) * scale) * bounds["height"] / height,
+        )
+        for x, y in ring
+    ]
+    return points, (1.0 + width / bounds["width"]) / scale
+
+
+def pentagon(flat: dict, size: float) -> list[tuple[float, float]]:
+    """A pentagon about the middle of the map, in the layout's coordinates, its corners
+    ``size`` times the map's width and height from the middle."""
+    xs, ys = flat["vertices"]["x"], flat["vertices"]["y"]
+    mid_x, mid_y = (min(xs) + max(xs)) / 2, (min(ys) + max(ys)) / 2
+    radius_x, radius_y = size * (max(xs) - min(xs)), size * (max(ys) - min(ys))
+    angles = [math.pi / 2 + 2 * math.pi * k / 5 for k in range(5)]
+    return [(mid_x + radius_x * math.cos(a), mid_y + radius_y * math.sin(a)) for a in angles]
+
+
+def draw(page, flat: dict, ring: list[tuple[float, float]]) -> float:
+    """Draw ``ring`` as a user does: Draw, a click at each point but the last, a double click
+    at the last (which closes the outline); then wait for its area. Answers how closely the
+    page can read a click, in layout units (:func:`on_screen`)."""
+    page.click("#draw")  # first: it may scroll the page
+    clicks, tolerance = on_screen(page, flat, ring)
+    for x, y in clicks[:-1]:
+        page.mouse.click(x, y)
+    # While drawing: the points and the open polyline through them.
+    assert page.locator("#map svg .zone-drawing circle").count() == len(clicks) - 1
+    assert page.locator("#map svg .zone-drawing polyline").count() == 1
+    page.mouse.dblclick(*clicks[-1])
+    page.wait_for_selector("#zone-area[data-state=measured]", timeout=30_000)
+    assert page.locator("#map svg .zone-drawing circle").count() == len(clicks)
+    assert page.locator("#map svg .zone-drawing polygon").count() == 1
+    return tolerance
+
+
+def measured(page, server: str, units: str) -> tuple[dict, dict]:
+    """The ring the page posted (``data-ring``) and what /v1/measure answers for it."""
+    ring = json.loads(page.locator("#zone-area").get_attribute("data-ring"))
+    params = {**PARAMS, "zones": [{"name": "zone", "outer": ring}], "units": units}
+    return ring, post(server, "/v1/measure", params)["zones"][0]
+
+
+def test_a_zone_drawn_on_the_map_is_measured_and_outlined_on_the_3d_view(server):
+    """Five points clicked on the map (the last a double click, which closes the outline):
+    the page posts the ring at those points of the layout to /v1/measure, shows its area in
+    cm² as the API answers it, draws the outline lifted onto the surface in the 3D view, and
+    measures again when the units change; Clear takes it all away."""
+    require(
+        shutil.which(CHROMIUM) is not None or Path(CHROMIUM).exists(),
+        "Chromium",
+        "apt-get install chromium (or set MESHFLAT_CHROMIUM)",
+    )
+    from playwright.sync_api import sync_playwright
+
+    flat = post(server, "/v1/flatten", PARAMS)
+    ring = pentagon(flat, 0.3)
+
+    problems: list[str] = []
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(
+            executable_path=CHROMIUM,
+            args=["--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader"],
+        )
+        try:
+            page = flattened_page(browser, server, problems)
+            assert page.locator("#units").input_value() == "mm"
+            page.wait_for_timeout(500)  # a few frames of the 3D view
+            assert page.evaluate(CHANGED_PIXELS, True) == 0
+
+            tolerance = draw(page, flat, ring)
+            page.wait_for_timeout(500)  # a few frames with the outline
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "demo-zone.png"), full_page=True)
+
+            # The ring the page posted: the clicked points of the layout; its area as the
+            # API answers it.
+            posted, zone = measured(page, server, "mm")
+            got = list(zip(posted["x"], posted["y"], strict=True))
+            assert len(got) == 5
+            for (x, y), (got_x, got_y) in zip(ring, got, strict=True):
+                assert abs(got_x - x) < tolerance and abs(got_y - y) < tolerance, (got, ring)
+            assert zone["area_outside_region"] == 0.0  # drawn inside the region
+            text = page.locator("#zone-area").inner_text()
+            assert text == f"Zone: {zone['area_cm2']:.2f} cm²", text
+            # The 3D view: one line segment per piece of the lifted outline, none off the
+            # region, and the canvas shows them.
+            faces = zone["outline"][0]["faces"]
+            assert None not in faces and len(faces) >= 5
+            assert page.locator("#zone-area").get_attribute("data-segments") == str(len(faces))
+            assert page.evaluate(CHANGED_PIXELS, False) > 50
+
+            # Other units: measured again, 100 times as many cm² in cm as in mm.
+            page.select_option("#units", "cm")
+            page.wait_for_selector("#zone-area[data-state=measured]", timeout=30_000)
+            _, in_cm = measured(page, server, "cm")
+            assert in_cm["area_cm2"] == pytest.approx(100 * zone["area_cm2"])
+            assert page.locator("#zone-area").inner_text() == f"Zone: {in_cm['area_cm2']:.2f} cm²"
+
+            # A zone that runs off the region (a new drawing replaces the last): its outline
+            # in the 3D view breaks there, no segment where a piece has no face.
+            draw(page, flat, pentagon(flat, 0.52))
+            _, off = measured(page, server, "cm")
+            faces = off["outline"][0]["faces"]
+            assert None in faces and off["area_outside_region"] > 0
+            segments = len(faces) - faces.count(None)
+            assert page.locator("#zone-area").get_attribute("data-segments") == str(segments)
+            assert page.locator("#zone-area").inner_text() == f"Zone: {off['area_cm2']:.2f} cm²"
+
+            # Clear: the drawing, the area and the outline go; the 3D view is as before.
+            page.click("#clear-zone")
+            assert page.locator("#map svg .zone-drawing").count() == 0
+            assert page.locator("#zone-area").inner_text() == ""
+            assert page.locator("#zone-area").get_attribute("data-segments") is None
+            page.wait_for_timeout(500)
+            assert page.evaluate(CHANGED_PIXELS, False) == 0
         finally:
             browser.close()
     assert not problems, problems

@@ -1,6 +1,7 @@
 // meshflat demo: pick a sample or upload a mesh, choose a cone region, flatten, and see the
 // 2D map (SVG from /v1/flatten) next to the 3D region textured through the returned UVs
-// (GLB from /v1/flatten, loaded by three.js's GLTFLoader).
+// (GLB from /v1/flatten, loaded by three.js's GLTFLoader). A zone drawn on the map is
+// measured by /v1/measure: its area, and its outline lifted onto the surface in the 3D view.
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
@@ -86,12 +87,12 @@ async function meshFile() {
   return { blob: await response.blob(), name };
 }
 
-async function flattenAs(mesh, accept) {
+async function post(path, mesh, p, accept) {
   const form = new FormData();
   form.append('mesh', mesh.blob, mesh.name);
-  form.append('params', JSON.stringify(params()));
+  form.append('params', JSON.stringify(p));
   const headers = { Accept: accept, ...keyHeaders() };
-  const response = await fetch('/v1/flatten', { method: 'POST', body: form, headers });
+  const response = await fetch(path, { method: 'POST', body: form, headers });
   if (!response.ok) throw await problemOf(response);
   return response;
 }
@@ -136,9 +137,134 @@ function show(gltf) {
   camera.updateProjectionMatrix();
   let vertices = 0;
   shown.traverse((node) => {
-    if (node.isMesh) vertices += node.geometry.attributes.position.count;
+    if (!node.isMesh) return;
+    vertices += node.geometry.attributes.position.count;
+    // Pushed back a little in depth, so that a zone's outline drawn on the surface shows.
+    Object.assign(node.material, { polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1 });
   });
   return vertices;
+}
+
+// -- a zone drawn on the map ----------------------------------------------------------------
+
+const SVG = 'http://www.w3.org/2000/svg';
+const ZONE_COLOUR = 0xe41a1c;
+// The picture's plot box shows the layout's box padded by 4 % of its larger side
+// (service/outputs/picture.py, _view), which the GLB's UVs scale to [0, 1]: 0.04 in u and v.
+const PAD = 0.04;
+// The map shown: its mesh, its params (with the frame the service resolved, so that
+// /v1/measure draws the same map without choosing again) and the GLB's UV numbers.
+let map = null;
+// The outline drawn on the map, in the picture's pixels; ticket: the measuring that counts.
+const zone = { points: [], drawing: false, closed: false, ticket: 0 };
+let outline = null; // the lifted outline in the 3D view
+
+const mapSvg = () => $('map').querySelector('svg');
+
+// A point of the map picture (SVG pixels) in the layout's coordinates, through the UVs:
+// x = u / scale + x_min, y = s_sign * (v / scale + s_min) (service/outputs/glb.py).
+function toLayout([px, py]) {
+  const plot = mapSvg().querySelector('#plot rect');
+  const [left, top, width, height] = ['x', 'y', 'width', 'height'].map((a) => Number(plot.getAttribute(a)));
+  const { scale, x_min: xMin, s_min: sMin, s_sign: sSign, max: [uMax, vMax] } = map.uv;
+  const u = -PAD + ((px - left) / width) * (uMax + 2 * PAD);
+  const v = -PAD + ((py - top) / height) * (vMax + 2 * PAD);
+  return [u / scale + xMin, sSign * (v / scale + sMin)];
+}
+
+function zoneStatus(text, state) {
+  $('zone-area').textContent = text;
+  $('zone-area').className = state === 'error' ? 'error' : '';
+  $('zone-area').dataset.state = state;
+}
+
+function drawZone() {
+  let group = mapSvg().querySelector('g.zone-drawing');
+  if (!group) {
+    group = document.createElementNS(SVG, 'g');
+    group.setAttribute('class', 'zone-drawing');
+    mapSvg().append(group);
+  }
+  const line = document.createElementNS(SVG, zone.closed ? 'polygon' : 'polyline');
+  line.setAttribute('points', zone.points.map((p) => p.join(',')).join(' '));
+  const dots = zone.points.map(([x, y]) => {
+    const dot = document.createElementNS(SVG, 'circle');
+    Object.entries({ cx: x, cy: y, r: 3 }).forEach(([name, value]) => dot.setAttribute(name, value));
+    return dot;
+  });
+  group.replaceChildren(line, ...dots);
+}
+
+function removeOutline() {
+  if (!outline) return;
+  scene.remove(outline);
+  outline.geometry.dispose();
+  outline.material.dispose();
+  outline = null;
+}
+
+function clearZone() {
+  Object.assign(zone, { points: [], drawing: false, closed: false, ticket: zone.ticket + 1 });
+  mapSvg()?.querySelector('g.zone-drawing')?.remove();
+  $('map').classList.remove('drawing');
+  removeOutline();
+  zoneStatus('', 'none');
+  delete $('zone-area').dataset.ring;
+  delete $('zone-area').dataset.segments;
+}
+
+function startZone() {
+  clearZone();
+  zone.drawing = true;
+  $('map').classList.add('drawing');
+  zoneStatus('Click points on the map; double-click to close the outline.', 'drawing');
+}
+
+// The outline lifted onto the surface, one segment per piece on it: none where it runs off
+// the region (faces[i] null).
+function showOutline({ points, faces }) {
+  const ends = faces.flatMap((face, i) => (face === null ? [] : [...points[i], ...points[i + 1]]));
+  const geometry = new THREE.BufferGeometry();
+  geometry.setAttribute('position', new THREE.Float32BufferAttribute(ends, 3));
+  outline = new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ color: ZONE_COLOUR }));
+  outline.name = 'zone-outline';
+  scene.add(outline);
+  $('zone-area').dataset.segments = String(geometry.attributes.position.count / 2);
+}
+
+async function measure() {
+  const ticket = ++zone.ticket;
+  const ring = zone.points.map(toLayout);
+  const outer = { x: ring.map((p) => p[0]), y: ring.map((p) => p[1]) };
+  const p = { ...map.params, zones: [{ name: 'zone', outer }], units: $('units').value };
+  $('zone-area').dataset.ring = JSON.stringify(outer);
+  zoneStatus('measuring…', 'measuring');
+  try {
+    const response = await post('/v1/measure', map.mesh, p, 'application/json');
+    const [measured] = (await response.json()).zones;
+    if (ticket !== zone.ticket) return; // cleared, or measured again, meanwhile
+    removeOutline();
+    showOutline(measured.outline[0]);
+    zoneStatus(`Zone: ${measured.area_cm2.toFixed(2)} cm²`, 'measured');
+  } catch (error) {
+    if (ticket === zone.ticket) zoneStatus(error.message, 'error');
+  }
+}
+
+// A click adds a point (the second click of a double click adds none); a double click closes.
+function addPoint(event) {
+  if (!zone.drawing || event.detail > 1) return;
+  const point = new DOMPoint(event.clientX, event.clientY).matrixTransform(mapSvg().getScreenCTM().inverse());
+  zone.points.push([point.x, point.y]);
+  drawZone();
+}
+
+function closeZone() {
+  if (!zone.drawing || zone.points.length < 3) return;
+  Object.assign(zone, { drawing: false, closed: true });
+  $('map').classList.remove('drawing');
+  drawZone();
+  measure();
 }
 
 // -- the page -----------------------------------------------------------------------------
@@ -170,14 +296,18 @@ function summary(extras) {
 async function flatten(event) {
   event?.preventDefault();
   $('go').disabled = true;
+  $('draw').disabled = true;
+  clearZone();
+  map = null;
   document.body.dataset.state = 'flattening';
   setStatus('flattening…');
   const started = performance.now();
   try {
     const mesh = await meshFile();
+    const p = params();
     const [svgResponse, glbResponse] = await Promise.all([
-      flattenAs(mesh, 'image/svg+xml'),
-      flattenAs(mesh, 'model/gltf-binary'),
+      post('/v1/flatten', mesh, p, 'image/svg+xml'),
+      post('/v1/flatten', mesh, p, 'model/gltf-binary'),
     ]);
     const svg = new DOMParser().parseFromString(await svgResponse.text(), 'image/svg+xml').documentElement;
     svg.removeAttribute('width');
@@ -190,6 +320,11 @@ async function flatten(event) {
     $('summary').textContent = summary(extras);
     // The centre actually used (fitted, or the box centre the name stood for).
     $('center').value = extras.params.center.map((c) => Number(c.toPrecision(6))).join(', ');
+    const { method, sigma, center, rotation } = extras.params;
+    const json = gltf.parser.json;
+    const uv = json.accessors[json.meshes[0].primitives[0].attributes.TEXCOORD_0];
+    map = { mesh, params: { ...p, method, sigma, center, rotation }, uv: { ...extras.uv, max: uv.max } };
+    $('draw').disabled = false;
     document.body.dataset.vertices = String(vertices);
     document.body.dataset.state = 'shown';
     setStatus(`done in ${Math.round(performance.now() - started)} ms`);
@@ -208,6 +343,11 @@ $('auto').addEventListener('change', () => {
   for (const id of ['center', 'pole', 'sigma']) $(id).disabled = $('auto').checked;
 });
 $('form').addEventListener('submit', flatten);
+$('draw').addEventListener('click', startZone);
+$('clear-zone').addEventListener('click', clearZone);
+$('units').addEventListener('change', () => zone.closed && measure());
+$('map').addEventListener('click', addPoint);
+$('map').addEventListener('dblclick', closeZone);
 animate();
 loadSamples().then(() => {
   document.body.dataset.state = 'ready';

@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-locate bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-locate bench-measure bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -41,6 +41,11 @@ bench-fit: $(VENV)/.installed-bench
 # queries per second against the k-d trees it replaced. Needs curl besides the bench extra.
 bench-locate: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.locate_bench $(BENCH_ARGS)
+
+# Zones and a curve drawn on the map of a 1M-face scalp, measured on the surface, against
+# shapely 2 clipping the triangles (one thread, timed alternately in one process).
+bench-measure: $(VENV)/.installed-bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.measure_bench $(BENCH_ARGS)
 
 # Needs curl (the end-to-end client) besides the bench extra.
 bench-service: $(VENV)/.installed-bench

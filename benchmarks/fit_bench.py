@@ -25,7 +25,6 @@ Then, on the scalps of the bundled samples, the energy of the automatic choice a
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import math
 import os
@@ -45,7 +44,7 @@ from scipy.sparse.csgraph import connected_components
 
 from benchmarks.docs import publish
 from benchmarks.server import status_bytes
-from benchmarks.transforms_bench import machine, subdivided
+from benchmarks.transforms_bench import footer, subdivided
 from service.allocator import keep_large_blocks
 from transforms import Chart, Frame, PoleCap, fit_region, flatten_region
 from transforms.faces import measure_faces
@@ -334,8 +333,7 @@ def measure(rungs: list[int], runs: int, budget: float) -> str:
         "|---|---:|---:|---|---|",
         *sample_rows(),
         "",
-        f"Machine: {machine()}. libigl {version('libigl')}, numpy {np.__version__}. Run "
-        f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC.",
+        footer(f"libigl {version('libigl')}", f"numpy {np.__version__}"),
     ]
     return "\n".join(lines)
 

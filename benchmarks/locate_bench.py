@@ -21,7 +21,6 @@ docs/benchmarks.md. The hits of every run are checked against the points they ca
 from __future__ import annotations
 
 import argparse
-import datetime
 import shutil
 import statistics
 import subprocess
@@ -36,7 +35,7 @@ from scipy.spatial import cKDTree
 from benchmarks.docs import publish
 from benchmarks.fit_bench import ladder_rung
 from benchmarks.server import serving, status_bytes
-from benchmarks.transforms_bench import machine
+from benchmarks.transforms_bench import footer
 from service.allocator import keep_large_blocks
 from service.examples import MULTIPART, multipart_body
 from transforms import Chart, Frame, LocateIndex, PoleCap, locate
@@ -345,8 +344,7 @@ def measure(runs: int, queries: int) -> str:
         lines += rows_of(scalp, served, local, queries)
     lines += [
         "",
-        f"Machine: {machine()}, numpy {np.__version__}. Run "
-        f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC.",
+        footer(f"numpy {np.__version__}"),
     ]
     return "\n".join(lines)
 

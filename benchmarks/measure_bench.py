@@ -38,7 +38,6 @@ surface length is the sum of its pieces' lifted lengths. Both are compared with 
 from __future__ import annotations
 
 import argparse
-import datetime
 import gc
 import math
 import statistics
@@ -53,7 +52,7 @@ import shapely
 
 from benchmarks.docs import publish
 from benchmarks.fit_bench import compact
-from benchmarks.transforms_bench import machine, subdivided
+from benchmarks.transforms_bench import footer, subdivided
 from service.allocator import keep_large_blocks
 from transforms import (
     LAYOUT_ORIENTATION,
@@ -456,8 +455,7 @@ def measure(runs: int) -> str:
         "",
         *agreement_rows(zones, ours[0], peers[0]),
         "",
-        f"Machine: {machine()}, numpy {np.__version__}. Run "
-        f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC.",
+        footer(f"numpy {np.__version__}", f"shapely {version('shapely')}"),
     ]
     return "\n".join(lines)
 

@@ -22,7 +22,6 @@ it read and its answer (the returned arrays, or the JSON bytes).
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import subprocess
@@ -36,7 +35,7 @@ import numpy as np
 
 from benchmarks.docs import publish
 from benchmarks.server import status_bytes
-from benchmarks.transforms_bench import machine
+from benchmarks.transforms_bench import footer
 
 #: Targets from the issue: a flatten's temporaries per face, and a fit's peak against the
 #: flatten's on the same region.
@@ -226,8 +225,7 @@ def measure(subdivisions: list[int]) -> str:
             lines += rows_of(title, save_region(folder, f"scalp-{times}", *region(times)))
     lines += [
         "",
-        f"Machine: {machine()}. numpy {np.__version__}. Run "
-        f"{datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC.",
+        footer(f"numpy {np.__version__}"),
     ]
     return "\n".join(lines)
 

@@ -19,11 +19,9 @@ Targets: end to end at most 1.3x in-process; the GLB with JSON output under 1.5 
 from __future__ import annotations
 
 import argparse
-import datetime
 import io
 import json
 import os
-import platform
 import shutil
 import statistics
 import subprocess
@@ -38,7 +36,7 @@ import trimesh
 
 from benchmarks.docs import publish
 from benchmarks.server import free_port, status_bytes, wait_ready
-from benchmarks.transforms_bench import machine, subdivided
+from benchmarks.transforms_bench import footer, subdivided
 from service.allocator import keep_large_blocks
 from service.capabilities import MESH_COMMANDS
 from service.examples import MULTIPART, multipart_body
@@ -209,8 +207,7 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {name} | {_ms(ours)} | {_ms(peer)} | {speedup:.1f}x |")
     lines += [
         "",
-        f"Machine: {machine()}. Python {platform.python_version()}, numpy {np.__version__}. "
-        f"Run {datetime.datetime.now(datetime.UTC).strftime('%Y-%m-%d %H:%M UTC')}.",
+        footer(f"numpy {np.__version__}"),
     ]
     table = "\n".join(lines)
     publish("service-bench", "The service end to end", table, args.write_docs)

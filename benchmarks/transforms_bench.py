@@ -172,6 +172,14 @@ def machine() -> str:
     return f"{cpu}, {cores} cores{memory}; {platform.system()} {platform.release()}"
 
 
+def footer(*libraries: str) -> str:
+    """The line that ends a report: the machine, ``libraries`` (``"numpy 2.4"``, ...) and
+    the time of the run."""
+    used = ", ".join([f"Python {platform.python_version()}", *libraries])
+    when = datetime.datetime.now(datetime.UTC)
+    return f"Machine: {machine()}. {used}. Run {when:%Y-%m-%d %H:%M} UTC."
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
@@ -232,8 +240,7 @@ def measure(subdivisions: int, runs: int) -> str:
         )
     lines += [
         "",
-        f"Machine: {machine()}. Python {platform.python_version()}, numpy {np.__version__}. "
-        f"Run {datetime.datetime.now(datetime.UTC).strftime('%Y-%m-%d %H:%M UTC')}.",
+        footer(f"numpy {np.__version__}"),
     ]
     return "\n".join(lines)
 

@@ -10,6 +10,7 @@ import json
 import math
 import os
 import shutil
+from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
@@ -41,7 +42,22 @@ def server():
         yield server.url
 
 
-def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
+def post(server: str, route: str, params: dict) -> dict:
+    """The JSON answer of a mesh route for the sample, with the key."""
+    response = httpx.post(
+        f"{server}{route}",
+        files={"mesh": (SAMPLE, SAMPLES[SAMPLE].path.read_bytes())},
+        data={"params": json.dumps(params)},
+        headers={"X-API-Key": KEY},
+        timeout=60,
+    )
+    assert response.status_code == 200, response.text
+    return response.json()
+
+
+@contextmanager
+def chromium():
+    """The system's headless Chromium, driven by playwright, with WebGL in software."""
     require(
         shutil.which(CHROMIUM) is not None or Path(CHROMIUM).exists(),
         "Chromium",
@@ -49,86 +65,95 @@ def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
     )
     from playwright.sync_api import sync_playwright
 
-    # What the API answers for the same request: the page must show the same region.
-    data = SAMPLES[SAMPLE].path.read_bytes()
-    expected = httpx.post(
-        f"{server}/v1/flatten",
-        files={"mesh": (SAMPLE, data)},
-        data={"params": json.dumps(PARAMS)},
-        headers={"X-API-Key": KEY},
-        timeout=60,
-    ).json()
-    vertex_count = len(expected["vertices"]["ids"])
-
-    problems: list[str] = []
     with sync_playwright() as playwright:
         browser = playwright.chromium.launch(
             executable_path=CHROMIUM,
             args=["--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader"],
         )
         try:
-            page = browser.new_page(viewport={"width": 1600, "height": 900})
-            # The one console error expected: the samples asked for before the key is given.
-            page.on(
-                "console",
-                lambda m: m.type == "error" and "401" not in m.text and problems.append(m.text),
-            )
-            page.on("pageerror", lambda e: problems.append(str(e)))
-            page.on("requestfailed", lambda r: problems.append(f"{r.url}: {r.failure}"))
-            page.goto(server, wait_until="load")
-            page.wait_for_selector("body[data-state=ready]", timeout=30_000)
-            assert "enter the API key" in page.locator("#status").inner_text()
-            page.fill("#apikey", KEY)
-            page.locator("#apikey").blur()  # a change event, as when the user moves on
-            page.wait_for_selector(f"#sample option[value='{SAMPLE}']", state="attached")
-            page.select_option("#sample", SAMPLE)
-            page.click("#go")
-            page.wait_for_selector("body[data-state=shown]", timeout=60_000)
-            page.wait_for_timeout(500)  # a few frames of the 3D view
-            ARTIFACTS.mkdir(exist_ok=True)
-            page.screenshot(path=str(ARTIFACTS / "demo.png"), full_page=True)
-
-            # The map: the SVG from /v1/flatten, drawn triangle by triangle, with its legend.
-            assert page.locator("#map svg path.triangles").count() >= 1
-            legend = page.locator("#map svg g.legend").text_content()
-            faces = len(expected["faces"]["ids"])
-            assert f"region: {faces:,} triangles" in legend
-            # The 3D view: the GLB loaded by three.js, with the region's vertex count.
-            assert page.locator("body").get_attribute("data-vertices") == str(vertex_count)
-            assert page.locator("#vertices").inner_text() == f"{vertex_count:,}"
-            assert "seam-free, star-shaped" in page.locator("#summary").inner_text()
-            # The canvas shows something besides the background.
-            drawn = page.evaluate(
-                """() => {
-                    const canvas = document.getElementById('view');
-                    const gl = canvas.getContext('webgl2') || canvas.getContext('webgl');
-                    const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
-                    const pixels = new Uint8Array(w * h * 4);
-                    gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, pixels);
-                    let other = 0;
-                    for (let i = 0; i < pixels.length; i += 4)
-                        if (Math.abs(pixels[i] - 0xf4) > 8 || Math.abs(pixels[i + 2] - 0xf8) > 8)
-                            other++;
-                    return other / (w * h);
-                }"""
-            )
-            assert drawn > 0.02, drawn
-            # The centre field shows the centre used, three numbers.
-            assert len(page.locator("#center").input_value().split(",")) == 3
-
-            # Automatic mode on the default sample (the first listed): chosen, untangled,
-            # one piece and fold-free.
-            default = page.locator("#sample option").first.get_attribute("value")
-            page.select_option("#sample", default)
-            page.check("#auto")
-            page.click("#go")
-            page.wait_for_selector("body[data-state=shown]", timeout=120_000)
-            automatic = page.locator("#summary").inner_text()
-            assert automatic.startswith("seam-free"), automatic
-            assert "0 folded after" in automatic, automatic
-            page.screenshot(path=str(ARTIFACTS / "demo-auto.png"), full_page=True)
+            yield browser
         finally:
             browser.close()
+
+
+def demo_page(browser, server: str, problems: list[str]):
+    """The demo page, loaded and ready; its errors go to ``problems``. The one console
+    error expected: the samples asked for before the key is given (401)."""
+    page = browser.new_page(viewport={"width": 1600, "height": 900})
+    page.on(
+        "console",
+        lambda m: m.type == "error" and "401" not in m.text and problems.append(m.text),
+    )
+    page.on("pageerror", lambda e: problems.append(str(e)))
+    page.on("requestfailed", lambda r: problems.append(f"{r.url}: {r.failure}"))
+    page.goto(server, wait_until="load")
+    page.wait_for_selector("body[data-state=ready]", timeout=30_000)
+    return page
+
+
+def flatten_sample(page) -> None:
+    """Enter the key, pick the sample (its preset) and flatten it, until it is shown."""
+    page.fill("#apikey", KEY)
+    page.locator("#apikey").blur()  # a change event, as when the user moves on
+    page.wait_for_selector(f"#sample option[value='{SAMPLE}']", state="attached")
+    page.select_option("#sample", SAMPLE)
+    page.click("#go")
+    page.wait_for_selector("body[data-state=shown]", timeout=60_000)
+
+
+def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
+    # What the API answers for the same request: the page must show the same region.
+    expected = post(server, "/v1/flatten", PARAMS)
+    vertex_count = len(expected["vertices"]["ids"])
+
+    problems: list[str] = []
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        assert "enter the API key" in page.locator("#status").inner_text()
+        flatten_sample(page)
+        page.wait_for_timeout(500)  # a few frames of the 3D view
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "demo.png"), full_page=True)
+
+        # The map: the SVG from /v1/flatten, drawn triangle by triangle, with its legend.
+        assert page.locator("#map svg path.triangles").count() >= 1
+        legend = page.locator("#map svg g.legend").text_content()
+        faces = len(expected["faces"]["ids"])
+        assert f"region: {faces:,} triangles" in legend
+        # The 3D view: the GLB loaded by three.js, with the region's vertex count.
+        assert page.locator("body").get_attribute("data-vertices") == str(vertex_count)
+        assert page.locator("#vertices").inner_text() == f"{vertex_count:,}"
+        assert "seam-free, star-shaped" in page.locator("#summary").inner_text()
+        # The canvas shows something besides the background.
+        drawn = page.evaluate(
+            """() => {
+                const canvas = document.getElementById('view');
+                const gl = canvas.getContext('webgl2') || canvas.getContext('webgl');
+                const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
+                const pixels = new Uint8Array(w * h * 4);
+                gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, pixels);
+                let other = 0;
+                for (let i = 0; i < pixels.length; i += 4)
+                    if (Math.abs(pixels[i] - 0xf4) > 8 || Math.abs(pixels[i + 2] - 0xf8) > 8)
+                        other++;
+                return other / (w * h);
+            }"""
+        )
+        assert drawn > 0.02, drawn
+        # The centre field shows the centre used, three numbers.
+        assert len(page.locator("#center").input_value().split(",")) == 3
+
+        # Automatic mode on the default sample (the first listed): chosen, untangled,
+        # one piece and fold-free.
+        default = page.locator("#sample option").first.get_attribute("value")
+        page.select_option("#sample", default)
+        page.check("#auto")
+        page.click("#go")
+        page.wait_for_selector("body[data-state=shown]", timeout=120_000)
+        automatic = page.locator("#summary").inner_text()
+        assert automatic.startswith("seam-free"), automatic
+        assert "0 folded after" in automatic, automatic
+        page.screenshot(path=str(ARTIFACTS / "demo-auto.png"), full_page=True)
     assert not problems, problems
 
 
@@ -147,40 +172,6 @@ CHANGED_PIXELS = """(keep) => {
             changed++;
     return changed;
 }"""
-
-
-def post(server: str, route: str, params: dict) -> dict:
-    """The JSON answer of a mesh route for the sample, with the key."""
-    response = httpx.post(
-        f"{server}{route}",
-        files={"mesh": (SAMPLE, SAMPLES[SAMPLE].path.read_bytes())},
-        data={"params": json.dumps(params)},
-        headers={"X-API-Key": KEY},
-        timeout=60,
-    )
-    assert response.status_code == 200, response.text
-    return response.json()
-
-
-def flattened_page(browser, server: str, problems: list[str]):
-    """A page of the demo with the key entered and the sample flattened (the preset)."""
-    page = browser.new_page(viewport={"width": 1600, "height": 900})
-    page.on(
-        "console",
-        lambda m: m.type == "error" and "401" not in m.text and problems.append(m.text),
-    )
-    page.on("pageerror", lambda e: problems.append(str(e)))
-    page.on("requestfailed", lambda r: problems.append(f"{r.url}: {r.failure}"))
-    page.goto(server, wait_until="load")
-    page.wait_for_selector("body[data-state=ready]", timeout=30_000)
-    assert page.locator("#draw").is_disabled()  # no map to draw on yet
-    page.fill("#apikey", KEY)
-    page.locator("#apikey").blur()
-    page.wait_for_selector(f"#sample option[value='{SAMPLE}']", state="attached")
-    page.select_option("#sample", SAMPLE)
-    page.click("#go")
-    page.wait_for_selector("body[data-state=shown]", timeout=60_000)
-    return page
 
 
 def on_screen(page, flat: dict, ring: list[tuple[float, float]]):
@@ -250,115 +241,92 @@ def test_a_zone_drawn_on_the_map_is_measured_and_outlined_on_the_3d_view(server)
     the page posts the ring at those points of the layout to /v1/measure, shows its area in
     cm² as the API answers it, draws the outline lifted onto the surface in the 3D view, and
     measures again when the units change; Clear takes it all away."""
-    require(
-        shutil.which(CHROMIUM) is not None or Path(CHROMIUM).exists(),
-        "Chromium",
-        "apt-get install chromium (or set MESHFLAT_CHROMIUM)",
-    )
-    from playwright.sync_api import sync_playwright
-
     flat = post(server, "/v1/flatten", PARAMS)
     ring = pentagon(flat, 0.3)
 
     problems: list[str] = []
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(
-            executable_path=CHROMIUM,
-            args=["--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader"],
-        )
-        try:
-            page = flattened_page(browser, server, problems)
-            assert page.locator("#units").input_value() == "mm"
-            page.wait_for_timeout(500)  # a few frames of the 3D view
-            assert page.evaluate(CHANGED_PIXELS, True) == 0
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        assert page.locator("#draw").is_disabled()  # no map to draw on yet
+        flatten_sample(page)
+        assert page.locator("#units").input_value() == "mm"
+        page.wait_for_timeout(500)  # a few frames of the 3D view
+        assert page.evaluate(CHANGED_PIXELS, True) == 0
 
-            tolerance = draw(page, flat, ring)
-            page.wait_for_timeout(500)  # a few frames with the outline
-            ARTIFACTS.mkdir(exist_ok=True)
-            page.screenshot(path=str(ARTIFACTS / "demo-zone.png"), full_page=True)
+        tolerance = draw(page, flat, ring)
+        page.wait_for_timeout(500)  # a few frames with the outline
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "demo-zone.png"), full_page=True)
 
-            # The ring the page posted: the clicked points of the layout; its area as the
-            # API answers it.
-            posted, zone = measured(page, server, "mm")
-            got = list(zip(posted["x"], posted["y"], strict=True))
-            assert len(got) == 5
-            for (x, y), (got_x, got_y) in zip(ring, got, strict=True):
-                assert abs(got_x - x) < tolerance and abs(got_y - y) < tolerance, (got, ring)
-            assert zone["area_outside_region"] == 0.0  # drawn inside the region
-            text = page.locator("#zone-area").inner_text()
-            assert text == f"Zone: {zone['area_cm2']:.2f} cm²", text
-            # The 3D view: one line segment per piece of the lifted outline, none off the
-            # region, and the canvas shows them.
-            faces = zone["outline"][0]["faces"]
-            assert None not in faces and len(faces) >= 5
-            assert page.locator("#zone-area").get_attribute("data-segments") == str(len(faces))
-            assert page.evaluate(CHANGED_PIXELS, False) > 50
+        # The ring the page posted: the clicked points of the layout; its area as the
+        # API answers it.
+        posted, zone = measured(page, server, "mm")
+        got = list(zip(posted["x"], posted["y"], strict=True))
+        assert len(got) == 5
+        for (x, y), (got_x, got_y) in zip(ring, got, strict=True):
+            assert abs(got_x - x) < tolerance and abs(got_y - y) < tolerance, (got, ring)
+        assert zone["area_outside_region"] == 0.0  # drawn inside the region
+        text = page.locator("#zone-area").inner_text()
+        assert text == f"Zone: {zone['area_cm2']:.2f} cm²", text
+        # The 3D view: one line segment per piece of the lifted outline, none off the
+        # region, and the canvas shows them.
+        faces = zone["outline"][0]["faces"]
+        assert None not in faces and len(faces) >= 5
+        assert page.locator("#zone-area").get_attribute("data-segments") == str(len(faces))
+        assert page.evaluate(CHANGED_PIXELS, False) > 50
 
-            # Other units: measured again, 100 times as many cm² in cm as in mm.
-            page.select_option("#units", "cm")
-            page.wait_for_selector("#zone-area[data-state=measured]", timeout=30_000)
-            _, in_cm = measured(page, server, "cm")
-            assert in_cm["area_cm2"] == pytest.approx(100 * zone["area_cm2"])
-            assert page.locator("#zone-area").inner_text() == f"Zone: {in_cm['area_cm2']:.2f} cm²"
+        # Other units: measured again, 100 times as many cm² in cm as in mm.
+        page.select_option("#units", "cm")
+        page.wait_for_selector("#zone-area[data-state=measured]", timeout=30_000)
+        _, in_cm = measured(page, server, "cm")
+        assert in_cm["area_cm2"] == pytest.approx(100 * zone["area_cm2"])
+        assert page.locator("#zone-area").inner_text() == f"Zone: {in_cm['area_cm2']:.2f} cm²"
 
-            # A zone that runs off the region (a new drawing replaces the last): its outline
-            # in the 3D view breaks there, no segment where a piece has no face.
-            draw(page, flat, pentagon(flat, 0.52))
-            _, off = measured(page, server, "cm")
-            faces = off["outline"][0]["faces"]
-            assert None in faces and off["area_outside_region"] > 0
-            segments = len(faces) - faces.count(None)
-            assert page.locator("#zone-area").get_attribute("data-segments") == str(segments)
-            assert page.locator("#zone-area").inner_text() == f"Zone: {off['area_cm2']:.2f} cm²"
+        # A zone that runs off the region (a new drawing replaces the last): its outline
+        # in the 3D view breaks there, no segment where a piece has no face.
+        draw(page, flat, pentagon(flat, 0.52))
+        _, off = measured(page, server, "cm")
+        faces = off["outline"][0]["faces"]
+        assert None in faces and off["area_outside_region"] > 0
+        segments = len(faces) - faces.count(None)
+        assert page.locator("#zone-area").get_attribute("data-segments") == str(segments)
+        assert page.locator("#zone-area").inner_text() == f"Zone: {off['area_cm2']:.2f} cm²"
 
-            # Clear: the drawing, the area and the outline go; the 3D view is as before.
-            page.click("#clear-zone")
-            assert page.locator("#map svg .zone-drawing").count() == 0
-            assert page.locator("#zone-area").inner_text() == ""
-            assert page.locator("#zone-area").get_attribute("data-segments") is None
-            page.wait_for_timeout(500)
-            assert page.evaluate(CHANGED_PIXELS, False) == 0
-        finally:
-            browser.close()
+        # Clear: the drawing, the area and the outline go; the 3D view is as before.
+        page.click("#clear-zone")
+        assert page.locator("#map svg .zone-drawing").count() == 0
+        assert page.locator("#zone-area").inner_text() == ""
+        assert page.locator("#zone-area").get_attribute("data-segments") is None
+        page.wait_for_timeout(500)
+        assert page.evaluate(CHANGED_PIXELS, False) == 0
     assert not problems, problems
 
 
 def test_docs_page_lists_the_operations_with_nothing_fetched_from_elsewhere(server):
     """/docs works behind a firewall: Swagger UI's script and styles come from the service
     (fastapi-offline), and the page lists every route of the document."""
-    require(
-        shutil.which(CHROMIUM) is not None or Path(CHROMIUM).exists(),
-        "Chromium",
-        "apt-get install chromium (or set MESHFLAT_CHROMIUM)",
-    )
-    from playwright.sync_api import sync_playwright
-
     paths = httpx.get(f"{server}/openapi.json", timeout=30).json()["paths"]
     elsewhere: list[str] = []
     failed: list[str] = []
-    with sync_playwright() as playwright:
-        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-        try:
-            page = browser.new_page(viewport={"width": 1400, "height": 900})
-            page.on(
-                "request",
-                lambda r: (
-                    r.url.startswith(("http", "ws"))
-                    and not r.url.startswith(server)
-                    and elsewhere.append(r.url)
-                ),
-            )
-            page.on("requestfailed", lambda r: failed.append(f"{r.url}: {r.failure}"))
-            page.goto(f"{server}/docs", wait_until="load")
-            page.wait_for_selector(".opblock-summary-path", timeout=30_000)
-            shown = {
-                text.strip().replace("\u200b", "")
-                for text in page.locator(".opblock-summary-path").all_inner_texts()
-            }
-            ARTIFACTS.mkdir(exist_ok=True)
-            page.screenshot(path=str(ARTIFACTS / "docs.png"))
-        finally:
-            browser.close()
+    with chromium() as browser:
+        page = browser.new_page(viewport={"width": 1400, "height": 900})
+        page.on(
+            "request",
+            lambda r: (
+                r.url.startswith(("http", "ws"))
+                and not r.url.startswith(server)
+                and elsewhere.append(r.url)
+            ),
+        )
+        page.on("requestfailed", lambda r: failed.append(f"{r.url}: {r.failure}"))
+        page.goto(f"{server}/docs", wait_until="load")
+        page.wait_for_selector(".opblock-summary-path", timeout=30_000)
+        shown = {
+            text.strip().replace("\u200b", "")
+            for text in page.locator(".opblock-summary-path").all_inner_texts()
+        }
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "docs.png"))
     assert set(paths) <= shown, set(paths) - shown
     assert not elsewhere, elsewhere
     assert not failed, failed

@@ -478,6 +478,26 @@ def test_a_curve_entering_the_region_starts_at_its_border():
     assert outside.length == 0.0 and len(outside.faces) == 0 and len(outside.map_points) == 0
 
 
+@pytest.mark.parametrize("far", [1e3, 1e9, 1e12, 1e15])
+@pytest.mark.parametrize("both", [False, True])
+def test_a_curve_with_a_point_far_off_the_map_keeps_its_length_on_the_region(far, both):
+    """A straight curve across the square from a point ``far`` off it (and to one, with
+    ``both``): the same length and the same points on the region as the curve cut at the
+    square's sides, however far the points."""
+    triangles = jittered_mesh(n=16)
+    y = 0.4375  # between rows of vertices, so that both curves cross the same edges
+    points = [[-far, y], [0.5, y], [far if both else 0.9, y]]
+    near = [[0.0, y], [0.5, y], [1.0 if both else 0.9, y]]
+    polyline, cut = lift_curve(triangles, points), lift_curve(triangles, near)
+    assert polyline.length == pytest.approx(cut.length, rel=1e-12)
+    assert cut.length > 0.9
+    np.testing.assert_allclose(polyline.map_points, cut.map_points, atol=1e-12)
+    np.testing.assert_array_equal(polyline.faces, cut.faces)
+    # A segment wholly off the map, far away, leaves a gap, not an error.
+    beyond = lift_curve(triangles, [[0.5, y], [0.5, 2.0], [far, 2.0], [far, y + 1.0]])
+    assert beyond.length == pytest.approx(lift_curve(triangles, [[0.5, y], [0.5, 1.0]]).length)
+
+
 # -- a folded map ---------------------------------------------------------------------------
 
 

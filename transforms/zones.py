@@ -284,8 +284,11 @@ def lift_polyline(triangles: MapTriangles, trace: Trace, segments: np.ndarray) -
     s0, s1 = trace.s0[piece], trace.s1[piece]
     start = np.where(t0 == 0, s0, s0 + t0 * (s1 - s0))
     stop = np.where(t1 == 1, s1, s0 + t1 * (s1 - s0))
+    origin = _segment_starts(trace)
+    direction = _segment_ends(trace) - origin
     # A triangle that the segment only grazes (at a corner) would be sorted out of turn.
-    kept = stop - start > GRAZE
+    length = np.linalg.norm(direction, axis=1)[trace.segment[piece]]
+    kept = (stop - start) * length > GRAZE * triangles.typical_size
     piece, triangle, start, stop = piece[kept], triangle[kept], start[kept], stop[kept]
     segment = trace.segment[piece]
     if len(segment) == 0:
@@ -299,8 +302,6 @@ def lift_polyline(triangles: MapTriangles, trace: Trace, segments: np.ndarray) -
     last = np.r_[~joined, True]
     segment, triangle = segment[first], triangle[first]
     start, stop = start[first], stop[last]
-    origin = _segment_starts(trace)
-    direction = _segment_ends(trace) - origin
     map_start = origin[segment] + start[:, None] * direction[segment]
     map_stop = origin[segment] + stop[:, None] * direction[segment]
     lifted_start = triangles.lift(triangle, triangles.barycentric(triangle, map_start))
@@ -326,8 +327,46 @@ def lift_curve(triangles: MapTriangles, points) -> Polyline:
     Polyline
     """
     points = np.asarray(points, dtype=np.float64)
-    trace = Trace.of(triangles, points[:-1], points[1:])
+    a, b = _within_map(triangles, points[:-1], points[1:])
+    trace = Trace.of(triangles, a, b)
     return lift_polyline(triangles, trace, np.arange(len(points) - 1))
+
+
+def _within_map(triangles: MapTriangles, a: np.ndarray, b: np.ndarray):
+    """The segments ``a -> b`` ((E, 2) float each) cut to the triangles' box on the map,
+    grown by their typical size; a segment that misses it becomes a point at its corner.
+
+    A point far off the map (1e12 away, say) would stretch the cell grid and leave the
+    region's stretch of the segment too small a share of it to be told apart. Each cut end
+    is reckoned from the segment's end nearer to it, so that it keeps its precision."""
+    xmin, xmax, ymin, ymax = triangles.bounds
+    margin = triangles.typical_size
+    low = np.array([xmin.min(), ymin.min()]) - margin
+    high = np.array([xmax.max(), ymax.max()]) + margin
+    d = b - a
+    enter_t, enter_u = [np.zeros(len(a))], [np.ones(len(a))]  # not cut: t = 0, u = 1 - t
+    leave_t, leave_u = [np.ones(len(a))], [np.zeros(len(a))]
+    missed = np.zeros(len(a), dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(2):
+            t_low, u_low = (low[k] - a[:, k]) / d[:, k], (b[:, k] - low[k]) / d[:, k]
+            t_high, u_high = (high[k] - a[:, k]) / d[:, k], (b[:, k] - high[k]) / d[:, k]
+            up, down = d[:, k] > 0, d[:, k] < 0
+            enter_t.append(np.where(up, t_low, np.where(down, t_high, -np.inf)))
+            enter_u.append(np.where(up, u_low, u_high))
+            leave_t.append(np.where(up, t_high, np.where(down, t_low, np.inf)))
+            leave_u.append(np.where(up, u_high, u_low))
+            missed |= ~up & ~down & ((a[:, k] < low[k]) | (a[:, k] > high[k]))
+    rows = np.arange(len(a))
+    enter = np.argmax(np.column_stack(enter_t), axis=1)
+    leave = np.argmin(np.column_stack(leave_t), axis=1)
+    t0, u0 = np.column_stack(enter_t)[rows, enter], np.column_stack(enter_u)[rows, enter]
+    t1, u1 = np.column_stack(leave_t)[rows, leave], np.column_stack(leave_u)[rows, leave]
+    start = np.where((t0 <= u0)[:, None], a + t0[:, None] * d, b - u0[:, None] * d)
+    stop = np.where((t1 <= u1)[:, None], a + t1[:, None] * d, b - u1[:, None] * d)
+    missed |= t0 > t1
+    start[missed] = stop[missed] = low
+    return start, stop
 
 
 def _segment_starts(trace: Trace) -> np.ndarray:
@@ -346,8 +385,9 @@ def _segment_ends(trace: Trace) -> np.ndarray:
     return ends
 
 
-#: Parts of a segment this short (as a share of it) are a corner grazed, not a piece.
-GRAZE = 1e-12
+#: Parts of a segment shorter than this share of the triangles' typical size on the map are
+#: a corner grazed, not a piece.
+GRAZE = 1e-9
 
 #: Pieces whose ends are this close along their segments are joined (a crossing of a
 #: triangle edge, found from the triangles on both sides of it).

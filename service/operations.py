@@ -305,6 +305,8 @@ class Located:
     hits : Hits, face positions in ``selection.faces``, points in the local frame
     layout : Layout, of the params (for the answer's params)
     format : str, the format the mesh was read as
+    via : LocateVia, how the directions were located
+    untangle : bool, whether the map was untangled (``via`` map) or the params asked for it
     """
 
     chart: Chart
@@ -313,6 +315,8 @@ class Located:
     hits: Hits
     layout: Layout
     format: str
+    via: LocateVia
+    untangle: bool
 
     @property
     def found(self) -> np.ndarray:
@@ -339,7 +343,9 @@ def locate_directions(mesh: Mesh, params: LocateParams, settings: Settings) -> L
     rotation = frame.rotation
     hits = locate(mesh.vertices - frame.center, faces, directions @ rotation)
     hits = Hits(hits.faces, hits.barycentric, hits.points @ rotation.T)
-    return Located(chart, frame, selection, hits, params.layout, mesh.format)
+    return Located(
+        chart, frame, selection, hits, params.layout, mesh.format, LocateVia.RAY, params.untangle
+    )
 
 
 def _locate_on_map(mesh: Mesh, params: LocateParams, settings: Settings) -> Located:
@@ -356,8 +362,11 @@ def _locate_on_map(mesh: Mesh, params: LocateParams, settings: Settings) -> Loca
     local = region.frame.to_local(points[found])
     hits = Hits(faces, weights, np.full((len(faces), 3), np.nan))
     hits.points[found] = local
-    selection = region.selection
-    return Located(region.chart, region.frame, selection, hits, params.layout, mesh.format)
+    untangled = region.untangled is not None
+    return Located(
+        region.chart, region.frame, region.selection, hits, params.layout, mesh.format,
+        LocateVia.MAP, untangled,
+    )  # fmt: skip
 
 
 # -- zones and curves ------------------------------------------------------------------------

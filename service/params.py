@@ -522,6 +522,20 @@ class MeasureParams(MeshParams, PictureParams):
         "zone filled, named and labelled with its area, and the curves.",
     ) = None
 
+    @model_validator(mode="after")
+    def _names_tell_apart(self) -> MeasureParams:
+        # Answers, overlaps and the picture's legend name zones and curves.
+        for kind, drawn in (("zones", self.zones), ("curves", self.curves)):
+            seen: dict[str, int] = {}
+            for i, item in enumerate(drawn):
+                if item.name in seen:
+                    raise ValueError(
+                        f"{kind}.{i}: the name {item.name!r} is that of {kind}.{seen[item.name]}; "
+                        "each needs its own"
+                    )
+                seen[item.name] = i
+        return self
+
     model_config = ConfigDict(
         json_schema_extra={
             "examples": [

@@ -8,6 +8,7 @@ first two for programs.
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -189,12 +190,18 @@ def core_errors_as_problems(places: ErrorPlaces) -> Iterator[None]:
         raise problem_of(error, places) from None
 
 
+#: How pydantic labels a union's member in an error's location.
+_UNION_MEMBER = re.compile(r"[\w-]+\[.*\]")
+
+
 def validation_problem(errors: list[dict], prefix: str = "") -> Problem:
     """A 422 naming up to five invalid fields (pydantic's errors); ``prefix`` places them
     (``params.`` for the multipart JSON field)."""
     messages, first_field = [], None
     for item in errors[:5]:
+        # pydantic names the member of a union it tried ("function-after[...]"): not a field.
         parts = [str(part) for part in item.get("loc", ()) if part != "body"]
+        parts = [part for part in parts if not _UNION_MEMBER.fullmatch(part)]
         location = (prefix + ".".join(parts)).rstrip(".")
         message = str(item.get("msg", "invalid")).removeprefix("Value error, ")
         first_field = first_field or location or None

@@ -19,7 +19,7 @@ from transforms import Layout, Method
 from transforms.fit import EXPLAIN_FACES
 
 from .meshio import FORMATS
-from .params import Region, choice
+from .params import LocateVia, Region, choice
 
 if TYPE_CHECKING:
     from .operations import Angles, Located, Measured, MeshRegion
@@ -89,6 +89,9 @@ class ResolvedParams(Answer):
     )
     untangle: bool | None = Field(
         None, description="Whether the layout was untangled (flatten, validate and fit)."
+    )
+    via: choice(LocateVia) | None = Field(
+        None, description="How the query directions were located (locate answers)."
     )
 
     @classmethod
@@ -407,7 +410,13 @@ class LocateResponse(Answer):
         weights = np.where(found[:, None], hits.barycentric, 0.0).tolist()
         answers = Hit.rows(found.tolist(), face=ids, barycentric=weights, point=world.tolist())
         params = ResolvedParams.of(
-            located.chart, located.frame, located.layout, located.selection, format=located.format
+            located.chart,
+            located.frame,
+            located.layout,
+            located.selection,
+            format=located.format,
+            untangle=located.untangle,
+            via=located.via,
         )
         return cls.build(params=params, hits=answers)
 

@@ -256,9 +256,24 @@ async def test_bad_curves_and_units_are_422s(client):
     assert "two distinct points" in body["detail"]
     units = {"between": [[1, 2, 3], [1, 2, 3]], "mm": 62.0}
     problem(await measure(client, {"units": units}), 422, "params.units.between")
-    problem(await measure(client, {"units": "inch"}), 422)
+    body = problem(await measure(client, {"units": "inch"}), 422, "params.units")
+    assert "[" not in body["field"], body  # no pydantic union member in the field's name
     body = await measure(client, {"zones": [{"name": "", "outer": {"x": [0], "y": [0]}}]})
     problem(body, 422)
+
+
+async def test_zones_and_curves_need_names_of_their_own(client):
+    """Overlaps, the legend and the answers name what was drawn: two zones (or curves) of
+    one name are a 422 naming the second."""
+    zones = [rectangle("crown", 0, 1, 0, 1), rectangle("crown", 1, 2, 0, 1)]
+    body = problem(await measure(client, {"zones": zones}), 422, "params")
+    assert "zones.1: the name 'crown' is that of zones.0" in body["detail"]
+    curves = [{"name": "line", "x": [0, 1], "y": [0, 1]}] * 2
+    body = problem(await measure(client, {"curves": curves}), 422, "params")
+    assert "curves.1: the name 'line' is that of curves.0" in body["detail"]
+    # The same name for a zone and a curve is fine.
+    fine = {"zones": zones[:1], "curves": [{"name": "crown", "x": [0, 1], "y": [0, 1]}]}
+    assert (await measure(client, fine)).status_code == 200
 
 
 async def test_too_many_drawn_points_is_a_413():
@@ -318,6 +333,12 @@ async def test_locate_via_map_finds_the_point_the_map_shows(client):
     assert (await flatten(client, NAME, off, endpoint="/v1/locate")).json()["hits"] == [None]
     ray = (await flatten(client, NAME, params, endpoint="/v1/locate")).json()
     assert ray["hits"][0]["point"] != hits[0]["point"]
+    # The answer's params say how, so that sent back they locate the same way.
+    assert ray["params"]["via"] == "ray"
+    answer = (await flatten(client, NAME, {**params, "via": "map"}, endpoint="/v1/locate")).json()
+    assert answer["params"]["via"] == "map" and answer["params"]["untangle"] is False
+    again = {**answer["params"], "theta": params["theta"], "phi": params["phi"]}
+    assert (await flatten(client, NAME, again, endpoint="/v1/locate")).json()["hits"] == hits
 
 
 async def test_the_command_line_measures_zones_from_a_file(client, tmp_path, capsys):

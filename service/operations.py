@@ -305,7 +305,6 @@ class Located:
     hits : Hits, face positions in ``selection.faces``, points in the local frame
     layout : Layout, of the params (for the answer's params)
     format : str, the format the mesh was read as
-    via : LocateVia, how the directions were located
     untangle : bool, whether the map was untangled (``via`` map) or the params asked for it
     """
 
@@ -315,7 +314,6 @@ class Located:
     hits: Hits
     layout: Layout
     format: str
-    via: LocateVia
     untangle: bool
 
     @property
@@ -343,9 +341,7 @@ def locate_directions(mesh: Mesh, params: LocateParams, settings: Settings) -> L
     rotation = frame.rotation
     hits = locate(mesh.vertices - frame.center, faces, directions @ rotation)
     hits = Hits(hits.faces, hits.barycentric, hits.points @ rotation.T)
-    return Located(
-        chart, frame, selection, hits, params.layout, mesh.format, LocateVia.RAY, params.untangle
-    )
+    return Located(chart, frame, selection, hits, params.layout, mesh.format, params.untangle)
 
 
 def _locate_on_map(mesh: Mesh, params: LocateParams, settings: Settings) -> Located:
@@ -364,9 +360,8 @@ def _locate_on_map(mesh: Mesh, params: LocateParams, settings: Settings) -> Loca
     hits.points[found] = local
     untangled = region.untangled is not None
     return Located(
-        region.chart, region.frame, region.selection, hits, params.layout, mesh.format,
-        LocateVia.MAP, untangled,
-    )  # fmt: skip
+        region.chart, region.frame, region.selection, hits, params.layout, mesh.format, untangled
+    )
 
 
 # -- zones and curves ------------------------------------------------------------------------

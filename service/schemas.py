@@ -19,7 +19,7 @@ from transforms import Layout, Method
 from transforms.fit import EXPLAIN_FACES
 
 from .meshio import FORMATS
-from .params import LocateVia, Region, choice
+from .params import Region, choice
 
 if TYPE_CHECKING:
     from .operations import Angles, Located, Measured, MeshRegion
@@ -89,9 +89,6 @@ class ResolvedParams(Answer):
     )
     untangle: bool | None = Field(
         None, description="Whether the layout was untangled (flatten, validate and fit)."
-    )
-    via: choice(LocateVia) | None = Field(
-        None, description="How the query directions were located (locate answers)."
     )
 
     @classmethod
@@ -416,7 +413,6 @@ class LocateResponse(Answer):
             located.selection,
             format=located.format,
             untangle=located.untangle,
-            via=located.via,
         )
         return cls.build(params=params, hits=answers)
 

@@ -333,11 +333,11 @@ async def test_locate_via_map_finds_the_point_the_map_shows(client):
     assert (await flatten(client, NAME, off, endpoint="/v1/locate")).json()["hits"] == [None]
     ray = (await flatten(client, NAME, params, endpoint="/v1/locate")).json()
     assert ray["hits"][0]["point"] != hits[0]["point"]
-    # The answer's params say how, so that sent back they locate the same way.
-    assert ray["params"]["via"] == "ray"
+    # The answer's params are the frame and region, for any route; the queries (theta, phi,
+    # via) go with them again to locate the same way.
     answer = (await flatten(client, NAME, {**params, "via": "map"}, endpoint="/v1/locate")).json()
-    assert answer["params"]["via"] == "map" and answer["params"]["untangle"] is False
-    again = {**answer["params"], "theta": params["theta"], "phi": params["phi"]}
+    assert "via" not in answer["params"] and answer["params"]["untangle"] is False
+    again = {**answer["params"], "theta": params["theta"], "phi": params["phi"], "via": "map"}
     assert (await flatten(client, NAME, again, endpoint="/v1/locate")).json()["hits"] == hits
 
 

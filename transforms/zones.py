@@ -19,7 +19,7 @@ in or out, read off the winding numbers of the cell centres.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -426,6 +426,7 @@ class ZoneCover:
     covered_map_area : float, the zone's map area the triangles cover, front-facing ones
         counted positive and back-facing ones negative (its area for a fold-free map)
     outline : tuple of Polyline, the rings lifted, the outer one first
+    trace, centre_windings : the rings over the triangles, for :meth:`winding`
     """
 
     inside: np.ndarray
@@ -434,6 +435,23 @@ class ZoneCover:
     map_area: float
     covered_map_area: float
     outline: tuple[Polyline, ...]
+    trace: Trace | None = field(default=None, repr=False)
+    centre_windings: np.ndarray | None = field(default=None, repr=False)
+
+    def winding(self, points) -> np.ndarray:
+        """(q,) int: the winding number of the zone's rings about map ``points`` ((q, 2)):
+        1 inside the zone, 0 outside (outer ring counter-clockwise, holes clockwise; a point
+        on a ring's edge counts by the half-open rule of eq. 12.2's ``w``)."""
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        grid = self.trace.grid
+        low = np.array([grid.x0, grid.y0])
+        high = low + grid.size * np.array([grid.n_columns, grid.n_rows])
+        near = np.all((points >= low) & (points < high), axis=1)
+        winding = np.zeros(len(points), dtype=np.int64)
+        if near.any():
+            found = _windings(self.trace, points[near], self.centre_windings)
+            winding[near] = np.rint(found).astype(np.int64)
+        return winding
 
     def total(self, per_triangle: np.ndarray) -> float:
         """The sum of a per-triangle quantity ((m,) float, such as the surface area) over
@@ -479,7 +497,7 @@ def cover_zone(triangles: MapTriangles, rings) -> ZoneCover:
     covered = ZoneCover(inside, partial, share, 0.0, 0.0, ()).total(triangles.front_map_area)
     edges = np.arange(len(ring))
     outline = tuple(lift_polyline(triangles, trace, edges[ring == k]) for k in range(len(rings)))
-    return ZoneCover(inside, partial, share, map_area, covered, outline)
+    return ZoneCover(inside, partial, share, map_area, covered, outline, trace, winding)
 
 
 def _centre_windings(trace: Trace) -> np.ndarray:

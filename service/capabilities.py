@@ -17,7 +17,7 @@ from .encoding import Timings, encode
 from .jobs import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE
 from .meshio import Mesh
 from .outputs import Output
-from .outputs.render import MEASURE_RENDERERS, RENDERERS
+from .outputs.render import MEASURE_RENDERERS, RENDERERS, SITES_RENDERERS
 from .params import (
     FitParams,
     FlattenParams,
@@ -26,6 +26,7 @@ from .params import (
     MeasureParams,
     MeshParams,
     PointsRequest,
+    SitesParams,
 )
 from .problems import ErrorPlaces
 from .schemas import (
@@ -35,6 +36,7 @@ from .schemas import (
     LocateResponse,
     MeasureResponse,
     PointsResponse,
+    SitesResponse,
     ValidateResponse,
 )
 from .settings import Settings
@@ -223,6 +225,29 @@ MESH_CAPABILITIES = (
         operation=operations.measure,
         response=MeasureResponse,
         renderers=MEASURE_RENDERERS,
+    ),
+    MeshCapability(
+        name="sites",
+        path="/v1/sites",
+        summary="Place sites (grafts) on the region at a density",
+        description="Multipart like /v1/measure; `params` also holds the density, "
+        "`density_per_cm2` for the whole region or `zones` (as /v1/measure's, not "
+        "overlapping) each with its own, and `units` (required: densities are per cm²). "
+        "Sites are Poisson-disk samples of the surface (random sequential adsorption, "
+        "docs/math.md section 13): each zone gets its area times its density, rounded (or, "
+        "with `count`, its share of that exact total), no two sites closer than "
+        "`min_spacing_mm` or the default rule's 0.7 / sqrt(density), across triangle and zone "
+        "borders; none on flagged triangles unless `allow_flagged`; the same `seed`, the same "
+        "sites, in any pose of the mesh. Answers the sites (position, unit normal, face id, "
+        "barycentric weights, theta and phi, and the layout's x and y), the count, per zone "
+        "its area, sites and achieved density, and the smallest distance between two sites, "
+        "measured. Or, by the Accept header or params.output: a PLY point cloud with normals "
+        "and face ids, the region's GLB with the sites as a POINTS primitive, or the map with "
+        "the sites and zones (SVG or PNG).",
+        params=SitesParams,
+        operation=operations.place,
+        response=SitesResponse,
+        renderers=SITES_RENDERERS,
     ),
 )
 

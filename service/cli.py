@@ -9,7 +9,9 @@
     meshflat validate MESH ... [--out FILE.json]
     meshflat fit MESH ... [--out FILE.json]
     meshflat locate MESH ... --params '{"theta": [...], "phi": [...]}'
-    meshflat measure MESH ... --zones zones.json [--out FILE.json|.svg|.png]
+    meshflat measure MESH ... --zones zones.json [--units mm] [--out FILE.json|.svg|.png]
+    meshflat sites MESH ... [--density 40] [--zones zones.json] [--units mm] [--out sites.ply]
+                      [--density-map map.png --params '{"density_range": [20, 60]}']
     meshflat batch MANIFEST.jsonl --out DIR [--processes N] [--shard-count N [--shard-index I]]
 
 One command per mesh route of :mod:`service.capabilities`, running the same operation: the
@@ -43,7 +45,7 @@ from transforms import Layout
 from .capabilities import MESH_COMMANDS, MESH_FORM
 from .meshio import READERS
 from .outputs import Output
-from .params import CENTERS
+from .params import CENTERS, LengthUnit
 from .problems import Problem, core_errors_as_problems
 from .settings import Settings
 
@@ -108,12 +110,7 @@ def _vector(text: str, option: str) -> list[float]:
 
 def params_of(args: argparse.Namespace) -> dict:
     """The API's params from the command line: ``--params`` JSON, then the options."""
-    try:
-        params = json.loads(args.params) if args.params else {}
-    except json.JSONDecodeError as error:
-        raise Problem(422, f"--params: not JSON ({error})", field="--params") from None
-    if not isinstance(params, dict):
-        raise Problem(422, "--params: must be a JSON object", field="--params")
+    params = _json_params(args.params)
     if args.region_cone:
         params["region"] = {"cone": _cone(args.region_cone)}
         if args.apex:
@@ -131,6 +128,36 @@ def params_of(args: argparse.Namespace) -> dict:
         params["rotation"] = {"pole": _vector(args.pole, "--pole"), "up": _vector(args.up, "--up")}
     if getattr(args, "zones", None):
         params.update(_drawn(args.zones))
+    for option, name in (("density", "density_per_cm2"), ("units", "units")):
+        if getattr(args, option, None) is not None:
+            params[name] = getattr(args, option)
+    return params
+
+
+def _file_parts(args: argparse.Namespace, names) -> dict[str, bytes]:
+    """The form's file parts besides the mesh, from their options (``--density-map``)."""
+    parts = {}
+    for name in names:
+        path = getattr(args, name, None)
+        if path is None:
+            continue
+        option = "--" + name.replace("_", "-")
+        try:
+            parts[name] = Path(path).read_bytes()
+        except OSError as error:
+            message = f"{option}: cannot read {path!r}: {error.strerror}"
+            raise Problem(422, message, field=option) from None
+    return parts
+
+
+def _json_params(text: str | None) -> dict:
+    """The ``--params`` JSON object ({} without one)."""
+    try:
+        params = json.loads(text) if text else {}
+    except json.JSONDecodeError as error:
+        raise Problem(422, f"--params: not JSON ({error})", field="--params") from None
+    if not isinstance(params, dict):
+        raise Problem(422, "--params: must be a JSON object", field="--params")
     return params
 
 
@@ -207,6 +234,7 @@ def run(args: argparse.Namespace) -> bytes:
     with core_errors_as_problems(MESH_FORM):
         with progress.step("reading"):
             params = mesh_params(capability.params, orjson.dumps(params_of(args)))
+            params.with_parts(_file_parts(args, capability.params.FILE_PARTS))
             path = Path(args.mesh)
             try:
                 data = path.read_bytes()
@@ -266,6 +294,20 @@ def parser() -> argparse.ArgumentParser:
                 "--zones",
                 metavar="FILE",
                 help="JSON: a list of zones, or an object with zones, curves and units",
+            )
+        fields = capability.params.model_fields
+        if "units" in fields:
+            units = [unit.value for unit in LengthUnit]
+            command.add_argument("--units", choices=units, help="the mesh's length unit")
+        for name, what in capability.params.FILE_PARTS.items():
+            option = "--" + name.replace("_", "-")
+            command.add_argument(option, dest=name, metavar="FILE", help=what.split(":")[0])
+        if "density_per_cm2" in fields:
+            command.add_argument(
+                "--density",
+                type=float,
+                metavar="PER_CM2",
+                help="sites per cm² (of the region, or of each zone giving none)",
             )
         command.add_argument("--out", metavar="FILE", help="default: JSON on stdout")
         command.add_argument("--progress", action="store_true", help="a progress bar always")

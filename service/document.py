@@ -54,11 +54,15 @@ def multipart_body(model: type[BaseModel]) -> dict:
         "description": f"JSON, as the {name} schema; default {{}}.",
         "example": example,
     }
+    parts = {
+        name: {"type": "string", "format": "binary", "description": what}
+        for name, what in model.FILE_PARTS.items()
+    }
     form = {
         "schema": {
             "type": "object",
             "required": ["mesh"],
-            "properties": {"mesh": mesh, "params": params},
+            "properties": {"mesh": mesh, "params": params, **parts},
         },
         "encoding": {"params": {"contentType": "application/json"}},
     }

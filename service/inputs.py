@@ -125,5 +125,6 @@ def mesh_form(
     params = mesh_params(model, bytes(text))
     if "mesh" not in form:
         raise Problem(422, "mesh: the form has no 'mesh' file field", "invalid-request", "mesh")
+    params.with_parts({name: bytes(part.data) for name, part in form.items()})
     part = form["mesh"]
     return params, load_mesh(part.data, part.filename, params, settings)

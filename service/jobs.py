@@ -71,6 +71,9 @@ PICTURE_BYTES_PER_FACE = 400
 #: /v1/locate via the map): 308 at the peak of building them and 66 for a zone over most of a
 #: million-face map, measured with tracemalloc, with room.
 MAP_BYTES_PER_FACE = 450
+#: What placing a site may take: its candidates and trees while placing, its values and their
+#: JSON after (about 330 bytes of JSON a site).
+SITE_BYTES = 2_000
 
 
 class Stage(Enum):

@@ -11,10 +11,13 @@ They know nothing of HTTP. Bad input surfaces as the core's
 
 from __future__ import annotations
 
+import io
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
 
 import numpy as np
+from PIL import Image
 
 from transforms import (
     LAYOUT_ORIENTATION,
@@ -45,11 +48,21 @@ from transforms import (
 )
 from transforms import selection as select
 from transforms.region import flagged_mask
+from transforms.sites import (
+    SPACING_RULE,
+    SitePart,
+    Sites,
+    SitesDoNotFit,
+    minimum_distance,
+    place_sites,
+    site_normals,
+)
 from transforms.viewpoint import check_center_sees_area
 
-from .jobs import MAP_BYTES_PER_FACE, charge
+from .jobs import MAP_BYTES_PER_FACE, SITE_BYTES, charge
 from .meshio import Mesh, format_of, read_mesh
 from .outlines import Outline, checked_curve, checked_zone, overlaps
+from .outputs.picture import Framing
 from .params import (
     DEFAULT_SIGMA,
     AutoPole,
@@ -63,6 +76,7 @@ from .params import (
     MeshParams,
     PointsRequest,
     PoleUp,
+    SitesParams,
 )
 from .problems import Problem
 from .samples import SAMPLES
@@ -442,8 +456,316 @@ def _mm_per_unit(units: LengthUnit | KnownDistance | None) -> float | None:
                 "invalid-request",
                 "params.units.between",
             )
-        return units.mm / distance
+        scale = units.mm / distance
+        if not MM_PER_UNIT[0] <= scale <= MM_PER_UNIT[1]:
+            low, high = MM_PER_UNIT
+            raise Problem(
+                422,
+                f"params.units: {units.mm:g} mm over a distance of {distance:g} mesh units is "
+                f"{scale:.3g} mm per unit; the scale must be within {low:g} to {high:g} mm per "
+                "unit (a micron to a kilometre)",
+                "invalid-request",
+                "params.units",
+            )
+        return scale
     return LengthUnit(units).mm
+
+
+#: Millimetres per mesh unit a known distance may give (areas in cm² stay finite).
+MM_PER_UNIT = (1e-3, 1e6)
+
+
+# -- sites ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SiteZoneResult:
+    """One part that got sites: a zone, or the whole region (``outline`` None).
+
+    Attributes
+    ----------
+    name : str
+    outline : Outline or None
+    area : float, its surface area, mesh units²
+    open_area : float, the part of it sites may go on (flagged triangles left out unless
+        allowed), mesh units²
+    density_per_cm2 : float, the density asked for
+    quota : int, its sites
+    spacing : float or None, the least distance between its sites and any other, mesh units
+        (None without sites)
+    achieved : float, its sites per cm² of ``open_area``
+    """
+
+    name: str
+    outline: Outline | None
+    area: float
+    open_area: float
+    density_per_cm2: float
+    quota: int
+    spacing: float | None
+    achieved: float
+
+
+@dataclass(frozen=True)
+class Placed:
+    """Sites placed on a region (docs/math.md, section 13).
+
+    Attributes
+    ----------
+    region : MeshRegion
+    triangles : MapTriangles
+    sites : Sites, positions in the region's faces, barycentric weights, points, parts
+    normals : (n, 3) float, unit: the region's vertex normals interpolated
+    map_points : (n, 2) float, the layout's x, y (the correspondence of section 12)
+    theta, phi : (n,) float, the transform of the points
+    zones : tuple of SiteZoneResult, in the order of ``sites.part``
+    min_distance : float, the smallest distance between two sites, measured
+    mm_per_unit : float
+    """
+
+    region: MeshRegion
+    triangles: MapTriangles
+    sites: Sites
+    normals: np.ndarray
+    map_points: np.ndarray
+    theta: np.ndarray
+    phi: np.ndarray
+    zones: tuple[SiteZoneResult, ...]
+    min_distance: float
+    mm_per_unit: float
+
+
+def place(mesh: Mesh, params: SitesParams, settings: Settings) -> Placed:
+    """Sites on the region of ``params`` at its densities (:func:`transforms.sites.place_sites`):
+    the count of each zone its area times its density (or shares of ``count``), spaced at
+    least ``min_spacing_mm`` and the default rule's spacing apart."""
+    mm_per_unit = _mm_per_unit(params.units)
+    if mm_per_unit is None:
+        raise Problem(
+            422,
+            "params.units: sites per cm² need the mesh's length unit (mm, cm or m) or a known "
+            "distance",
+            "invalid-request",
+            "params.units",
+        )
+    outlines = _apart([checked_zone(zone, k) for k, zone in enumerate(params.zones)])
+    image = _density_image(params)
+    region = flatten(mesh, params, settings)
+    triangles = map_triangles(region)
+    open_faces = ~flagged_mask(region.flat.validation, len(triangles)) | params.allow_flagged
+    if image is not None:
+        found = [_density_map_part(region, triangles, image, open_faces)]
+    else:
+        found = list(_zone_parts(triangles, params, outlines, open_faces))
+    unit_area = mm_per_unit**2 / 100.0  # cm² per mesh unit²
+    expected = [float(np.dot(part.weight, part.density)) * unit_area for part in found]
+    total = params.count if params.count is not None else sum(expected)
+    check_count(round(total), settings.max_sites, "sites", "MESHFLAT_MAX_SITES")
+    quotas = _quotas(expected, params.count)
+    charge(SITE_BYTES * sum(quotas))
+    asked = None if params.min_spacing_mm is None else params.min_spacing_mm / mm_per_unit
+    parts, results = [], []
+    for part, quota, count in zip(found, quotas, expected, strict=True):
+        # The density placed: as asked, scaled to the quota (a count, or rounding).
+        placed = part.density * unit_area * (quota / count if count > 0 else 0.0)
+        if asked is None:  # the default rule (13.1) at the density placed
+            with np.errstate(divide="ignore"):
+                spacing = SPACING_RULE / np.sqrt(placed)
+            spacing[placed == 0] = 1.0  # no site goes there
+        else:
+            spacing = np.full_like(placed, asked)
+        parts.append(part.sites(quota, spacing))
+        least = float(spacing[placed > 0].min()) if quota and (placed > 0).any() else None
+        results.append(part.result(quota, least, unit_area))
+    sites = _placed(triangles, parts, params, mm_per_unit)
+    normals = site_normals(triangles.surface_points, triangles.faces, sites, region.frame.center)
+    map_points = np.einsum("pk,pkd->pd", sites.weights, triangles.corners(sites.triangles))
+    theta, phi, _ = world_to_angles(sites.points, region.frame, region.chart)
+    return Placed(
+        region, triangles, sites, normals, map_points, theta, phi, tuple(results),
+        minimum_distance(sites.points), mm_per_unit,
+    )  # fmt: skip
+
+
+def _apart(outlines: list[Outline]) -> list[Outline]:
+    """The zones, refused when two overlap (a site's density would be ambiguous there)."""
+    for i, j, _ in overlaps(outlines):
+        raise Problem(
+            422,
+            f"params.zones.{j} ({outlines[j].name!r}) overlaps params.zones.{i} "
+            f"({outlines[i].name!r}): a site's density would be ambiguous there",
+            "invalid-request",
+            f"params.zones.{j}",
+        )
+    return outlines
+
+
+def _placed(triangles: MapTriangles, parts: list[SitePart], params: SitesParams, mm_per_unit):
+    """:func:`transforms.sites.place_sites` with the seed; a part too full is a 422."""
+    try:
+        return place_sites(
+            triangles.surface_points, triangles.faces, parts, np.random.default_rng(params.seed)
+        )
+    except SitesDoNotFit as error:
+        if params.density_range is not None:
+            field = "params.density_range"
+        elif params.zones:
+            field = f"params.zones.{error.part}"
+        else:
+            field = "params.density_per_cm2"
+        raise Problem(
+            422,
+            f"{field} ({error.name!r}): {error.words}, at a spacing of "
+            f"{error.spacing * mm_per_unit:.4g} mm; ask for fewer sites (count, density) or a "
+            "smaller min_spacing_mm",
+            "invalid-request",
+            field,
+        ) from None
+
+
+@dataclass(frozen=True)
+class _Part:
+    """A zone's (or the region's) triangles open to sites: their area in it and the density
+    asked for on each (per cm²)."""
+
+    name: str
+    outline: Outline | None
+    triangles: np.ndarray
+    weight: np.ndarray
+    density: np.ndarray
+    partial: np.ndarray | None
+    inside: Callable[[np.ndarray, np.ndarray], np.ndarray] | None
+    whole: np.ndarray | None  # the whole areas of the triangles a zone cuts
+    area: float
+    asked: float | None  # the one density of a zone, None for a density map
+
+    def sites(self, quota: int, spacing: np.ndarray) -> SitePart:
+        """The core's part: ``quota`` sites at ``spacing`` ((j,) float) on these triangles."""
+        return SitePart(
+            self.triangles, self.weight, quota, spacing, self.density, self.partial,
+            self.inside, self.whole, self.name,
+        )  # fmt: skip
+
+    def result(self, quota: int, spacing: float | None, unit_area: float) -> SiteZoneResult:
+        open_area = float(self.weight[self.density > 0].sum())
+        mean = self.asked
+        if mean is None:  # a density map: its mean over the area it puts sites on
+            mean = float(np.dot(self.weight, self.density) / open_area) if open_area else 0.0
+        open_cm2 = open_area * unit_area
+        achieved = quota / open_cm2 if open_cm2 > 0 else 0.0
+        return SiteZoneResult(
+            self.name, self.outline, self.area, open_area, mean, quota, spacing, achieved
+        )
+
+
+def _zone_parts(triangles: MapTriangles, params: SitesParams, outlines, open_faces):
+    """A part for each zone (its own density, or params.density_per_cm2), or the region's."""
+    area = triangles.surface_area
+    if not outlines:
+        faces = np.flatnonzero(open_faces)
+        asked = float(params.density_per_cm2)
+        density = np.full(len(faces), asked)
+        yield _Part(
+            "region", None, faces, area[faces], density, None, None, None, float(area.sum()),
+            asked,
+        )  # fmt: skip
+        return
+    for outline, zone in zip(outlines, params.zones, strict=True):
+        cover = cover_zone(triangles, outline.rings)
+        faces = np.concatenate([cover.inside, cover.partial])
+        weight = np.concatenate([area[cover.inside], area[cover.partial] * cover.share])
+        partial = np.r_[np.zeros(len(cover.inside), bool), np.ones(len(cover.partial), bool)]
+        keep = open_faces[faces]
+        asked = float(zone.density_per_cm2 or params.density_per_cm2)
+        density = np.full(int(keep.sum()), asked)
+
+        def inside(faces, weights, cover=cover):
+            corners = triangles.corners(faces)
+            return cover.winding(np.einsum("pk,pkd->pd", weights, corners)) != 0
+
+        yield _Part(
+            outline.name, outline, faces[keep], weight[keep], density, partial[keep], inside,
+            area[faces[keep]], cover.total(area), asked,
+        )  # fmt: skip
+
+
+def _density_image(params: SitesParams) -> np.ndarray | None:
+    """(h, w) float: the density_map part's sites per cm² (grey 0-255 to density_range), or
+    None without density_range.
+
+    Raises
+    ------
+    Problem
+        422: no part, not a PNG, another size than the PNG answer's, not 8-bit grey.
+    """
+    data = params.part("density_map")
+
+    def refuse(words: str) -> Problem:
+        return Problem(422, f"density_map: {words}", "invalid-request", "density_map")
+
+    if params.density_range is None:
+        if data is not None:
+            raise refuse("a density map needs params.density_range, and no zones or density")
+        return None
+    if data is None:
+        raise refuse("density_range needs the map: a multipart part 'density_map', a grey PNG")
+    try:
+        image = Image.open(io.BytesIO(data))
+        if image.format != "PNG":
+            raise refuse(f"a PNG, not {image.format}")
+        size = (params.image_width, params.image_height)
+        if image.size != size:  # known from the header, before any pixel is decoded
+            raise refuse(
+                f"{image.size[0]} x {image.size[1]} pixels; the PNG answer's framing is "
+                f"params.image_width x image_height, {size[0]} x {size[1]}"
+            )
+        if image.mode not in ("L", "LA"):
+            raise refuse(f"8-bit grey (mode L), not mode {image.mode}")
+        charge(16 * size[0] * size[1])
+        grey = np.asarray(image.getchannel(0), dtype=np.float64)
+    except (OSError, ValueError, SyntaxError) as error:
+        raise refuse(f"not a readable PNG ({type(error).__name__})") from None
+    low, high = params.density_range
+    return low + (high - low) * grey / 255.0
+
+
+def _density_map_part(region: MeshRegion, triangles: MapTriangles, image, open_faces) -> _Part:
+    """The region's open triangles, each at the density of the pixel under its centroid on
+    the map, in the framing of the PNG answer (:class:`service.outputs.picture.Framing`)."""
+    height, width = image.shape
+    x, y = region.layout
+    framing = Framing.of(x, y, region.flat.layout, width, height)
+    centroids = np.column_stack([triangles.corner_x.mean(axis=0), triangles.corner_y.mean(axis=0)])
+    column, row = np.floor(framing.pixels(centroids)).astype(np.int64).T
+    shown = (column >= 0) & (column < width) & (row >= 0) & (row < height)
+    density = np.zeros(len(centroids))
+    density[shown] = image[row[shown], column[shown]]
+    faces = np.flatnonzero(open_faces)
+    area = triangles.surface_area
+    return _Part(
+        "density map", None, faces, area[faces], density[faces], None, None, None,
+        float(area.sum()), None,
+    )  # fmt: skip
+
+
+def _quotas(expected: list[float], count: int | None) -> list[int]:
+    """Each part's sites: its expected number rounded, or, with ``count``, its share of
+    ``count`` by the largest remainders (the total exact, the ratios kept)."""
+    expected = np.asarray(expected, dtype=np.float64)
+    if count is None:
+        return np.rint(expected).astype(int).tolist()
+    if not expected.sum() > 0:
+        raise Problem(
+            422,
+            "params.count: no part of the region is open to sites at a density above 0",
+            "invalid-request",
+            "params.count",
+        )
+    share = expected / expected.sum() * count
+    quotas = np.floor(share).astype(int)
+    order = np.argsort(-(share - quotas), kind="stable")
+    quotas[order[: count - quotas.sum()]] += 1
+    return quotas.tolist()
 
 
 # -- points --------------------------------------------------------------------------------

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import math
 from enum import StrEnum
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, model_validator
 
 from transforms import Layout, Method
 from transforms.selection import NAMED_CENTERS
@@ -311,6 +311,20 @@ class MeshParams(ChartParams):
 
     model_config = ConfigDict(json_schema_extra={"examples": [MESH_PARAMS_EXAMPLE]})
 
+    #: The form's file parts besides the mesh that the route reads: name -> what it is.
+    FILE_PARTS: ClassVar[dict[str, str]] = {}
+    #: Their bytes, as sent (:meth:`with_parts`).
+    _parts: dict[str, bytes] = PrivateAttr(default_factory=dict)
+
+    def with_parts(self, parts: dict[str, bytes]):
+        """These params holding the form's ``parts`` this model reads (:data:`FILE_PARTS`)."""
+        self._parts = {name: data for name, data in parts.items() if name in self.FILE_PARTS}
+        return self
+
+    def part(self, name: str) -> bytes | None:
+        """The bytes of the form's part ``name``, or None when it was not sent."""
+        return self._parts.get(name)
+
     @property
     def auto(self) -> bool:
         """Whether meshflat chooses any of centre, rotation and sigma."""
@@ -425,7 +439,7 @@ class FlattenParams(MeshParams, PictureParams):
     the answer."""
 
     output: output_choice(
-        tuple(Output),
+        (Output.JSON, Output.GLB, Output.SVG, Output.PNG),
         "json (application/json), glb (model/gltf-binary: the region with TEXCOORD_0 from the "
         "layout), svg (image/svg+xml) or png (image/png): a picture of the map.",
     ) = None
@@ -501,6 +515,19 @@ class KnownDistance(_Strict):
     mm: PositiveNumber = Field(description="Their distance in millimetres.")
 
 
+def check_names(kind: str, drawn: list) -> None:
+    """Refuse two of ``drawn`` (zones or curves, ``kind``) of one name: answers, overlaps
+    and the picture's legend name them."""
+    seen: dict[str, int] = {}
+    for i, item in enumerate(drawn):
+        if item.name in seen:
+            raise ValueError(
+                f"{kind}.{i}: the name {item.name!r} is that of {kind}.{seen[item.name]}; "
+                "each needs its own"
+            )
+        seen[item.name] = i
+
+
 class MeasureParams(MeshParams, PictureParams):
     """The JSON of the ``params`` field of /v1/measure: a region and its frame as for
     /v1/flatten (``"auto"`` allowed), and what was drawn on its map."""
@@ -524,16 +551,8 @@ class MeasureParams(MeshParams, PictureParams):
 
     @model_validator(mode="after")
     def _names_tell_apart(self) -> MeasureParams:
-        # Answers, overlaps and the picture's legend name zones and curves.
-        for kind, drawn in (("zones", self.zones), ("curves", self.curves)):
-            seen: dict[str, int] = {}
-            for i, item in enumerate(drawn):
-                if item.name in seen:
-                    raise ValueError(
-                        f"{kind}.{i}: the name {item.name!r} is that of {kind}.{seen[item.name]}; "
-                        "each needs its own"
-                    )
-                seen[item.name] = i
+        check_names("zones", self.zones)
+        check_names("curves", self.curves)
         return self
 
     model_config = ConfigDict(
@@ -555,6 +574,127 @@ class MeasureParams(MeshParams, PictureParams):
                     ],
                     "units": "mm",
                 }
+            ]
+        }
+    )
+
+
+#: Sites per cm² a density may ask for (a site every 0.1 mm or so).
+MAX_DENSITY_PER_CM2 = 10_000.0
+DensityPerCm2 = Annotated[float, Field(allow_inf_nan=False, gt=0, le=MAX_DENSITY_PER_CM2)]
+
+
+class SiteZone(Zone):
+    """A zone drawn on the map (as for /v1/measure) and the density of sites in it."""
+
+    density_per_cm2: DensityPerCm2 | None = Field(
+        None, description="Sites per cm² of the zone's surface (default: params.density_per_cm2)."
+    )
+
+
+class SitesParams(MeshParams, PictureParams):
+    """The JSON of the ``params`` field of /v1/sites: a region and its frame as for
+    /v1/measure, the density (one for the region, or one per zone), and the count, spacing
+    and seed of the sites."""
+
+    density_per_cm2: DensityPerCm2 | None = Field(
+        None,
+        description="Sites per cm² over the whole region; with zones, of each zone that "
+        "gives none.",
+    )
+    zones: Annotated[list[SiteZone], Field(max_length=256)] = Field(
+        [],
+        description="Zones drawn on the map (as for /v1/measure), each with its density; "
+        "sites go only into zones, which must not overlap.",
+    )
+    units: choice(LengthUnit) | KnownDistance | None = Field(
+        None,
+        description="The mesh's length unit (mm, cm or m), or its scale from a known "
+        "distance: needed to turn sites per cm² into sites per mesh unit².",
+    )
+    count: int | None = Field(
+        None,
+        ge=1,
+        description="An exact total: the zones keep their relative densities and the "
+        "spacing adapts. Default: each zone's area times its density, rounded.",
+    )
+    min_spacing_mm: PositiveNumber | None = Field(
+        None,
+        description="No two sites closer than this in 3D, millimetres. Default: "
+        "0.7 / sqrt(density) in each zone, at the density placed (docs/math.md, section 13).",
+    )
+    density_range: Annotated[list[Annotated[float, Field(ge=0, le=MAX_DENSITY_PER_CM2)]],
+                             Field(min_length=2, max_length=2)] | None = Field(
+        None,
+        description="With a density_map part: the sites per cm² its grey values 0 and 255 "
+        "stand for, [lo, hi] (linear between).",
+    )  # fmt: skip
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="Same inputs and seed: same sites.")
+    allow_flagged: bool = Field(
+        False, description="Whether sites may go on triangles the validation flags."
+    )
+    output: output_choice(
+        (Output.JSON, Output.PLY, Output.GLB, Output.SVG, Output.PNG),
+        "json (application/json); ply (application/ply: a point cloud with normals and face "
+        "ids); glb (model/gltf-binary: the region mesh and a POINTS primitive of the sites); "
+        "svg (image/svg+xml) or png (image/png): the map with the sites and the zones.",
+    ) = None
+
+    FILE_PARTS: ClassVar[dict[str, str]] = {
+        "density_map": "A grey PNG (8 bits) in the framing of the PNG answer: image_width by "
+        "image_height pixels, the map where the PNG answer draws it. Each region triangle takes "
+        "the density of the pixel under its centroid on the map: params.density_range maps "
+        "grey 0-255 to sites per cm²."
+    }
+
+    @model_validator(mode="after")
+    def _a_density_for_each(self) -> SitesParams:
+        if self.density_range is not None:
+            lo, hi = self.density_range
+            if lo > hi or self.zones or self.density_per_cm2 is not None:
+                raise ValueError(
+                    "density_range: [lo, hi] with lo <= hi, for a density_map part, without "
+                    "zones or density_per_cm2"
+                )
+            return self
+        if self.density_per_cm2 is not None:
+            return self
+        if not self.zones:
+            raise ValueError(
+                "density_per_cm2: sites per cm² of the region; or give zones, or a density_map "
+                "part with density_range"
+            )
+        for i, zone in enumerate(self.zones):
+            if zone.density_per_cm2 is None:
+                raise ValueError(
+                    f"zones.{i} ({zone.name!r}): give its density_per_cm2, or "
+                    "params.density_per_cm2 for every zone without one"
+                )
+        return self
+
+    @model_validator(mode="after")
+    def _names_tell_apart(self) -> SitesParams:
+        check_names("zones", self.zones)
+        return self
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {**MESH_PARAMS_EXAMPLE, "density_per_cm2": 3, "units": "cm", "seed": 7},
+                {
+                    **MESH_PARAMS_EXAMPLE,
+                    "zones": [
+                        {
+                            "name": "crown",
+                            "outer": {
+                                "x": [-1.8, -1.35, -1.35, -1.8],
+                                "y": [1.4, 1.4, 1.75, 1.75],
+                            },
+                            "density_per_cm2": 30,
+                        }
+                    ],
+                    "units": "mm",
+                },
             ]
         }
     )

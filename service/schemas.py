@@ -22,7 +22,7 @@ from .meshio import FORMATS
 from .params import Region, choice
 
 if TYPE_CHECKING:
-    from .operations import Angles, Located, Measured, MeshRegion
+    from .operations import Angles, Located, Measured, MeshRegion, Placed
 
 
 class Answer(BaseModel):
@@ -567,6 +567,93 @@ class MeasureResponse(Answer):
                 )
                 for i, j, area in measured.overlaps
             ],
+        )
+
+
+class SiteArrays(Answer):
+    position: list[list[float]] = Field(description="World points [x, y, z] on the surface.")
+    normal: list[list[float]] = Field(
+        description="Unit normals: the region's vertex normals (each the sum of its faces' "
+        "normals weighted by area) interpolated with the barycentric weights, pointing away "
+        "from the frame's centre."
+    )
+    face: list[int] = Field(description="The file's id of the triangle each site is on.")
+    barycentric: list[list[float]] = Field(
+        description="Weights of the triangle's corners (in the file's order), in [0, 1] and "
+        "summing to 1: position is their combination of the corners."
+    )
+    theta: list[float] = Field(description="The transform of position: polar angle, radians.")
+    phi: list[float] = Field(description="The transform of position: azimuth, radians.")
+    x: list[float] = Field(
+        description="The layout's x of the site: the same weights of the triangle's corners "
+        "on the map (the correspondence of /v1/measure)."
+    )
+    y: list[float] = Field(description="The layout's y, likewise.")
+
+
+class ZoneSites(Answer):
+    name: str = Field(description="The zone's name; 'region' for density_per_cm2.")
+    area_cm2: float = Field(description="The zone's surface area, cm² (as /v1/measure's).")
+    open_area_cm2: float = Field(
+        description="The part of it sites may go on: without the triangles the validation "
+        "flags, unless allow_flagged."
+    )
+    density_per_cm2: float = Field(description="The density asked for.")
+    sites: int = Field(description="Sites placed in the zone.")
+    achieved_density_per_cm2: float = Field(
+        description="sites / open_area_cm2: the density asked for, to a site's rounding (or "
+        "scaled to params.count)."
+    )
+    spacing_mm: float | None = Field(
+        description="The least distance kept between the zone's sites and any other site "
+        "(zones are placed densest first, each keeping its own spacing); null without sites."
+    )
+
+
+class SitesResponse(Answer):
+    params: ResolvedParams
+    units: Units = Field(description="The scale used.")
+    count: int = Field(description="Sites placed.")
+    zones: list[ZoneSites]
+    min_distance: float | None = Field(
+        description="The smallest 3D distance between two sites, measured, mesh units (null "
+        "for fewer than two)."
+    )
+    min_distance_mm: float | None = Field(description="The same in mm.")
+    sites: SiteArrays
+
+    @classmethod
+    def of(cls, placed: Placed) -> SitesResponse:
+        scale, sites = placed.mm_per_unit, placed.sites
+        closest = None if not np.isfinite(placed.min_distance) else placed.min_distance
+        return cls.build(
+            params=ResolvedParams.of_region(placed.region),
+            units=Units.build(mm_per_unit=scale),
+            count=len(sites.triangles),
+            zones=[
+                ZoneSites.build(
+                    name=zone.name,
+                    area_cm2=_cm2(zone.area, scale),
+                    open_area_cm2=_cm2(zone.open_area, scale),
+                    density_per_cm2=zone.density_per_cm2,
+                    sites=zone.quota,
+                    achieved_density_per_cm2=zone.achieved,
+                    spacing_mm=None if zone.spacing is None else zone.spacing * scale,
+                )
+                for zone in placed.zones
+            ],
+            min_distance=closest,
+            min_distance_mm=None if closest is None else closest * scale,
+            sites=SiteArrays.build(
+                position=sites.points,
+                normal=placed.normals,
+                face=placed.region.faces[sites.triangles],
+                barycentric=sites.weights,
+                theta=placed.theta,
+                phi=placed.phi,
+                x=np.ascontiguousarray(placed.map_points[:, 0]),
+                y=np.ascontiguousarray(placed.map_points[:, 1]),
+            ),
         )
 
 

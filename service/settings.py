@@ -27,6 +27,7 @@ class Settings:
     max_points : MESHFLAT_MAX_POINTS, per /v1/points or /v1/locate request
     max_drawn_points : MESHFLAT_MAX_DRAWN_POINTS, the points of all the zones' rings and the
         curves of a /v1/measure request (an outline a surgeon draws has hundreds)
+    max_sites : MESHFLAT_MAX_SITES, sites one /v1/sites request may place
     threads : MESHFLAT_THREADS, threads one request's computation may use
     max_jobs : MESHFLAT_MAX_JOBS, jobs computed at once per process
     max_waiting : MESHFLAT_MAX_WAITING, jobs queued for a slot beyond those (their bodies in);
@@ -55,6 +56,7 @@ class Settings:
     max_faces: int = Limits.max_faces
     max_points: int = 5_000_000
     max_drawn_points: int = 100_000
+    max_sites: int = 1_000_000
     threads: int = 1
     max_jobs: int = 2
     max_waiting: int = 1

@@ -12,14 +12,17 @@ from pathlib import Path
 import pytest
 
 from service.batch import DIGEST_FILE, ERROR_FILE, SCANS_FAILED, available_cpus
+from service.capabilities import MESH_COMMANDS
 from service.cli import main
-from service.outputs import Output
 from service.samples import SAMPLES
 
 from .corpus import cases
 from .test_api import flatten, problem
 from .test_cli import NAME, PARAMS
 from .test_privacy import watched_writes
+
+#: The forms a flatten answers in (the manifest's outputs name them by extension).
+FLATTEN = MESH_COMMANDS["flatten"]
 
 pytestmark = pytest.mark.anyio
 
@@ -53,7 +56,7 @@ def by_scan(lines: list[dict]) -> dict[str, str]:
 
 
 async def test_outputs_are_the_api_answers_byte_for_byte(client, tmp_path):
-    forms = [f"map.{output.value}" for output in Output]
+    forms = [f"map.{output.value}" for output in FLATTEN.outputs]
     manifest = write_manifest(
         tmp_path,
         [
@@ -161,7 +164,7 @@ async def test_one_bad_scan_fails_alone_with_the_api_message(client, tmp_path, c
 async def test_only_the_outputs_asked_for_and_the_records_reach_the_disk(tmp_path):
     filename, data = BAD_MESH.mesh
     (tmp_path / filename).write_bytes(data)
-    forms = [f"map.{output.value}" for output in Output]
+    forms = [f"map.{output.value}" for output in FLATTEN.outputs]
     manifest = write_manifest(
         tmp_path, [{**scalp(forms), "name": "s"}, {"mesh": filename, "outputs": ["map.json"]}]
     )

@@ -24,14 +24,17 @@ from service.settings import Settings
 #: The service as deployed: with keys, so that the document's security is checked too (a
 #: request without the key must get a 401).
 KEY = "fuzz-key"
-app = create_app(Settings(api_keys=(KEY,)))
+#: Sites capped low: the schema allows a million of them, which take seconds each request.
+app = create_app(Settings(api_keys=(KEY,), max_sites=20_000))
 
 # A request the schema allows must be accepted (2xx), with one exception, per route: the
 # routes below also answer 422 to conditions a JSON schema cannot state: a mesh file's
 # content (the schema says "binary"), a point at the centre (no direction), theta, phi and r
 # of different lengths, "sigma or pole_angle_deg, not both" across a nested object, a ring
 # drawn on the map that crosses itself or a hole outside its zone. Their 422
-# is still checked to be a documented problem that conforms to its schema.
+# is still checked to be a documented problem that conforms to its schema. /v1/sites also
+# answers 422 to zones that overlap, a density without units or a spacing the sites do not
+# fit at, and 413 to more sites than the limit.
 CONFIG = SchemathesisConfig.from_dict(
     {
         "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx"]}},
@@ -41,7 +44,13 @@ CONFIG = SchemathesisConfig.from_dict(
                     "^/v1/(flatten|validate|fit|locate|measure|points|points/inverse)$"
                 ),
                 "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx", "422"]}},
-            }
+            },
+            {
+                "include-path-regex": "^/v1/sites$",
+                "checks": {
+                    "positive_data_acceptance": {"expected-statuses": ["2xx", "413", "422"]}
+                },
+            },
         ],
     }
 )

@@ -1,5 +1,6 @@
-"""What /v1/flatten can answer besides JSON: the region as a GLB with UVs, and a picture of
-its map (SVG or PNG); and the choice among them from ``Accept`` or ``params.output``."""
+"""What the mesh routes can answer besides JSON: the region as a GLB with UVs, a picture of
+its map (SVG or PNG), sites as a PLY point cloud; and the choice among them from ``Accept``
+or ``params.output``."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ class Output(StrEnum):
     GLB = "glb"
     SVG = "svg"
     PNG = "png"
+    PLY = "ply"
 
     @property
     def media_type(self) -> str:
@@ -23,7 +25,7 @@ class Output(StrEnum):
     @property
     def binary(self) -> bool:
         """Whether the form is bytes rather than text."""
-        return self in (Output.GLB, Output.PNG)
+        return self in (Output.GLB, Output.PNG, Output.PLY)
 
 
 _MEDIA_TYPES = {
@@ -31,6 +33,8 @@ _MEDIA_TYPES = {
     Output.GLB: "model/gltf-binary",
     Output.SVG: "image/svg+xml",
     Output.PNG: "image/png",
+    # No PLY media type is registered; this is the one in common use.
+    Output.PLY: "application/ply",
 }
 
 

@@ -17,6 +17,9 @@ from .picture import (
     OUTLINE,
     SEAM_COLOUR,
     SINGULAR_COLOUR,
+    SITES_COLOUR,
+    SITES_KEY,
+    SVG_SITES,
     Picture,
 )
 
@@ -73,6 +76,11 @@ def to_svg(picture: Picture) -> bytes:
             f'<line class="singular {name}" x1="{left}" y1="{row:.1f}" x2="{right}" '
             f'y2="{row:.1f}" stroke="{SINGULAR_COLOUR}" stroke-width="2" '
             f'stroke-dasharray="3 4"/>'
+        )
+    if len(p.sites):  # under the zones' names
+        shown = p.sites[:SVG_SITES] - 1.0
+        parts.append(
+            f'<path class="sites" fill="{SITES_COLOUR}" d="{_rows(shown, "M%.1f %.1fh2v2h-2Z")}"/>'
         )
     parts += _svg_overlays(p)
     parts.append("</g>")
@@ -167,6 +175,8 @@ def _svg_frame(p: Picture) -> list[str]:
                 f'<line x1="{x}" y1="{row + 6}" x2="{x + 14}" y2="{row + 6}" stroke="{colour}" '
                 'stroke-width="2"/>'
             )
+        elif label == SITES_KEY:
+            parts.append(f'<rect x="{x + 5}" y="{row + 4}" width="4" height="4" fill="{colour}"/>')
         elif label < 0:  # a line: the seam or the singular points
             parts.append(
                 f'<line x1="{x}" y1="{row + 6}" x2="{x + 14}" y2="{row + 6}" stroke="{colour}" '
@@ -207,6 +217,13 @@ def to_png(picture: Picture) -> bytes:
     fill = palette[p.raster(1.0)]
     canvas.paste(Image.fromarray(fill, "RGB"), (left, top))
     font = ImageFont.load_default(size=13)
+    if len(p.sites):  # 2 x 2 pixels each, inside the plot, under the zones' names
+        spots = np.floor(p.sites - 0.5).astype(np.int64)
+        inside = np.all((spots >= [left, top]) & (spots < [right - 1, bottom - 1]), axis=1)
+        pixels = np.asarray(canvas).copy()
+        for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+            pixels[spots[inside, 1] + dy, spots[inside, 0] + dx] = _rgb(SITES_COLOUR)
+        canvas = Image.fromarray(pixels, "RGB")
     if p.overlays:
         canvas = _png_overlays(canvas, p, font)
     draw = ImageDraw.Draw(canvas)
@@ -237,6 +254,8 @@ def _png_legend(draw: ImageDraw.ImageDraw, p: Picture, font) -> None:
         row = y + 20 * i
         if label == CURVE_KEY:
             draw.line((x, row + 6, x + 14, row + 6), fill=colour, width=2)
+        elif label == SITES_KEY:
+            draw.rectangle((x + 5, row + 4, x + 8, row + 7), fill=colour)
         elif label < 0:
             _dashed(draw, (x, row + 6), (x + 14, row + 6), colour, 2, 4, 2)
         else:

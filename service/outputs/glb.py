@@ -33,7 +33,7 @@ from PIL import Image
 #: glTF constants.
 _FLOAT, _UNSIGNED_INT = 5126, 5125
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
-_TRIANGLES = 4
+_POINTS, _TRIANGLES = 0, 4
 _GLB_MAGIC, _GLB_VERSION = 0x46546C67, 2
 _JSON_CHUNK, _BIN_CHUNK = 0x4E4F534A, 0x004E4942
 
@@ -58,8 +58,9 @@ def region_glb(
     triangles: np.ndarray,
     face_ids: np.ndarray,
     extras: dict,
+    sites: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> bytes:
-    """A GLB of one triangle mesh.
+    """A GLB of one triangle mesh, and of sites on it as a POINTS primitive.
 
     Parameters
     ----------
@@ -70,6 +71,8 @@ def region_glb(
     face_ids : (m,) int, the file's id of each triangle
     extras : dict, JSON-ready, written as ``asset.extras.meshflat`` (with
         ``face_ids_accessor`` added)
+    sites : ((n, 3), (n, 3)) float or None: points and their unit normals, a second mesh
+        (``sites``: ``POSITION`` and ``NORMAL``, mode POINTS) of a second node
 
     Returns
     -------
@@ -83,6 +86,9 @@ def region_glb(
         ("face_ids", face_ids.astype(np.uint32), None),
         ("checker", np.frombuffer(_checker_png(), dtype=np.uint8), None),
     ]
+    if sites is not None:
+        points, normals = (np.ascontiguousarray(a, dtype=np.float32) for a in sites)
+        blobs += [("SITE_POSITION", points, _ARRAY_BUFFER), ("NORMAL", normals, _ARRAY_BUFFER)]
     buffer_views, accessors, chunks, offset = [], [], [], 0
     for name, array, target in blobs:
         data = array.tobytes()
@@ -102,12 +108,12 @@ def region_glb(
             "type": {1: "SCALAR", 2: "VEC2", 3: "VEC3"}[columns],
             "name": name,
         }
-        if name in ("POSITION", "TEXCOORD_0", "_VERTEX_ID"):  # bounds: required for POSITION
+        if name in ("POSITION", "TEXCOORD_0", "_VERTEX_ID", "SITE_POSITION"):  # POSITION needs them
             low, high = array.min(axis=0), array.max(axis=0)
             accessor["min"] = np.atleast_1d(low).tolist()
             accessor["max"] = np.atleast_1d(high).tolist()
         accessors.append(accessor)
-    attributes = {name: i for i, (name, _, target) in enumerate(blobs) if target == _ARRAY_BUFFER}
+    attributes = {name: i for i, (name, _, _) in enumerate(blobs[:3])}
     document = {
         "asset": {
             "version": "2.0",
@@ -115,7 +121,7 @@ def region_glb(
             "extras": {"meshflat": extras | {"face_ids_accessor": 4}},
         },
         "scene": 0,
-        "scenes": [{"nodes": [0]}],
+        "scenes": [{"nodes": [0] if sites is None else [0, 1]}],
         "nodes": [{"mesh": 0, "name": "region"}],
         "meshes": [
             {
@@ -143,6 +149,10 @@ def region_glb(
         "bufferViews": buffer_views,
         "buffers": [{"byteLength": offset}],
     }
+    if sites is not None:  # accessors 5 and 6, after the region's (the image has none)
+        document["nodes"].append({"mesh": 1, "name": "sites"})
+        points = {"attributes": {"POSITION": 5, "NORMAL": 6}, "mode": _POINTS}
+        document["meshes"].append({"name": "sites", "primitives": [points]})
     json_chunk = orjson.dumps(document, option=orjson.OPT_SERIALIZE_NUMPY)
     json_chunk += b" " * (-len(json_chunk) % 4)
     binary = b"".join(chunks)

@@ -15,7 +15,7 @@ on the surface. Such triangles are not filled; their corners are marked instead.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -81,8 +81,55 @@ class Overlay:
     anchor: tuple[float, float]
 
 
-#: Legend keys of the zones (a filled swatch) and the curves (a line).
-ZONE_KEY, CURVE_KEY = 100, -3
+#: Legend keys of the zones (a filled swatch), the curves (a line) and the sites (a dot).
+ZONE_KEY, CURVE_KEY, SITES_KEY = 100, -3, -4
+SITES_COLOUR = "#222222"
+#: Sites an SVG draws at the most (each a little square); a PNG draws them all.
+SVG_SITES = 50_000
+
+
+@dataclass(frozen=True)
+class Framing:
+    """Where the map's layout points fall on a ``width`` x ``height`` canvas: its box
+    padded by 4 % (``view``: x and s ranges, ``s = s_sign * y`` growing with theta,
+    downwards), scaled alike in both directions into the box inside the margins and centred
+    there (``plot``: left, top, right, bottom pixels). Pixel ``(column, row)`` covers
+    ``[column, column + 1) x [row, row + 1)``: its centre is at half-integers."""
+
+    s_sign: float
+    view: tuple[float, float, float, float]
+    scale: float
+    plot: tuple[int, int, int, int]
+
+    #: Margins (left, top, right, bottom) for the axes, the legend and the caption.
+    MARGINS = (70, 48, 270, 96)
+
+    @classmethod
+    def of(cls, x: np.ndarray, y: np.ndarray, layout: Layout, width: int, height: int) -> Framing:
+        """The framing of the layout ``x``, ``y`` ((k,) each) on the canvas."""
+        s_sign = 1.0 if layout is Layout.THETA_PHI else -1.0
+        margin_left, margin_top, margin_right, margin_bottom = cls.MARGINS
+        box = (margin_left, margin_top, width - margin_right, height - margin_bottom)
+        x_low, x_high, s_low, s_high = view = _view(np.asarray(x), s_sign * np.asarray(y))
+        scale = min((box[2] - box[0]) / (x_high - x_low), (box[3] - box[1]) / (s_high - s_low))
+        # Centre the view in the box; the plot is the part the view fills.
+        used_w, used_h = (x_high - x_low) * scale, (s_high - s_low) * scale
+        left = box[0] + ((box[2] - box[0]) - used_w) / 2
+        top = box[1] + ((box[3] - box[1]) - used_h) / 2
+        plot = (round(left), round(top), round(left + used_w), round(top + used_h))
+        return cls(s_sign, view, scale, plot)
+
+    def column(self, x) -> np.ndarray:
+        """The canvas column of layout ``x`` values."""
+        return self.plot[0] + (np.asarray(x) - self.view[0]) * self.scale
+
+    def row(self, s) -> np.ndarray:
+        """The canvas row of ``s`` values (``s_sign * y``)."""
+        return self.plot[1] + (np.asarray(s) - self.view[2]) * self.scale
+
+    def pixels(self, points: np.ndarray) -> np.ndarray:
+        """(n, 2) float: the canvas ``(column, row)`` of layout points ((n, 2): x, y)."""
+        return np.stack([self.column(points[:, 0]), self.row(self.s_sign * points[:, 1])], axis=1)
 
 
 @dataclass(frozen=True)
@@ -107,6 +154,7 @@ class Picture:
     legend : (label, colour, text) rows
     caption : lines of text
     overlays : zones and curves drawn over the map
+    sites : (n, 2) float, sites drawn over the map as dots
     """
 
     width: int
@@ -126,6 +174,7 @@ class Picture:
     legend: tuple[tuple[int, str, str], ...]
     caption: tuple[str, ...]
     overlays: tuple[Overlay, ...] = ()
+    sites: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
 
     def raster(self, scale: float = 1.0, include_boundary: bool = True) -> np.ndarray:
         """(h, w) uint8 labels of the plotting box at ``scale`` pixels per canvas pixel:
@@ -173,8 +222,9 @@ def describe(
     width: int,
     height: int,
     drawn: tuple[Drawn, ...] = (),
+    sites: np.ndarray | None = None,
 ) -> Picture:
-    """The picture of a flattened region, with zones and curves over it.
+    """The picture of a flattened region, with zones, curves and sites over it.
 
     Parameters
     ----------
@@ -183,28 +233,12 @@ def describe(
     face_count : int, the region's triangles
     width, height : int, the canvas in pixels
     drawn : zones and curves to draw over the map
+    sites : (n, 2) float or None, points of the layout to draw as dots
     """
-    x = flat.x
-    # Grows with theta, downwards: the layout's y, against theta for Mercator.
-    s_sign = 1.0 if flat.layout is Layout.THETA_PHI else -1.0
-    s = s_sign * flat.y
-    margin_left, margin_top, margin_right = 70, 48, 270
-    margin_bottom = 96
-    box = (margin_left, margin_top, width - margin_right, height - margin_bottom)
-    x_low, x_high, s_low, s_high = _view(x, s)
-    scale = min((box[2] - box[0]) / (x_high - x_low), (box[3] - box[1]) / (s_high - s_low))
-    # Centre the view in the box; the plot is the part the view fills.
-    used_w, used_h = (x_high - x_low) * scale, (s_high - s_low) * scale
-    left = box[0] + ((box[2] - box[0]) - used_w) / 2
-    top = box[1] + ((box[3] - box[1]) - used_h) / 2
-    plot = (round(left), round(top), round(left + used_w), round(top + used_h))
-
-    def column(value):
-        return plot[0] + (np.asarray(value) - x_low) * scale
-
-    def row(value):
-        return plot[1] + (np.asarray(value) - s_low) * scale
-
+    framing = Framing.of(flat.x, flat.y, flat.layout, width, height)
+    x, s, plot = flat.x, framing.s_sign * flat.y, framing.plot
+    x_low, x_high, s_low, s_high = framing.view
+    column, row = framing.column, framing.row
     points = np.stack([column(x), row(s)], axis=1)
     corners = points[flat.faces]
     labels = np.full(len(flat.faces), FILL, dtype=np.uint8)
@@ -216,12 +250,12 @@ def describe(
     # A triangle with several flags is drawn in the colour of the last (the most serious);
     # the legend counts it under each and says where the colours hide one.
     both = np.intersect1d(validation.backfacing_faces, validation.folded_faces).size
-    for label, colour, text, field in FLAGS:
-        flagged = getattr(validation, field)
+    for label, colour, text, attribute in FLAGS:
+        flagged = getattr(validation, attribute)
         labels[flagged] = label
         if len(flagged):
             shown = "" if len(flagged) <= MARKED_TRIANGLES else f", {MARKED_TRIANGLES:,} marked"
-            if field == "backfacing_faces" and both:
+            if attribute == "backfacing_faces" and both:
                 shown += f" ({both:,} drawn as folded)"
             legend.append((label, colour, f"{text}: {len(flagged):,}{shown}"))
     if len(validation.boundary_edges):
@@ -235,17 +269,8 @@ def describe(
         for theta, name in ((0.0, "north"), (math.pi, "south"))
         if math.isfinite(value := _second_of(theta, flat.layout)) and in_s(value)
     )
-    overlays = []
-    for k, item in enumerate(drawn):
-        rings = tuple(
-            np.stack([column(r[:, 0]), row(s_sign * r[:, 1])], axis=1) for r in item.rings
-        )
-        colour = OVERLAY_COLOURS[k % len(OVERLAY_COLOURS)]
-        anchor = rings[0].mean(axis=0) if item.closed else rings[0][0]
-        anchor = np.clip(anchor, [plot[0] + 30, plot[1] + 10], [plot[2] - 30, plot[3] - 10])
-        overlays.append(Overlay(rings, item.closed, item.name, colour, tuple(anchor.tolist())))
-        key = ZONE_KEY if item.closed else CURVE_KEY
-        legend.append((key, colour, f"{item.name}: {item.measure}"))
+
+    overlays, dots = _overlays(drawn, sites, framing.pixels, plot, legend)
     if seam:
         legend.append((-1, SEAM_COLOUR, "seam (phi +-180 deg)"))
     if singular:
@@ -268,7 +293,27 @@ def describe(
         legend=tuple(legend),
         caption=_caption(flat, params, face_count),
         overlays=tuple(overlays),
+        sites=dots,
     )
+
+
+def _overlays(drawn: tuple[Drawn, ...], sites, canvas, plot, legend: list):
+    """The zones and curves in pixels (``canvas`` maps layout points), each in its colour
+    with its name kept inside the ``plot``, and the sites' dots ((n, 2) float); their legend
+    rows are added to ``legend``."""
+    overlays = []
+    for k, item in enumerate(drawn):
+        rings = tuple(canvas(ring) for ring in item.rings)
+        colour = OVERLAY_COLOURS[k % len(OVERLAY_COLOURS)]
+        anchor = rings[0].mean(axis=0) if item.closed else rings[0][0]
+        anchor = np.clip(anchor, [plot[0] + 30, plot[1] + 10], [plot[2] - 30, plot[3] - 10])
+        overlays.append(Overlay(rings, item.closed, item.name, colour, tuple(anchor.tolist())))
+        key = ZONE_KEY if item.closed else CURVE_KEY
+        legend.append((key, colour, f"{item.name}: {item.measure}"))
+    if sites is None:
+        return tuple(overlays), np.empty((0, 2))
+    legend.append((SITES_KEY, SITES_COLOUR, f"sites: {len(sites):,}"))
+    return tuple(overlays), canvas(sites)
 
 
 def _view(x: np.ndarray, s: np.ndarray) -> tuple[float, float, float, float]:

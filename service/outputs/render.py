@@ -13,7 +13,7 @@ from transforms import Layout
 
 from ..encoding import plain
 from ..jobs import charge, picture_bytes
-from ..params import FlattenParams, MeasureParams, PictureParams
+from ..params import FlattenParams, MeasureParams, PictureParams, SitesParams
 from ..problems import Problem
 from ..schemas import Metrics, ResolvedParams, Validation
 from . import Output
@@ -22,14 +22,15 @@ from .glb import layout_uv, region_glb
 from .picture import Drawn, describe
 
 if TYPE_CHECKING:
-    from ..operations import Measured, MeshRegion
+    from ..operations import Measured, MeshRegion, Placed
 
 #: Vertex ids travel in the GLB as float32 (glTF allows no 32-bit integer attributes).
 FLOAT32_EXACT = 2**24
 
 
-def glb(region: MeshRegion, params: FlattenParams) -> bytes:
-    """The region as a GLB with ``TEXCOORD_0`` from the layout.
+def glb(region: MeshRegion, params: FlattenParams, sites=None) -> bytes:
+    """The region as a GLB with ``TEXCOORD_0`` from the layout (and ``sites``, points and
+    normals, as a POINTS primitive: :func:`.glb.region_glb`).
 
     Raises
     ------
@@ -68,7 +69,7 @@ def glb(region: MeshRegion, params: FlattenParams) -> bytes:
             "folded_after": len(u.flipped_after),
         }
     positions = region.mesh.vertices[flat.vertex_ids]
-    return region_glb(positions, uv, flat.vertex_ids, flat.faces, region.faces, extras)
+    return region_glb(positions, uv, flat.vertex_ids, flat.faces, region.faces, extras, sites)
 
 
 def svg(region: MeshRegion, params: FlattenParams) -> bytes:
@@ -83,12 +84,12 @@ def png(region: MeshRegion, params: FlattenParams) -> bytes:
     return to_png(_picture(region, params))
 
 
-def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...] = ()):
+def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...] = (), sites=None):
     resolved = plain(ResolvedParams.of_region(region))
     x, y = region.layout  # repaired when untangled
     flat = replace(region.flat, x=x, y=y)
     return describe(
-        flat, resolved, len(region.faces), params.image_width, params.image_height, drawn
+        flat, resolved, len(region.faces), params.image_width, params.image_height, drawn, sites
     )
 
 
@@ -136,3 +137,65 @@ def _length_text(length: float, mm_per_unit: float | None) -> str:
 
 #: The forms of measured zones besides JSON, by :class:`Output`.
 MEASURE_RENDERERS = {Output.SVG: measured_svg, Output.PNG: measured_png}
+
+
+# -- sites ---------------------------------------------------------------------------------
+
+
+def sites_ply(placed: Placed, params: SitesParams) -> bytes:
+    """The sites as a binary PLY point cloud: ``x y z`` (double), ``nx ny nz`` (float, unit
+    normals) and ``face`` (int, the file's triangle id) per vertex."""
+    sites = placed.sites
+    row = np.dtype(
+        [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("nx", "<f4"), ("ny", "<f4"),
+         ("nz", "<f4"), ("face", "<i4")]
+    )  # fmt: skip
+    table = np.empty(len(sites.triangles), dtype=row)
+    for k, axis in enumerate("xyz"):
+        table[axis] = sites.points[:, k]
+        table[f"n{axis}"] = placed.normals[:, k]
+    table["face"] = placed.region.faces[sites.triangles]
+    header = (
+        "ply\nformat binary_little_endian 1.0\ncomment meshflat sites\n"
+        f"element vertex {len(table)}\n"
+        "property double x\nproperty double y\nproperty double z\n"
+        "property float nx\nproperty float ny\nproperty float nz\n"
+        "property int face\nend_header\n"
+    )
+    return header.encode("ascii") + table.tobytes()
+
+
+def sites_glb(placed: Placed, params: SitesParams) -> bytes:
+    """The region as /v1/flatten's GLB, with the sites as a POINTS primitive (none when no
+    site was placed: glTF has no empty accessors)."""
+    sites = (placed.sites.points, placed.normals) if len(placed.sites.points) else None
+    return glb(placed.region, params, sites)
+
+
+def sites_svg(placed: Placed, params: SitesParams) -> bytes:
+    """The region's map with the zones and the sites (up to ``SVG_SITES`` of them) as SVG."""
+    return to_svg(_picture(placed.region, params, _site_zones(placed), placed.map_points))
+
+
+def sites_png(placed: Placed, params: SitesParams) -> bytes:
+    """The same picture as PNG, every site drawn (its raster charged first)."""
+    region = placed.region
+    charge(picture_bytes(params.image_width, params.image_height, len(region.mesh.faces)))
+    return to_png(_picture(region, params, _site_zones(placed), placed.map_points))
+
+
+def _site_zones(placed: Placed) -> tuple[Drawn, ...]:
+    return tuple(
+        Drawn(zone.outline.rings, True, zone.name, f"{zone.quota:,} sites")
+        for zone in placed.zones
+        if zone.outline is not None
+    )
+
+
+#: The forms of placed sites besides JSON, by :class:`Output`.
+SITES_RENDERERS = {
+    Output.PLY: sites_ply,
+    Output.GLB: sites_glb,
+    Output.SVG: sites_svg,
+    Output.PNG: sites_png,
+}

@@ -302,6 +302,57 @@ def test_a_zone_drawn_on_the_map_is_measured_and_outlined_on_the_3d_view(server)
     assert not problems, problems
 
 
+def test_grafts_placed_in_a_zone_show_on_the_map_the_head_and_in_the_table(server):
+    """A zone drawn, 40 grafts per cm², Place grafts: the page shows as many grafts as
+    /v1/sites answers for that zone (seed 1), dots on the map, points on the 3D head, and a
+    table row with the zone's area, density and grafts; cleared, then over the whole
+    region."""
+    flat = post(server, "/v1/flatten", PARAMS)
+    problems: list[str] = []
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        assert page.locator("#place-sites").is_disabled()  # no map yet
+        flatten_sample(page)
+        draw(page, flat, pentagon(flat, 0.2))
+        page.wait_for_timeout(500)
+        page.evaluate(CHANGED_PIXELS, True)
+        page.fill("#density", "40")
+        page.click("#place-sites")
+        page.wait_for_selector("#sites-status[data-state=placed]", timeout=30_000)
+        ring = json.loads(page.locator("#zone-area").get_attribute("data-ring"))
+        zone = {"name": "zone", "outer": ring}
+        params = {**PARAMS, "zones": [zone], "units": "mm", "density_per_cm2": 40, "seed": 1}
+        answer = post(server, "/v1/sites", params)
+        assert page.locator("#sites-status").get_attribute("data-count") == str(answer["count"])
+        assert answer["count"] > 100
+        cells = page.locator("#sites-table td").all_inner_texts()
+        (expected,) = answer["zones"]
+        assert cells == [
+            "zone",
+            f"{expected['area_cm2']:.2f}",
+            "40.0",
+            f"{expected['sites']:,}",
+        ]
+        dots = page.locator("#map svg g.sites-drawing path").get_attribute("d")
+        assert dots.count("M") == answer["count"]
+        page.wait_for_timeout(500)
+        assert page.evaluate(CHANGED_PIXELS, False) > 50  # the grafts on the head
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "demo-grafts.png"), full_page=True)
+        # Cleared: no zone, no grafts; placed again, over the whole region.
+        page.click("#clear-zone")
+        assert page.locator("#map svg g.sites-drawing").count() == 0
+        assert page.locator("#sites-table td").count() == 0
+        page.click("#place-sites")
+        page.wait_for_selector("#sites-status[data-state=placed]", timeout=30_000)
+        whole = post(
+            server, "/v1/sites", {**PARAMS, "units": "mm", "density_per_cm2": 40, "seed": 1}
+        )
+        assert page.locator("#sites-status").get_attribute("data-count") == str(whole["count"])
+        assert page.locator("#sites-table td").first.inner_text() == "region"
+    assert not problems, problems
+
+
 def test_docs_page_lists_the_operations_with_nothing_fetched_from_elsewhere(server):
     """/docs works behind a firewall: Swagger UI's script and styles come from the service
     (fastapi-offline), and the page lists every route of the document."""

@@ -2,6 +2,8 @@
 // 2D map (SVG from /v1/flatten) next to the 3D region textured through the returned UVs
 // (GLB from /v1/flatten, loaded by three.js's GLTFLoader). A zone drawn on the map is
 // measured by /v1/measure: its area, and its outline lifted onto the surface in the 3D view.
+// Grafts placed by /v1/sites (in the zone, or over the region) show on the map and the head,
+// with a table of each zone's area, density and grafts.
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
@@ -161,15 +163,29 @@ let outline = null; // the lifted outline in the 3D view
 
 const mapSvg = () => $('map').querySelector('svg');
 
-// A point of the map picture (SVG pixels) in the layout's coordinates, through the UVs:
-// x = u / scale + x_min, y = s_sign * (v / scale + s_min) (service/outputs/glb.py).
-function toLayout([px, py]) {
+// The plot box of the map picture, in SVG pixels, and the UVs' numbers.
+function plotBox() {
   const plot = mapSvg().querySelector('#plot rect');
   const [left, top, width, height] = ['x', 'y', 'width', 'height'].map((a) => Number(plot.getAttribute(a)));
   const { scale, x_min: xMin, s_min: sMin, s_sign: sSign, max: [uMax, vMax] } = map.uv;
-  const u = -PAD + ((px - left) / width) * (uMax + 2 * PAD);
-  const v = -PAD + ((py - top) / height) * (vMax + 2 * PAD);
-  return [u / scale + xMin, sSign * (v / scale + sMin)];
+  return { left, top, width, height, scale, xMin, sMin, sSign, uSpan: uMax + 2 * PAD, vSpan: vMax + 2 * PAD };
+}
+
+// A point of the map picture (SVG pixels) in the layout's coordinates, through the UVs:
+// x = u / scale + x_min, y = s_sign * (v / scale + s_min) (service/outputs/glb.py).
+function toLayout([px, py]) {
+  const b = plotBox();
+  const u = -PAD + ((px - b.left) / b.width) * b.uSpan;
+  const v = -PAD + ((py - b.top) / b.height) * b.vSpan;
+  return [u / b.scale + b.xMin, b.sSign * (v / b.scale + b.sMin)];
+}
+
+// The inverse: a layout point to the picture's pixels.
+function toPicture([x, y]) {
+  const b = plotBox();
+  const u = (x - b.xMin) * b.scale;
+  const v = (b.sSign * y - b.sMin) * b.scale;
+  return [b.left + ((u + PAD) / b.uSpan) * b.width, b.top + ((v + PAD) / b.vSpan) * b.height];
 }
 
 function zoneStatus(text, state) {
@@ -211,6 +227,85 @@ function clearZone() {
   zoneStatus('', 'none');
   delete $('zone-area').dataset.ring;
   delete $('zone-area').dataset.segments;
+  clearSites();
+}
+
+// -- grafts placed by /v1/sites -------------------------------------------------------------
+
+const SITES_COLOUR = 0x1b1b1b;
+let grafts = null; // the sites in the 3D view
+let sitesTicket = 0;
+
+function clearSites() {
+  sitesTicket += 1;
+  mapSvg()?.querySelector('g.sites-drawing')?.remove();
+  if (grafts) {
+    scene.remove(grafts);
+    grafts.geometry.dispose();
+    grafts.material.dispose();
+    grafts = null;
+  }
+  $('sites-table').replaceChildren();
+  $('sites-status').textContent = '';
+  $('sites-status').className = '';
+  $('sites-status').dataset.state = 'none';
+  delete $('sites-status').dataset.count;
+}
+
+function showSites(answer) {
+  const { position, x, y } = answer.sites;
+  const group = document.createElementNS(SVG, 'g');
+  group.setAttribute('class', 'sites-drawing');
+  const d = x.map((xi, i) => {
+    const [px, py] = toPicture([xi, y[i]]);
+    return `M${(px - 1).toFixed(1)} ${(py - 1).toFixed(1)}h2v2h-2Z`;
+  });
+  const path = document.createElementNS(SVG, 'path');
+  path.setAttribute('d', d.join(''));
+  group.append(path);
+  mapSvg().append(group);
+  const geometry = new THREE.BufferGeometry();
+  geometry.setAttribute('position', new THREE.Float32BufferAttribute(position.flat(), 3));
+  grafts = new THREE.Points(geometry, new THREE.PointsMaterial({ color: SITES_COLOUR, size: 3, sizeAttenuation: false }));
+  grafts.name = 'grafts';
+  scene.add(grafts);
+  const rows = answer.zones.map((z) => {
+    const row = document.createElement('tr');
+    const cells = [z.name, z.area_cm2.toFixed(2), z.density_per_cm2.toFixed(1), z.sites.toLocaleString('en')];
+    row.replaceChildren(...cells.map((text) => Object.assign(document.createElement('td'), { textContent: text })));
+    return row;
+  });
+  const head = document.createElement('tr');
+  head.replaceChildren(...['zone', 'area (cm²)', 'density (per cm²)', 'grafts'].map((text) => Object.assign(document.createElement('th'), { textContent: text })));
+  $('sites-table').replaceChildren(head, ...rows);
+  $('sites-status').textContent = `${answer.count.toLocaleString('en')} grafts, at least ${answer.min_distance_mm.toFixed(2)} mm apart`;
+  $('sites-status').dataset.count = String(answer.count);
+  $('sites-status').dataset.state = 'placed';
+}
+
+// Grafts in the zone drawn (closed), else over the whole region, at the density asked.
+async function placeSites() {
+  clearSites();
+  const ticket = sitesTicket;
+  const density = Number($('density').value);
+  const p = { ...map.params, units: $('units').value, density_per_cm2: density, seed: 1 };
+  if (zone.closed) {
+    const ring = zone.points.map(toLayout);
+    p.zones = [{ name: 'zone', outer: { x: ring.map((q) => q[0]), y: ring.map((q) => q[1]) } }];
+  }
+  $('sites-status').textContent = 'placing…';
+  $('sites-status').dataset.state = 'placing';
+  try {
+    const response = await post('/v1/sites', map.mesh, p, 'application/json');
+    const answer = await response.json();
+    if (ticket !== sitesTicket) return;
+    showSites(answer);
+  } catch (error) {
+    if (ticket !== sitesTicket) return;
+    $('sites-status').textContent = error.message;
+    $('sites-status').className = 'error';
+    $('sites-status').dataset.state = 'error';
+  }
 }
 
 function startZone() {
@@ -233,6 +328,7 @@ function showOutline({ points, faces }) {
 }
 
 async function measure() {
+  clearSites();
   const ticket = ++zone.ticket;
   const ring = zone.points.map(toLayout);
   const outer = { x: ring.map((p) => p[0]), y: ring.map((p) => p[1]) };
@@ -297,6 +393,7 @@ async function flatten(event) {
   event?.preventDefault();
   $('go').disabled = true;
   $('draw').disabled = true;
+  $('place-sites').disabled = true;
   clearZone();
   map = null;
   document.body.dataset.state = 'flattening';
@@ -325,6 +422,7 @@ async function flatten(event) {
     const uv = json.accessors[json.meshes[0].primitives[0].attributes.TEXCOORD_0];
     map = { mesh, params: { ...p, method, sigma, center, rotation }, uv: { ...extras.uv, max: uv.max } };
     $('draw').disabled = false;
+    $('place-sites').disabled = false;
     document.body.dataset.vertices = String(vertices);
     document.body.dataset.state = 'shown';
     setStatus(`done in ${Math.round(performance.now() - started)} ms`);
@@ -345,6 +443,7 @@ $('auto').addEventListener('change', () => {
 $('form').addEventListener('submit', flatten);
 $('draw').addEventListener('click', startZone);
 $('clear-zone').addEventListener('click', clearZone);
+$('place-sites').addEventListener('click', placeSites);
 $('units').addEventListener('change', () => zone.closed && measure());
 $('map').addEventListener('click', addPoint);
 $('map').addEventListener('dblclick', closeZone);

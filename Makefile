@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-locate bench-measure bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-locate bench-measure bench-sites bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -46,6 +46,11 @@ bench-locate: $(VENV)/.installed-bench
 # shapely 2 clipping the triangles (one thread, timed alternately in one process).
 bench-measure: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.measure_bench $(BENCH_ARGS)
+
+# Sites at a density on the bundled scalp and on it subdivided (100k faces), against
+# point-cloud-utils', Open3D's and trimesh's samplers (one thread, timed alternately).
+bench-sites: $(VENV)/.installed-bench $(VENV)/.installed-sites-peers
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m benchmarks.sites_bench $(BENCH_ARGS)
 
 # Needs curl (the end-to-end client) besides the bench extra.
 bench-service: $(VENV)/.installed-bench

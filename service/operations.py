@@ -607,7 +607,9 @@ def _placed(triangles: MapTriangles, parts: list[SitePart], params: SitesParams,
             triangles.surface_points, triangles.faces, parts, np.random.default_rng(params.seed)
         )
     except SitesDoNotFit as error:
-        if params.density_range is not None:
+        if params.min_spacing_mm is not None:
+            field = "params.min_spacing_mm"
+        elif params.density_range is not None:
             field = "params.density_range"
         elif params.zones:
             field = f"params.zones.{error.part}"
@@ -720,7 +722,9 @@ def _density_image(params: SitesParams) -> np.ndarray | None:
                 f"params.image_width x image_height, {size[0]} x {size[1]}"
             )
         if image.mode not in ("L", "LA"):
-            raise refuse(f"8-bit grey (mode L), not mode {image.mode}")
+            raise refuse(
+                f"8-bit grey (mode L, or LA: the alpha is left out), not mode {image.mode}"
+            )
         charge(16 * size[0] * size[1])
         grey = np.asarray(image.getchannel(0), dtype=np.float64)
     except (OSError, ValueError, SyntaxError) as error:

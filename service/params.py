@@ -661,8 +661,8 @@ class SitesParams(MeshParams, PictureParams):
             return self
         if not self.zones:
             raise ValueError(
-                "density_per_cm2: sites per cm² of the region; or give zones, or a density_map "
-                "part with density_range"
+                "density_per_cm2: sites per cm² of the region; or zones; or, with a "
+                "density_map part, density_range [lo, hi] (the sites per cm² of grey 0 and 255)"
             )
         for i, zone in enumerate(self.zones):
             if zone.density_per_cm2 is None:

@@ -425,7 +425,7 @@ async def test_bad_requests_are_422s_naming_the_field(client):
     body = problem(await sites(client, {"zones": overlapping}), 422, "params.zones.1")
     assert "overlaps params.zones.0 ('a')" in body["detail"]
     body = await sites(client, {"density_per_cm2": 30, "min_spacing_mm": 3})
-    body = problem(body, 422, "params.density_per_cm2")
+    body = problem(body, 422, "params.min_spacing_mm")
     assert "sites were placed within 200 candidates a site" in body["detail"]
     assert "at a spacing of 3 mm" in body["detail"]
     problem(await sites(client, {"density_per_cm2": 1e6}), 422)
@@ -585,7 +585,7 @@ async def test_edge_cases_answer_without_a_500(client):
         body = problem(await sites(client, {"density_per_cm2": 5, "units": units}), 422)
         assert body["field"] == "params.units" and "mm per unit" in body["detail"]
     crowded = {"density_per_cm2": 1, "count": 500, "min_spacing_mm": 30}
-    problem(await sites(client, crowded), 422, "params.density_per_cm2")
+    problem(await sites(client, crowded), 422, "params.min_spacing_mm")
 
 
 async def test_a_density_map_without_its_range_is_a_422(client):

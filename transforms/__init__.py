@@ -21,6 +21,7 @@ from .errors import TransformInputError
 from .faces import DEGENERATE_RTOL, FaceMeasures, measure_faces
 from .fit import Fit, FitBounds, FitExplanation, FitFixed, default_choice, fit_region
 from .frames import Frame, check_rotation
+from .landmarks import LANDMARK_NAMES, Landmarks
 from .layouts import Layout, layout_xy
 from .locate import Hits, LocateIndex, locate
 from .mapping import MapTriangles
@@ -46,6 +47,7 @@ from .zones import Polyline, ZoneCover, cover_zone, lift_curve
 
 __all__ = [
     "DEGENERATE_RTOL",
+    "LANDMARK_NAMES",
     "LAYOUT_ORIENTATION",
     "MAX_ABS_COORDINATE",
     "RHO_MAX",
@@ -64,6 +66,7 @@ __all__ = [
     "FlatRegion",
     "Frame",
     "Hits",
+    "Landmarks",
     "Layout",
     "LocateIndex",
     "MapTriangles",

@@ -28,6 +28,7 @@ from transforms import (
     FlatRegion,
     Frame,
     Hits,
+    Landmarks,
     Layout,
     MapTriangles,
     Method,
@@ -143,6 +144,11 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
         return Selection(select.nonempty(faces), center, resolved)
     if region is None:
         faces = np.arange(n_faces)
+    elif region.scalp is not None:
+        scalp = region.scalp
+        landmarks = checked_landmarks(mesh, scalp.landmarks, "region.scalp.landmarks")
+        offset = scalp.offset_mm / _mm_per_unit(scalp.units, "params.region.scalp.units")
+        faces = landmarks.scalp_faces(mesh.vertices, mesh.faces, offset)
     elif region.faces is not None:
         faces = select.faces_listed(region.faces, n_faces)
     elif region.vertices is not None:
@@ -171,12 +177,14 @@ def _center(mesh: Mesh, face_ids: np.ndarray | None, center) -> np.ndarray:
     return select.named_center(mesh.vertices, faces, name)
 
 
-def fixed_choices(params: MeshParams, center: np.ndarray) -> FitFixed:
+def fixed_choices(params: MeshParams, center: np.ndarray, head: Frame | None = None) -> FitFixed:
     """What the caller fixed for :func:`transforms.fit_region` and
     :func:`transforms.default_choice` (None: choose it; no rotation or no cap given counts
-    as chosen)."""
+    as chosen); the ``head``'s frame (from landmarks) fixes the centre and the rotation."""
     rotation, up = params.rotation, None
-    if rotation is None or rotation == "auto":
+    if head is not None:
+        center, rotation = head.center, Frame.from_matrix(head.rotation)
+    elif rotation is None or rotation == "auto":
         rotation = None
     elif isinstance(rotation, AutoPole):
         rotation, up = None, rotation.up
@@ -187,7 +195,7 @@ def fixed_choices(params: MeshParams, center: np.ndarray) -> FitFixed:
     if given and params.sigma != "auto" and params.method is not Method.STANDARD:
         sigma = chart_of(params).cap.sigma
     return FitFixed(
-        center=None if params.center == "auto" else center,
+        center=None if params.center == "auto" and head is None else center,
         rotation=rotation,
         up=None if up is None else np.asarray(up, dtype=np.float64),
         sigma=sigma,
@@ -243,11 +251,13 @@ def resolve(
     """The chart and frame the parameters name; fitted (with the fit) where any is ``"auto"``
     (and always for /v1/fit's :class:`~service.params.FitParams`); the rotation and sigma not
     given chosen by :func:`transforms.default_choice` (no search) otherwise."""
+    head = head_frame(mesh, params)
+    fixed = fixed_choices(params, selection.center, head)
     if not params.auto:
-        fixed = fixed_choices(params, selection.center)
         warped = params.method is not Method.STANDARD
         if fixed.rotation is not None and (fixed.sigma is not None or not warped):
-            return chart_of(params), frame_of(params, selection.center), None
+            frame = head if head is not None else frame_of(params, selection.center)
+            return chart_of(params), frame, None
         chosen = default_choice(
             mesh.vertices,
             region_faces(mesh, selection),
@@ -261,13 +271,30 @@ def resolve(
     fit = fit_region(
         mesh.vertices,
         region_faces(mesh, selection),
-        fixed_choices(params, selection.center),
+        fixed,
         fit_bounds(params),
         method=params.method,
         layout=params.layout,
         threads=settings.threads,
     )
     return fit.chart, fit.frame, fit
+
+
+def head_frame(mesh: Mesh, params: MeshParams) -> Frame | None:
+    """The frame of ``params.frame``'s landmarks (:meth:`transforms.Landmarks.frame`), each
+    checked on the mesh's surface; None without landmarks."""
+    if params.frame is None:
+        return None
+    landmarks = checked_landmarks(mesh, params.frame.landmarks, "frame.landmarks")
+    return landmarks.frame()
+
+
+def checked_landmarks(mesh: Mesh, given, field: str) -> Landmarks:
+    """The landmarks of ``given`` (the params' model), checked as a head's and on the
+    mesh's surface; errors name ``field``'s landmark."""
+    landmarks = Landmarks.of(given.model_dump(exclude_none=True), field=field)
+    landmarks.check_on_surface(mesh.vertices, mesh.faces)
+    return landmarks
 
 
 def flatten(mesh: Mesh, params: MeshParams, settings: Settings) -> MeshRegion:
@@ -435,13 +462,16 @@ def measure(mesh: Mesh, params: MeasureParams, settings: Settings) -> Measured:
     )
 
 
-def _mm_per_unit(units: LengthUnit | KnownDistance | None) -> float | None:
-    """Millimetres per mesh unit, from ``params.units``.
+def _mm_per_unit(
+    units: LengthUnit | KnownDistance | None, field: str = "params.units"
+) -> float | None:
+    """Millimetres per mesh unit, from ``units`` (the params' ``field``).
 
     Raises
     ------
     Problem
-        422 when the two points of a known distance coincide.
+        422 when the two points of a known distance coincide, or give a scale beyond
+        ``MM_PER_UNIT``.
     """
     if units is None:
         return None
@@ -451,21 +481,21 @@ def _mm_per_unit(units: LengthUnit | KnownDistance | None) -> float | None:
         if not distance > 0:
             raise Problem(
                 422,
-                "params.units.between: the two points coincide; give two points the known "
+                f"{field}.between: the two points coincide; give two points the known "
                 "distance apart",
                 "invalid-request",
-                "params.units.between",
+                f"{field}.between",
             )
         scale = units.mm / distance
         if not MM_PER_UNIT[0] <= scale <= MM_PER_UNIT[1]:
             low, high = MM_PER_UNIT
             raise Problem(
                 422,
-                f"params.units: {units.mm:g} mm over a distance of {distance:g} mesh units is "
+                f"{field}: {units.mm:g} mm over a distance of {distance:g} mesh units is "
                 f"{scale:.3g} mm per unit; the scale must be within {low:g} to {high:g} mm per "
                 "unit (a micron to a kilometre)",
                 "invalid-request",
-                "params.units",
+                field,
             )
         return scale
     return LengthUnit(units).mm

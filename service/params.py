@@ -163,6 +163,68 @@ class InverseRequest(ChartParams):
         return self
 
 
+class LengthUnit(StrEnum):
+    """The length units a mesh may be in."""
+
+    MM = "mm"
+    CM = "cm"
+    M = "m"
+
+    @property
+    def mm(self) -> float:
+        """Millimetres in one unit."""
+        return {"mm": 1.0, "cm": 10.0, "m": 1000.0}[self.value]
+
+
+class KnownDistance(_Strict):
+    """The mesh's scale from a distance known in millimetres."""
+
+    between: Annotated[list[Vector3], Field(min_length=2, max_length=2)] = Field(
+        description="Two world points of the mesh, [[x, y, z], [x, y, z]] (the pupils, say)."
+    )
+    mm: PositiveNumber = Field(description="Their distance in millimetres.")
+
+
+class Landmarks(_Strict):
+    """Anatomical landmarks of the head, world points on its surface (docs/math.md, section
+    14)."""
+
+    nasion: Vector3 = Field(description="The deepest point between the eyes, on the nose's root.")
+    inion: Vector3 = Field(description="The bump at the back of the skull, above the neck.")
+    left_tragus: Vector3 = Field(description="The left ear's tragus, before the ear canal.")
+    right_tragus: Vector3 = Field(description="The right ear's tragus.")
+    vertex: Vector3 | None = Field(
+        None, description="The top of the head (optional): checks that left and right are not "
+        "swapped.",
+    )  # fmt: skip
+
+
+class LandmarkFrame(_Strict):
+    """A frame that belongs to the head, from its landmarks."""
+
+    landmarks: Landmarks = Field(
+        description="The centre sits a quarter of the tragi's distance above their midpoint, "
+        "the pole points down the neck and local +Z towards the nasion (docs/math.md, section "
+        "14): the same head, in any pose or scan, gets the same frame."
+    )
+
+
+class Scalp(_Strict):
+    """The scalp by anatomy: the surface above a plane through the brow and the inion."""
+
+    landmarks: Landmarks
+    offset_mm: Number = Field(
+        10.0,
+        ge=-100,
+        le=100,
+        description="How far above the nasion and the inion the boundary passes, mm.",
+    )
+    units: choice(LengthUnit) | KnownDistance = Field(
+        description="The mesh's length unit, or a known distance (between two landmarks, "
+        "say): offset_mm in mesh units."
+    )
+
+
 class Cone(_Strict):
     axis: Vector3 = Field(description="World direction of the cone's axis (non-zero).")
     half_angle_deg: Number = Field(gt=0, le=180, description="Half-angle in degrees.")
@@ -175,7 +237,8 @@ class Cone(_Strict):
 
 
 class Region(_Strict):
-    """Which faces: exactly one of ``faces``, ``vertices``, ``groups`` or ``cone``."""
+    """Which faces: exactly one of ``faces``, ``vertices``, ``groups``, ``cone`` or
+    ``scalp``."""
 
     model_config = ConfigDict(json_schema_extra=lambda schema: _one_property(schema))
 
@@ -193,17 +256,19 @@ class Region(_Strict):
         None,
         description="Faces whose centroid, seen from the apex, lies within half_angle_deg of axis.",
     )
+    scalp: Scalp = Field(
+        None,
+        description="Faces whose centroid lies above the plane through the nasion and the "
+        "inion raised by offset_mm, level from ear to ear (docs/math.md, section 14).",
+    )
 
     @model_validator(mode="after")
     def _exactly_one(self) -> Region:
-        given = [
-            name
-            for name in ("faces", "vertices", "groups", "cone")
-            if name in self.model_fields_set
-        ]
+        kinds = ("faces", "vertices", "groups", "cone", "scalp")
+        given = [name for name in kinds if name in self.model_fields_set]
         if len(given) != 1:
             raise ValueError(
-                "give exactly one of faces, vertices, groups or cone"
+                "give exactly one of faces, vertices, groups, cone or scalp"
                 + (f", not {' and '.join(given)}" if given else "")
             )
         return self
@@ -308,8 +373,25 @@ class MeshParams(ChartParams):
     format: Literal[FORMATS] | None = Field(
         None, description="The file's format; default: from the file name's extension."
     )
+    frame: LandmarkFrame | None = Field(
+        None,
+        description="The frame from the head's landmarks, instead of center and rotation: the "
+        'same for every scan of a head. With sigma "auto" only sigma is fitted; a fixed '
+        "sigma gives the same map for every scan.",
+    )
 
     model_config = ConfigDict(json_schema_extra={"examples": [MESH_PARAMS_EXAMPLE]})
+
+    @model_validator(mode="after")
+    def _frame_or_center_and_rotation(self) -> MeshParams:
+        if self.frame is not None:
+            given = [name for name in ("center", "rotation") if name in self.model_fields_set]
+            if given:
+                raise ValueError(
+                    f"frame: the landmarks fix the centre and the rotation; leave out "
+                    f"{' and '.join(given)}"
+                )
+        return self
 
     #: The form's file parts besides the mesh that the route reads: name -> what it is.
     FILE_PARTS: ClassVar[dict[str, str]] = {}
@@ -328,6 +410,8 @@ class MeshParams(ChartParams):
     @property
     def auto(self) -> bool:
         """Whether meshflat chooses any of centre, rotation and sigma."""
+        if self.frame is not None:
+            return self.sigma == "auto"
         return (
             self.center == "auto"
             or self.sigma == "auto"
@@ -447,19 +531,6 @@ class FlattenParams(MeshParams, PictureParams):
     model_config = ConfigDict(json_schema_extra={"examples": [MESH_PARAMS_EXAMPLE]})
 
 
-class LengthUnit(StrEnum):
-    """The length units a mesh may be in."""
-
-    MM = "mm"
-    CM = "cm"
-    M = "m"
-
-    @property
-    def mm(self) -> float:
-        """Millimetres in one unit."""
-        return {"mm": 1.0, "cm": 10.0, "m": 1000.0}[self.value]
-
-
 #: A name of a zone or a curve: what the answer and the picture label it with.
 Name = Annotated[str, Field(min_length=1, max_length=120)]
 #: Coordinates on the map: the layout's x or y of a flatten answer.
@@ -504,15 +575,6 @@ class Curve(_MapPoints):
     name: Name
     x: MapCoordinates = Field(min_length=2)
     y: MapCoordinates = Field(min_length=2)
-
-
-class KnownDistance(_Strict):
-    """The mesh's scale from a distance known in millimetres."""
-
-    between: Annotated[list[Vector3], Field(min_length=2, max_length=2)] = Field(
-        description="Two world points of the mesh, [[x, y, z], [x, y, z]] (the pupils, say)."
-    )
-    mm: PositiveNumber = Field(description="Their distance in millimetres.")
 
 
 def check_names(kind: str, drawn: list) -> None:

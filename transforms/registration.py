@@ -1,0 +1,198 @@
+"""A follow-up scan registered to a baseline (docs/math.md, section 15): seeded by landmarks
+(Umeyama's least squares, :func:`trimesh.registration.procrustes`) or by the surfaces'
+moments from several starts, refined by point-to-plane ICP over area-weighted samples with
+the pairs beyond a trimming distance left out, so that a cropped follow-up still aligns.
+
+Point-to-plane ICP is a few lines of linear algebra over scipy's k-d tree; the libraries of
+the field that ship it (Open3D, probreg on top of it) weigh about 900 MB installed, and
+trimesh's ICP is point-to-point, which slides along a smooth head and converges slowly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+from trimesh.registration import procrustes
+
+from .arrays import cross_rows, triangle_areas, unit_rows
+
+#: Samples drawn on each surface (area-weighted, the same for any pose of it).
+SAMPLES = 20_000
+#: ICP rounds at the most (and for comparing starts), and the step (radians, and in units
+#: of the median pair distance) that ends them.
+MAX_ROUNDS, COARSE_ROUNDS, SETTLED = 60, 25, 1e-4
+#: Pairs farther apart than this many times the ``TRIM_QUANTILE`` of their distances are
+#: left out of a round: up to about two thirds of either surface may have no counterpart.
+TRIM, TRIM_QUANTILE = 2.5, 30.0
+
+
+@dataclass(frozen=True)
+class Surface:
+    """Area-weighted samples of a surface and their unit normals ((n, 3) float each)."""
+
+    points: np.ndarray
+    normals: np.ndarray
+
+    @classmethod
+    def of(cls, vertices: np.ndarray, faces: np.ndarray, count: int = SAMPLES) -> Surface:
+        """Samples at evenly spaced points of the faces' cumulative area (systematic, so the
+        same surface in any pose gives the same samples), each at its face's centroid plus a
+        fixed spread, with the face's normal."""
+        areas = triangle_areas(vertices, faces)
+        cumulative = np.cumsum(areas)
+        picks = (np.arange(count) + 0.5) * (cumulative[-1] / count)
+        face = np.minimum(np.searchsorted(cumulative, picks, side="right"), len(faces) - 1)
+        # Where in its face a pick falls: the pick's share of the face's area, spread evenly.
+        share = (picks - (cumulative[face] - areas[face])) / np.maximum(areas[face], 1e-300)
+        root, t = np.sqrt(np.clip(share, 0.0, 1.0)), np.full(count, 0.5)
+        weights = np.column_stack([1.0 - root, root * (1.0 - t), root * t])
+        corners = vertices[faces[face]]
+        points = np.einsum("pk,pkd->pd", weights, corners)
+        normals, _ = unit_rows(
+            cross_rows(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        )
+        return cls(points, normals)
+
+    def every(self, step: int) -> Surface:
+        """Every ``step``-th sample: a coarser surface for comparing starts."""
+        return Surface(self.points[::step], self.normals[::step])
+
+
+@dataclass(frozen=True)
+class Registration:
+    """A 4x4 ``matrix`` taking the follow-up onto the baseline (``scale`` 1 when rigid);
+    ``residuals`` are the follow-up samples' point-to-plane distances to the baseline (n,);
+    ``paired`` which of them lie within the trimming distance at the end."""
+
+    matrix: np.ndarray
+    scale: float
+    residuals: np.ndarray
+    paired: np.ndarray
+
+
+def apply(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(n, 3) float: ``points`` moved by the 4x4 ``matrix``."""
+    return points @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def from_pairs(source: np.ndarray, target: np.ndarray, scale: bool) -> np.ndarray:
+    """The 4x4 rigid (or similarity) transform that takes ``source`` onto ``target`` ((n, 3)
+    each) in least squares (Umeyama; :func:`trimesh.registration.procrustes`)."""
+    matrix, _, _ = procrustes(source, target, reflection=False, translation=True, scale=scale)
+    return matrix
+
+
+def moment_starts(source: Surface, target: Surface) -> list[np.ndarray]:
+    """4x4 starts that take ``source``'s centroid and principal axes onto ``target``'s, in
+    the four proper ways the axes' signs allow."""
+    starts = []
+    frames = []
+    for surface in (source, target):
+        centre = surface.points.mean(axis=0)
+        _, _, axes = np.linalg.svd(surface.points - centre, full_matrices=False)
+        frames.append((centre, axes))
+    (c_s, a_s), (c_t, a_t) = frames
+    for signs in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+        flip = np.diag([signs[0], signs[1], signs[0] * signs[1]])
+        rotation = a_t.T @ flip @ a_s
+        if np.linalg.det(rotation) < 0:
+            rotation = a_t.T @ (flip @ np.diag([1, 1, -1])) @ a_s
+        matrix = np.eye(4)
+        matrix[:3, :3] = rotation
+        matrix[:3, 3] = c_t - rotation @ c_s
+        starts.append(matrix)
+    return starts
+
+
+def icp(
+    source: Surface,
+    target: Surface,
+    start: np.ndarray,
+    scale: bool = False,
+    rounds: int = MAX_ROUNDS,
+) -> Registration:
+    """Point-to-plane ICP from ``start``: each round pairs every source sample with its
+    nearest target sample, leaves out the pairs farther than the trimming distance, and
+    solves the linearised least squares of the distances along the target normals for a
+    small rotation and a translation (and, with ``scale``, a scale) about the pairs'
+    centroid (eq. 15.1)."""
+    tree = cKDTree(target.points)
+    matrix = start.copy()
+    for _ in range(rounds):
+        moved = apply(matrix, source.points)
+        distance, nearest = tree.query(moved)
+        keep = distance <= _trim(distance)
+        p, q, n = moved[keep], target.points[nearest[keep]], target.normals[nearest[keep]]
+        # About the pairs' centroid: p' = (1 + ds) R(omega) (p - c) + c + t, linearised.
+        centre = p.mean(axis=0)
+        arm = p - centre
+        columns = [cross_rows(arm, n), n]  # d/d(omega, t) of (p' - q) . n
+        if scale:
+            columns.append(np.einsum("pd,pd->p", arm, n)[:, None])  # d/d(ds)
+        step, *_ = np.linalg.lstsq(np.column_stack(columns), np.einsum("pd,pd->p", q - p, n))
+        grow = 1.0 + (step[6] if scale else 0.0)
+        turn = grow * Rotation.from_rotvec(step[:3]).as_matrix()
+        update = np.eye(4)
+        update[:3, :3] = turn
+        update[:3, 3] = centre + step[3:6] - turn @ centre
+        matrix = update @ matrix
+        size = np.median(distance) + 1e-300
+        moving = np.linalg.norm(step[3:6]) + abs(grow - 1.0) * float(np.abs(arm).max())
+        if np.linalg.norm(step[:3]) < SETTLED and moving < SETTLED * size:
+            break
+    return measured(source, target, matrix, tree)
+
+
+def _trim(distance: np.ndarray) -> float:
+    return TRIM * float(np.percentile(distance, TRIM_QUANTILE)) + 1e-12
+
+
+def measured(source: Surface, target: Surface, matrix: np.ndarray, tree=None) -> Registration:
+    """``matrix`` with the residuals of ``source``'s samples against ``target``: their
+    point-to-plane distances to the nearest target samples, and which are within the
+    trimming distance."""
+    tree = cKDTree(target.points) if tree is None else tree
+    moved = apply(matrix, source.points)
+    distance, nearest = tree.query(moved)
+    gap = moved - target.points[nearest]
+    residuals = np.abs(np.einsum("pd,pd->p", gap, target.normals[nearest]))
+    factor = float(np.cbrt(np.linalg.det(matrix[:3, :3])))
+    return Registration(matrix, factor, residuals, distance <= _trim(distance))
+
+
+def register(
+    source: Surface,
+    target: Surface,
+    pairs: tuple[np.ndarray, np.ndarray] | None = None,
+    scale: bool = False,
+    focus: Surface | None = None,
+) -> Registration:
+    """The follow-up (``source``) registered to the baseline (``target``, the whole scan):
+    from the landmarks' ``pairs`` ((k, 3) each, follow-up then baseline) when given, else
+    from the one of :func:`moment_starts` whose ICP on a tenth of the samples leaves the least
+    trimmed residual per paired share; refined on all the samples, then on ``focus`` (the
+    part of the baseline to align on) when given. The residuals are against the whole
+    baseline."""
+    if pairs is not None:
+        start = from_pairs(*pairs, scale=scale)
+    else:
+        coarse_source, coarse_target = source.every(10), target.every(10)
+        trials = [
+            icp(coarse_source, coarse_target, start, scale, rounds=COARSE_ROUNDS)
+            for start in moment_starts(source, target)
+        ]
+        start = min(trials, key=_badness).matrix
+    found = icp(source, target, start, scale)
+    if focus is not None:
+        found = measured(source, target, icp(source, focus, found.matrix, scale).matrix)
+    return found
+
+
+def _badness(found: Registration) -> float:
+    """The trimmed residual's RMS over the share of samples paired: low for a close fit of
+    much of the surface."""
+    paired = found.residuals[found.paired]
+    return float(np.sqrt(np.mean(paired**2))) / max(float(found.paired.mean()), 1e-9)

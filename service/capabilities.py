@@ -26,6 +26,7 @@ from .params import (
     MeasureParams,
     MeshParams,
     PointsRequest,
+    RegisterParams,
     SitesParams,
 )
 from .problems import ErrorPlaces
@@ -36,6 +37,7 @@ from .schemas import (
     LocateResponse,
     MeasureResponse,
     PointsResponse,
+    RegisterResponse,
     SitesResponse,
     ValidateResponse,
 )
@@ -248,6 +250,25 @@ MESH_CAPABILITIES = (
         operation=operations.place,
         response=SitesResponse,
         renderers=SITES_RENDERERS,
+    ),
+    MeshCapability(
+        name="register",
+        path="/v1/register",
+        summary="Register a follow-up scan to the baseline",
+        description="Multipart: the `baseline` and `follow_up` meshes and a `params` JSON "
+        "field: the baseline's region (the part to align on: the scalp changes over time, the "
+        "face and ears less) and frame as for /v1/flatten, `landmarks` of either scan, `mode` "
+        "(rigid or similarity) and `units`. Seeded by the landmarks of both scans when given, "
+        "else by the scans' moments from four starts; refined by point-to-plane ICP over "
+        "area-weighted samples, trimmed so that a cropped follow-up still aligns "
+        "(docs/math.md, section 15). Answers the 4x4 transform onto the baseline, the RMS "
+        "and 95th percentile of the residuals over the overlap (mm), the overlap, and the "
+        "baseline's frame expressed for the follow-up, so that the follow-up's map lands on "
+        "the baseline's; refuses (422) when after the best alignment less than 30 % of the "
+        "follow-up lies within 2 mm of the baseline.",
+        params=RegisterParams,
+        operation=operations.register_scans,
+        response=RegisterResponse,
     ),
 )
 

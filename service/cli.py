@@ -11,6 +11,7 @@
     meshflat locate MESH ... --params '{"theta": [...], "phi": [...]}'
     meshflat measure MESH ... --zones zones.json [--units mm] [--out FILE.json|.svg|.png]
     meshflat sites MESH ... [--density 40] [--zones zones.json] [--units mm] [--out sites.ply]
+    meshflat register BASE FOLLOW_UP ... --units mm [--params '{"landmarks": ...}'] --out frame.json
                       [--density-map map.png --params '{"density_range": [20, 60]}']
     meshflat batch MANIFEST.jsonl --out DIR [--processes N] [--shard-count N [--shard-index I]]
 
@@ -134,16 +135,18 @@ def params_of(args: argparse.Namespace) -> dict:
     return params
 
 
-def _file_parts(args: argparse.Namespace, names) -> dict[str, bytes]:
-    """The form's file parts besides the mesh, from their options (``--density-map``)."""
+def _file_parts(args: argparse.Namespace, model) -> dict[str, tuple[str, bytes]]:
+    """The form's file parts besides the mesh, from their arguments (``--density-map``,
+    ``FOLLOW_UP``)."""
     parts = {}
-    for name in names:
+    for name in model.FILE_PARTS:
         path = getattr(args, name, None)
         if path is None:
             continue
-        option = "--" + name.replace("_", "-")
+        positional = name in model.POSITIONAL_PARTS
+        option = name.upper() if positional else "--" + name.replace("_", "-")
         try:
-            parts[name] = Path(path).read_bytes()
+            parts[name] = (Path(path).name, Path(path).read_bytes())
         except OSError as error:
             message = f"{option}: cannot read {path!r}: {error.strerror}"
             raise Problem(422, message, field=option) from None
@@ -234,7 +237,7 @@ def run(args: argparse.Namespace) -> bytes:
     with core_errors_as_problems(MESH_FORM):
         with progress.step("reading"):
             params = mesh_params(capability.params, orjson.dumps(params_of(args)))
-            params.with_parts(_file_parts(args, capability.params.FILE_PARTS))
+            params.with_parts(_file_parts(args, capability.params))
             path = Path(args.mesh)
             try:
                 data = path.read_bytes()
@@ -300,6 +303,9 @@ def parser() -> argparse.ArgumentParser:
             units = [unit.value for unit in LengthUnit]
             command.add_argument("--units", choices=units, help="the mesh's length unit")
         for name, what in capability.params.FILE_PARTS.items():
+            if name in capability.params.POSITIONAL_PARTS:
+                command.add_argument(name, metavar=name.upper(), help=what.split(":")[0])
+                continue
             option = "--" + name.replace("_", "-")
             command.add_argument(option, dest=name, metavar="FILE", help=what.split(":")[0])
         if "density_per_cm2" in fields:

@@ -61,8 +61,8 @@ def multipart_body(model: type[BaseModel]) -> dict:
     form = {
         "schema": {
             "type": "object",
-            "required": ["mesh"],
-            "properties": {"mesh": mesh, "params": params, **parts},
+            "required": [model.MESH_PART],
+            "properties": {model.MESH_PART: mesh, "params": params, **parts},
         },
         "encoding": {"params": {"contentType": "application/json"}},
     }

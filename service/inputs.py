@@ -15,13 +15,13 @@ from typing import TypeVar
 from pydantic import BaseModel, ValidationError
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from .jobs import JSON_BYTES_PER_BYTE, charge, charge_mesh
+from .jobs import JSON_BYTES_PER_BYTE, charge, charge_mesh, job_bytes
 from .jsonkeys import repeated_key
 from .meshio import Mesh, format_of, read_mesh
 from .multipart import parse_form
 from .observability import observe_mesh
 from .params import MeshParams
-from .problems import Problem
+from .problems import ErrorPlaces, Problem, core_errors_as_problems
 from .settings import Settings
 
 #: The largest ``params`` field of a mesh form: parameters are a few hundred bytes, a region
@@ -123,8 +123,28 @@ def mesh_form(
         )
     charge(JSON_BYTES_PER_BYTE * len(text))  # its parse, beyond the reader's allowance
     params = mesh_params(model, bytes(text))
-    if "mesh" not in form:
-        raise Problem(422, "mesh: the form has no 'mesh' file field", "invalid-request", "mesh")
-    params.with_parts({name: bytes(part.data) for name, part in form.items()})
-    part = form["mesh"]
+    name = model.MESH_PART
+    if name not in form:
+        raise Problem(422, f"{name}: the form has no '{name}' file field", "invalid-request", name)
+    params.with_parts({key: (part.filename, bytes(part.data)) for key, part in form.items()})
+    part = form[name]
     return params, load_mesh(part.data, part.filename, params, settings)
+
+
+def load_other_mesh(params: MeshParams, name: str, settings: Settings) -> Mesh:
+    """The form's second mesh, the part ``name`` (its format from its file name), read within
+    the settings' limits and charged to the job's memory budget on top of the first.
+
+    Raises
+    ------
+    Problem
+        422 naming the part when it is missing or not a readable mesh; 413 beyond a limit.
+    """
+    data = params.part(name)
+    if data is None:
+        raise Problem(422, f"{name}: the form has no '{name}' file field", "invalid-request", name)
+    limits = replace(settings.limits, on_counts=lambda v, f: charge(job_bytes(v, f)))
+    with core_errors_as_problems(ErrorPlaces("params.", frozenset(), name)):
+        mesh = read_mesh(data, format_of(params.part_filename(name), None), limits)
+    observe_mesh(mesh.format, len(mesh.vertices), len(mesh.faces))
+    return mesh

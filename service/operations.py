@@ -49,6 +49,7 @@ from transforms import (
 )
 from transforms import selection as select
 from transforms.region import flagged_mask
+from transforms.registration import Registration, Surface, register
 from transforms.sites import (
     SPACING_RULE,
     SitePart,
@@ -60,6 +61,7 @@ from transforms.sites import (
 )
 from transforms.viewpoint import check_center_sees_area
 
+from .inputs import load_other_mesh
 from .jobs import MAP_BYTES_PER_FACE, SITE_BYTES, charge
 from .meshio import Mesh, format_of, read_mesh
 from .outlines import Outline, checked_curve, checked_zone, overlaps
@@ -77,6 +79,8 @@ from .params import (
     MeshParams,
     PointsRequest,
     PoleUp,
+    RegisterMode,
+    RegisterParams,
     SitesParams,
 )
 from .problems import Problem
@@ -800,6 +804,91 @@ def _quotas(expected: list[float], count: int | None) -> list[int]:
     order = np.argsort(-(share - quotas), kind="stable")
     quotas[order[: count - quotas.sum()]] += 1
     return quotas.tolist()
+
+
+# -- a follow-up registered to the baseline -----------------------------------------------
+
+#: A follow-up point lies on the baseline when within this distance of it (mm).
+OVERLAP_MM = 2.0
+#: The least share of the follow-up's area on the baseline for a registration to be given.
+MIN_OVERLAP = 0.3
+
+
+@dataclass(frozen=True)
+class Registered:
+    """A follow-up registered to the baseline (docs/math.md, section 15).
+
+    Attributes
+    ----------
+    region : MeshRegion, the baseline's region, flattened with its frame
+    found : Registration, the transform and the residuals
+    seeded_by : "landmarks" or "moments"
+    overlap : float, the share of the follow-up's area within ``overlap_mm`` of the baseline
+    overlap_mm : float, ``OVERLAP_MM``
+    rms_mm, p95_mm : float, the residuals over that overlap
+    frame : Frame, the baseline's frame expressed for the follow-up
+    mm_per_unit : float
+    """
+
+    region: MeshRegion
+    found: Registration
+    seeded_by: str
+    overlap: float
+    overlap_mm: float
+    rms_mm: float
+    p95_mm: float
+    frame: Frame
+    mm_per_unit: float
+
+
+def register_scans(mesh: Mesh, params: RegisterParams, settings: Settings) -> Registered:
+    """The follow-up (the form's ``follow_up`` part) registered to the baseline ``mesh``
+    (:func:`transforms.registration.register`), on the baseline's ``region``; refused when
+    too little of it lies on the baseline afterwards."""
+    mm_per_unit = _mm_per_unit(params.units)
+    follow = load_other_mesh(params, "follow_up", settings)
+    region = flatten(mesh, params, settings)
+    base = Surface.of(mesh.vertices, mesh.faces)
+    focus = Surface.of(mesh.vertices, region_faces(mesh, region.selection))
+    moving = Surface.of(follow.vertices, follow.faces)
+    pairs = _landmark_pairs(mesh, follow, params)
+    similar = params.mode is RegisterMode.SIMILARITY
+    found = register(moving, base, pairs, scale=similar, focus=focus)
+    on_base = found.residuals * mm_per_unit <= OVERLAP_MM
+    overlap = float(on_base.mean())
+    if overlap < MIN_OVERLAP:
+        raise Problem(
+            422,
+            f"follow_up: could not register it: after the best alignment found only "
+            f"{overlap:.0%} of its area lies within {OVERLAP_MM:g} mm of the baseline "
+            f"(at least {MIN_OVERLAP:.0%}); give landmarks of both scans, or a region both show",
+            "invalid-request",
+            "follow_up",
+        )
+    residuals = found.residuals[on_base] * mm_per_unit
+    rms, p95 = float(np.sqrt(np.mean(residuals**2))), float(np.percentile(residuals, 95))
+    # Baseline local = R (s A p + t - c) = s R A (p - A^T (c - t) / s): the same angles.
+    turn, shift = found.matrix[:3, :3] / found.scale, found.matrix[:3, 3]
+    rotation = region.frame.rotation @ turn
+    center = turn.T @ (region.frame.center - shift) / found.scale
+    frame = Frame.from_matrix(rotation, center)
+    seeded = "landmarks" if pairs is not None else "moments"
+    return Registered(region, found, seeded, overlap, OVERLAP_MM, rms, p95, frame, mm_per_unit)
+
+
+def _landmark_pairs(mesh: Mesh, follow: Mesh, params: RegisterParams):
+    """The landmarks both scans give, follow-up then baseline ((k, 3) each), or None. The
+    baseline's come from params.landmarks.baseline or params.frame."""
+    given = params.landmarks
+    baseline = given.baseline if given is not None and given.baseline is not None else None
+    if baseline is None and params.frame is not None:
+        baseline = params.frame.landmarks
+    if baseline is None or given is None or given.follow_up is None:
+        return None
+    base = checked_landmarks(mesh, baseline, "landmarks.baseline").named()
+    other = checked_landmarks(follow, given.follow_up, "landmarks.follow_up").named()
+    common = [name for name in base if name in other]
+    return np.stack([other[n] for n in common]), np.stack([base[n] for n in common])
 
 
 # -- points --------------------------------------------------------------------------------

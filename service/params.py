@@ -393,19 +393,30 @@ class MeshParams(ChartParams):
                 )
         return self
 
+    #: The form's part holding the mesh the route works on.
+    MESH_PART: ClassVar[str] = "mesh"
     #: The form's file parts besides the mesh that the route reads: name -> what it is.
     FILE_PARTS: ClassVar[dict[str, str]] = {}
-    #: Their bytes, as sent (:meth:`with_parts`).
-    _parts: dict[str, bytes] = PrivateAttr(default_factory=dict)
+    #: Those the command line takes as positional arguments after the mesh.
+    POSITIONAL_PARTS: ClassVar[tuple[str, ...]] = ()
+    #: Their file names and bytes, as sent (:meth:`with_parts`).
+    _parts: dict[str, tuple[str | None, bytes]] = PrivateAttr(default_factory=dict)
 
-    def with_parts(self, parts: dict[str, bytes]):
-        """These params holding the form's ``parts`` this model reads (:data:`FILE_PARTS`)."""
-        self._parts = {name: data for name, data in parts.items() if name in self.FILE_PARTS}
+    def with_parts(self, parts: dict[str, tuple[str | None, bytes]]):
+        """These params holding the form's ``parts`` (name -> (file name, bytes)) this model
+        reads (:data:`FILE_PARTS`)."""
+        self._parts = {name: part for name, part in parts.items() if name in self.FILE_PARTS}
         return self
 
     def part(self, name: str) -> bytes | None:
         """The bytes of the form's part ``name``, or None when it was not sent."""
-        return self._parts.get(name)
+        found = self._parts.get(name)
+        return None if found is None else found[1]
+
+    def part_filename(self, name: str) -> str | None:
+        """The file name the form's part ``name`` was sent with."""
+        found = self._parts.get(name)
+        return None if found is None else found[0]
 
     @property
     def auto(self) -> bool:
@@ -759,4 +770,49 @@ class SitesParams(MeshParams, PictureParams):
                 },
             ]
         }
+    )
+
+
+class RegisterMode(StrEnum):
+    """What a registration may change of the follow-up."""
+
+    RIGID = "rigid"
+    SIMILARITY = "similarity"
+
+
+class ScanLandmarks(_Strict):
+    """The landmarks of either scan (the pairs given seed the registration)."""
+
+    baseline: Landmarks | None = None
+    follow_up: Landmarks | None = None
+
+
+class RegisterParams(MeshParams):
+    """The JSON of the ``params`` field of /v1/register: the baseline's region and frame as
+    for /v1/flatten (``region`` is the part to align on), the landmarks, the mode and the
+    units."""
+
+    MESH_PART: ClassVar[str] = "baseline"
+    FILE_PARTS: ClassVar[dict[str, str]] = {
+        "follow_up": "The follow-up scan of the same head (OBJ, glTF, GLB, PLY or STL; its "
+        "format from its file name)."
+    }
+    #: The parts the command line takes as positional arguments after the mesh.
+    POSITIONAL_PARTS: ClassVar[tuple[str, ...]] = ("follow_up",)
+
+    landmarks: ScanLandmarks | None = Field(
+        None,
+        description="Landmarks of the baseline and of the follow-up: when both are given, "
+        "the registration starts from them (else from the scans' moments, several starts).",
+    )
+    mode: choice(RegisterMode) = Field(
+        RegisterMode.RIGID,
+        description="rigid (a rotation and a translation) or similarity (and a scale).",
+    )
+    units: choice(LengthUnit) | KnownDistance = Field(
+        description="The baseline's length unit, or a known distance: the residuals in mm."
+    )
+
+    model_config = ConfigDict(
+        json_schema_extra={"examples": [{**MESH_PARAMS_EXAMPLE, "units": "mm"}]}
     )

@@ -169,9 +169,10 @@ def problem_of(error: Exception, places: ErrorPlaces = JSON_BODY) -> Problem:
         ``error`` is none of those (a bug: let it become a 500).
     """
     if isinstance(error, MeshFormatError):
+        part = places.data or "mesh"
         if isinstance(error, MeshTooLargeError):
-            return Problem(413, f"mesh: {error}", "mesh-too-large", "mesh")
-        return Problem(422, f"mesh: {error}", "unreadable-mesh", "mesh")
+            return Problem(413, f"{part}: {error}", "mesh-too-large", part)
+        return Problem(422, f"{part}: {error}", "unreadable-mesh", part)
     if isinstance(error, ValidationError):
         return validation_problem(error.errors(), places.prefix)
     if isinstance(error, TransformInputError):

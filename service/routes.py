@@ -5,6 +5,7 @@ capability off the event loop (:func:`run_job`); the use-cases are :mod:`service
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import partial
 from typing import Annotated
 
@@ -155,7 +156,7 @@ def answer_mesh(
     """A mesh route's answer to a multipart body, in the form ``Accept`` or
     ``params.output`` asks for (CPU-bound: run it off the event loop)."""
     timings = Timings()
-    with core_errors_as_problems(MESH_FORM):
+    with core_errors_as_problems(replace(MESH_FORM, data=capability.params.MESH_PART)):
         with timings.measure("parse"):
             params, mesh = mesh_form(body, content_type, settings, capability.params)
             output = Output.JSON

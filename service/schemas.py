@@ -22,7 +22,7 @@ from .meshio import FORMATS
 from .params import Region, choice
 
 if TYPE_CHECKING:
-    from .operations import Angles, Located, Measured, MeshRegion, Placed
+    from .operations import Angles, Located, Measured, MeshRegion, Placed, Registered
 
 
 class Answer(BaseModel):
@@ -654,6 +654,46 @@ class SitesResponse(Answer):
                 x=np.ascontiguousarray(placed.map_points[:, 0]),
                 y=np.ascontiguousarray(placed.map_points[:, 1]),
             ),
+        )
+
+
+class RegisterResponse(Answer):
+    params: ResolvedParams = Field(description="The baseline's params, resolved.")
+    transform: list[list[float]] = Field(
+        description="The 4x4 matrix (rows) that maps the follow-up's points onto the "
+        "baseline: [x', y', z', 1] = M [x, y, z, 1]."
+    )
+    scale: float = Field(description="Its scale: 1 for rigid.")
+    seeded_by: Literal["landmarks", "moments"] = Field(
+        description="What the registration started from: the landmarks of both scans, or "
+        "the scans' moments (four starts, the best kept)."
+    )
+    overlap: float = Field(
+        description="The share of the follow-up's area within overlap_distance_mm of the "
+        "baseline's region after registration (a registration below 0.3 is refused)."
+    )
+    overlap_distance_mm: float = Field(description="The distance overlap counts within, mm.")
+    rms_mm: float = Field(description="RMS of the residuals over the overlap, mm.")
+    p95_mm: float = Field(description="Their 95th percentile, mm.")
+    frame: ResolvedParams = Field(
+        description="The baseline's frame expressed for the follow-up: sent as the "
+        "follow-up's params (method, sigma, center, rotation), its map lands on the "
+        "baseline's."
+    )
+
+    @classmethod
+    def of(cls, registered: Registered) -> RegisterResponse:
+        region = registered.region
+        return cls.build(
+            params=ResolvedParams.of_region(region),
+            transform=registered.found.matrix,
+            scale=registered.found.scale,
+            seeded_by=registered.seeded_by,
+            overlap=registered.overlap,
+            overlap_distance_mm=registered.overlap_mm,
+            rms_mm=registered.rms_mm,
+            p95_mm=registered.p95_mm,
+            frame=ResolvedParams.of(region.chart, registered.frame),
         )
 
 

@@ -50,9 +50,9 @@ async def test_every_json_answer_conforms_to_its_documented_schema(client, docum
     mesh = icosahedron_obj()
     for capability in MESH_CAPABILITIES:
         params = json.dumps(request_example(capability.params))
-        answer = await client.post(
-            capability.path, files={"mesh": ("ico.obj", mesh)}, data={"params": params}
-        )
+        model = capability.params
+        files = {name: ("ico.obj", mesh) for name in (model.MESH_PART, *model.POSITIONAL_PARTS)}
+        answer = await client.post(capability.path, files=files, data={"params": params})
         assert answer.status_code == 200, answer.text
         conforms(document, capability.path, "200", "application/json", answer.json())
     for capability in JSON_CAPABILITIES:

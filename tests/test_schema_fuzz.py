@@ -34,14 +34,15 @@ app = create_app(Settings(api_keys=(KEY,), max_sites=20_000))
 # drawn on the map that crosses itself or a hole outside its zone. Their 422
 # is still checked to be a documented problem that conforms to its schema. /v1/sites also
 # answers 422 to zones that overlap, a density without units or a spacing the sites do not
-# fit at, and 413 to more sites than the limit.
+# fit at, and 413 to more sites than the limit; /v1/register 422 to a follow-up that cannot
+# be read or registered.
 CONFIG = SchemathesisConfig.from_dict(
     {
         "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx"]}},
         "operations": [
             {
                 "include-path-regex": (
-                    "^/v1/(flatten|validate|fit|locate|measure|points|points/inverse)$"
+                    "^/v1/(flatten|validate|fit|locate|measure|register|points|points/inverse)$"
                 ),
                 "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx", "422"]}},
             },
@@ -75,12 +76,13 @@ def with_real_mesh(case) -> None:
     """Put a real mesh into a generated multipart body whose parameters are an object, in the
     format they name (or PLY, named); other bodies are sent as generated."""
     body = case.body
-    if not (isinstance(body, dict) and "mesh" in body and isinstance(body.get("params"), dict)):
+    parts = [name for name in ("mesh", "baseline") if isinstance(body, dict) and name in body]
+    if not (parts and isinstance(body.get("params"), dict)):
         return
     chosen = body["params"].get("format", "ply")
     if isinstance(chosen, str) and chosen in MESHES:
         body["params"] = {**body["params"], "format": chosen}
-        body["mesh"] = MESHES[chosen]
+        body[parts[0]] = MESHES[chosen]
 
 
 @schema.parametrize()

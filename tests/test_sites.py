@@ -38,6 +38,8 @@ from transforms.zones import cover_zone
 from .conftest import load_sample, sphere_mesh
 from .test_api import flatten, obj_of, problem
 from .test_mapping import jittered_mesh
+from .test_measure import NAME
+from .test_measure import PARAMS as SCALP
 
 # -- the core ---------------------------------------------------------------------------------
 
@@ -205,13 +207,7 @@ def test_vertex_normals_of_a_sphere_point_outwards_and_site_normals_follow():
 
 # -- the API ----------------------------------------------------------------------------------
 
-NAME = "fsaverage-head.ply"
-PARAMS = {
-    "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}},
-    "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
-    "sigma": 0.3,
-    "units": "mm",
-}
+PARAMS = {**SCALP, "units": "mm"}
 
 pytestmark = pytest.mark.anyio
 
@@ -226,7 +222,7 @@ def rectangle(name, x0, x1, y0, y1, density=None) -> dict:
 
 
 async def scalp_map(client) -> tuple[np.ndarray, np.ndarray]:
-    answer = await flatten(client, NAME, {k: v for k, v in PARAMS.items() if k != "units"})
+    answer = await flatten(client, NAME, SCALP)
     x, y = (np.asarray(answer.json()["vertices"][k]) for k in "xy")
     return x, y
 
@@ -475,7 +471,7 @@ async def test_a_density_map_puts_each_triangle_at_its_pixels_density(client):
     """A grey PNG in the framing of the PNG answer: a band of 255 across the middle of the
     map, 0 elsewhere, for 0 to 20 sites per cm². The sites go onto the triangles whose
     centroid's pixel is in the band, as many as their area times 20 per cm²."""
-    answer = (await flatten(client, NAME, {k: v for k, v in PARAMS.items() if k != "units"})).json()
+    answer = (await flatten(client, NAME, SCALP)).json()
     x, y = np.asarray(answer["vertices"]["x"]), np.asarray(answer["vertices"]["y"])
     framing = Framing.of(x, y, Layout.THETA_PHI, 1200, 800)
     low, high = (int(framing.column(np.quantile(x, q))) for q in (0.3, 0.6))

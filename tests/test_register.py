@@ -1,0 +1,150 @@
+"""A follow-up scan registered to the baseline (transforms.registration; docs/math.md,
+section 15) through ``POST /v1/register`` and ``meshflat register``: a follow-up made from a
+sample (moved, noisy, cropped) lands back on it, and its map on the baseline's."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from service.cli import main
+from service.samples import SAMPLES
+
+from .conftest import load_sample
+from .test_api import flatten, obj_of, problem
+from .test_landmarks import on_head
+from .test_measure import NAME
+from .test_measure import PARAMS as SCALP
+
+pytestmark = pytest.mark.anyio
+
+PARAMS = {**SCALP, "units": "mm"}
+TURN = Rotation.from_euler("zyx", [0.6, -0.3, 0.4])
+SHIFT = np.array([30.0, -12.0, 8.0])
+
+
+def follow_up(scale: float = 1.0, seed: int = 1):
+    """fsaverage moved and turned, 0.3 mm of noise, its lowest 20 % of faces cut away: the
+    OBJ bytes, the kept faces, and the true transform back onto the baseline (4x4)."""
+    vertices, faces = load_sample(NAME)
+    rng = np.random.default_rng(seed)
+    moved = scale * TURN.apply(np.array(vertices)) + SHIFT
+    moved += rng.normal(scale=0.3, size=moved.shape)
+    height = np.asarray(vertices)[faces].mean(axis=1)[:, 2]
+    kept = faces[height > np.quantile(height, 0.2)]
+    truth = np.eye(4)
+    truth[:3, :3] = TURN.as_matrix().T / scale
+    truth[:3, 3] = -truth[:3, :3] @ SHIFT
+    return obj_of(moved, kept), kept, truth, moved
+
+
+async def register(client, params: dict, follow: bytes | None, name: str = "follow.obj"):
+    files = {"baseline": (NAME, SAMPLES[NAME].path.read_bytes())}
+    if follow is not None:
+        files["follow_up"] = (name, follow)
+    data = {"params": json.dumps({**PARAMS, **params})}
+    return await client.post("/v1/register", files=files, data=data)
+
+
+def errors(transform, truth, points) -> tuple[float, float]:
+    """The largest distance (mm) between the points moved by ``transform`` and by ``truth``,
+    and the angle (degrees) between their rotations."""
+    matrix = np.asarray(transform)
+    ours = points @ matrix[:3, :3].T + matrix[:3, 3]
+    true = points @ truth[:3, :3].T + truth[:3, 3]
+    turn = (
+        matrix[:3, :3] @ truth[:3, :3].T / np.cbrt(np.linalg.det(matrix[:3, :3] @ truth[:3, :3].T))
+    )
+    return float(np.linalg.norm(ours - true, axis=1).max()), float(
+        np.degrees(Rotation.from_matrix(turn).magnitude())
+    )
+
+
+@pytest.mark.parametrize("seeded", ["moments", "landmarks"])
+async def test_a_moved_noisy_cropped_follow_up_lands_on_the_baseline(client, seeded):
+    data, _, truth, moved = follow_up()
+    params = {}
+    if seeded == "landmarks":
+        landmarks = on_head()
+        turned = {k: (TURN.apply(np.asarray(v)) + SHIFT).tolist() for k, v in landmarks.items()}
+        params["landmarks"] = {"baseline": landmarks, "follow_up": turned}
+    response = await register(client, params, data)
+    assert response.status_code == 200, response.text
+    answer = response.json()
+    assert answer["seeded_by"] == seeded
+    distance, angle = errors(answer["transform"], truth, moved)
+    assert distance < 0.3 and angle < 0.2, (distance, angle)
+    assert answer["scale"] == pytest.approx(1.0, abs=1e-9)
+    assert answer["overlap"] > 0.9 and answer["overlap_distance_mm"] == 2.0
+    assert answer["rms_mm"] < 0.5 and answer["p95_mm"] < 1.0
+
+
+async def test_the_follow_ups_map_lands_on_the_baseline_map(client):
+    """Flatten the follow-up with the answer's frame: each vertex of the baseline's region
+    lands where it is on the baseline's map (to the noise's angle, 0.3 mm over ~100 mm)."""
+    data, kept, _, _ = follow_up()
+    answer = (await register(client, {}, data)).json()
+    frame = SCALP
+    baseline = (await flatten(client, NAME, frame)).json()
+    number = {tuple(face): k for k, face in enumerate(kept.tolist())}
+    _, faces = load_sample(NAME)
+    region = [number[tuple(faces[i].tolist())] for i in baseline["faces"]["ids"]
+              if tuple(faces[i].tolist()) in number]  # fmt: skip
+    params = {**answer["frame"], "region": {"faces": region}}
+    there = await flatten(client, "follow.obj", params, data=data)
+    assert there.status_code == 200, there.text
+    there = there.json()
+    here_x = dict(zip(baseline["vertices"]["ids"], baseline["vertices"]["x"], strict=True))
+    here_y = dict(zip(baseline["vertices"]["ids"], baseline["vertices"]["y"], strict=True))
+    gaps = [
+        max(abs(x - here_x[v]), abs(y - here_y[v]))
+        for v, x, y in zip(*(there["vertices"][k] for k in ("ids", "x", "y")), strict=True)
+    ]
+    assert len(gaps) > 700 and max(gaps) < 0.02, max(gaps)
+
+
+async def test_a_scaled_follow_up_needs_similarity(client):
+    data, _, truth, moved = follow_up(scale=1.04)
+    similar = (await register(client, {"mode": "similarity"}, data)).json()
+    assert similar["scale"] == pytest.approx(1 / 1.04, rel=0.003)
+    distance, _ = errors(similar["transform"], truth, moved)
+    assert distance < 0.5
+    rigid = (await register(client, {}, data)).json()
+    assert rigid["scale"] == pytest.approx(1.0) and rigid["rms_mm"] > 2 * similar["rms_mm"]
+
+
+async def test_a_scan_of_something_else_is_refused(client):
+    """A box of the head's size: no alignment puts 30 % of it within 2 mm of the head."""
+    box = trimesh.creation.box(extents=[150, 180, 200]).subdivide().subdivide().subdivide()
+    data = obj_of(np.asarray(box.vertices), np.asarray(box.faces))
+    body = problem(await register(client, {}, data), 422, "follow_up")
+    assert "could not register it" in body["detail"] and "within 2 mm" in body["detail"]
+
+
+async def test_bad_register_requests_name_the_part_or_field(client):
+    data, _, _, _ = follow_up()
+    problem(await register(client, {}, None), 422, "follow_up")
+    body = problem(await register(client, {}, b"not a mesh", name="follow.obj"), 422)
+    assert body["field"].startswith("follow_up")
+    no_units = SCALP
+    files = {"baseline": (NAME, SAMPLES[NAME].path.read_bytes()), "follow_up": ("f.obj", data)}
+    response = await client.post("/v1/register", files=files, data={"params": json.dumps(no_units)})
+    problem(response, 422, "params.units")
+    landmarks = {"baseline": on_head(), "follow_up": {**on_head(), "nasion": [0, 400, 0]}}
+    body = problem(await register(client, {"landmarks": landmarks}, data), 422)
+    assert body["field"] == "params.landmarks.follow_up.nasion"
+
+
+async def test_the_command_line_registers_two_files(client, tmp_path):
+    data, _, _, _ = follow_up()
+    follow = tmp_path / "follow.obj"
+    follow.write_bytes(data)
+    out = tmp_path / "frame.json"
+    frame = ["--region-cone", "0,0,1:70", "--pole", "0,0,-1", "--up", "0,1,0", "--sigma", "0.3"]
+    command = ["register", str(SAMPLES[NAME].path), str(follow), *frame, "--units", "mm"]
+    assert main([*command, "--out", str(out)]) == 0
+    assert json.loads(out.read_bytes()) == (await register(client, {}, data)).json()

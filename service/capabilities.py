@@ -17,7 +17,7 @@ from .encoding import Timings, encode
 from .jobs import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE
 from .meshio import Mesh
 from .outputs import Output
-from .outputs.render import MEASURE_RENDERERS, RENDERERS, SITES_RENDERERS
+from .outputs.render import MEASURE_RENDERERS, REGISTER_RENDERERS, RENDERERS, SITES_RENDERERS
 from .params import (
     FitParams,
     FlattenParams,
@@ -265,10 +265,13 @@ MESH_CAPABILITIES = (
         "and 95th percentile of the residuals over the overlap (mm), the overlap, and the "
         "baseline's frame expressed for the follow-up, so that the follow-up's map lands on "
         "the baseline's; refuses (422) when after the best alignment less than 30 % of the "
-        "follow-up lies within 2 mm of the baseline.",
+        "follow-up lies within 2 mm of the baseline. Or, by the Accept header or "
+        "params.output, the overlay: the baseline's map with both regions' boundaries and "
+        "the zones (SVG or PNG).",
         params=RegisterParams,
         operation=operations.register_scans,
         response=RegisterResponse,
+        renderers=REGISTER_RENDERERS,
     ),
 )
 

@@ -18,6 +18,7 @@ from functools import cache
 
 import numpy as np
 from PIL import Image
+from scipy.spatial import cKDTree
 
 from transforms import (
     LAYOUT_ORIENTATION,
@@ -822,6 +823,9 @@ class Registered:
     ----------
     region : MeshRegion, the baseline's region, flattened with its frame
     found : Registration, the transform and the residuals
+    follow_boundary : (k, 2, 2) float, the follow-up's region's boundary edges on the
+        baseline's map (its faces over the baseline's region, mapped with ``frame``)
+    zones : tuple of Outline, checked, to draw
     seeded_by : "landmarks" or "moments"
     overlap : float, the share of the follow-up's area within ``overlap_mm`` of the baseline
     overlap_mm : float, ``OVERLAP_MM``
@@ -839,6 +843,8 @@ class Registered:
     p95_mm: float
     frame: Frame
     mm_per_unit: float
+    follow_boundary: np.ndarray
+    zones: tuple[Outline, ...]
 
 
 def register_scans(mesh: Mesh, params: RegisterParams, settings: Settings) -> Registered:
@@ -873,7 +879,28 @@ def register_scans(mesh: Mesh, params: RegisterParams, settings: Settings) -> Re
     center = turn.T @ (region.frame.center - shift) / found.scale
     frame = Frame.from_matrix(rotation, center)
     seeded = "landmarks" if pairs is not None else "moments"
-    return Registered(region, found, seeded, overlap, OVERLAP_MM, rms, p95, frame, mm_per_unit)
+    boundary = _follow_boundary(follow, found, focus, frame, region)
+    zones = tuple(checked_zone(zone, k) for k, zone in enumerate(params.zones))
+    return Registered(
+        region, found, seeded, overlap, OVERLAP_MM, rms, p95, frame, mm_per_unit, boundary,
+        zones,
+    )  # fmt: skip
+
+
+def _follow_boundary(follow: Mesh, found, focus: Surface, frame: Frame, region) -> np.ndarray:
+    """(k, 2, 2) float: the boundary edges, on the map, of the follow-up's faces whose
+    registered centroids lie on the baseline's region (within two sample spacings of its
+    samples), flattened with the baseline's frame expressed for the follow-up."""
+    centroids = follow.vertices[follow.faces].mean(axis=1)
+    moved = centroids @ found.matrix[:3, :3].T + found.matrix[:3, 3]
+    spacing = np.median(cKDTree(focus.points).query(focus.points, k=2)[0][:, 1])
+    near = cKDTree(focus.points).query(moved)[0] <= 2.0 * spacing
+    if not near.any():
+        return np.empty((0, 2, 2))
+    flat = flatten_region(follow.vertices, follow.faces[near], frame, region.chart,
+                          layout=region.flat.layout)  # fmt: skip
+    points = np.column_stack([flat.x, flat.y])
+    return points[flat.validation.boundary_edges]
 
 
 def _landmark_pairs(mesh: Mesh, follow: Mesh, params: RegisterParams):

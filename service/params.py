@@ -787,10 +787,10 @@ class ScanLandmarks(_Strict):
     follow_up: Landmarks | None = None
 
 
-class RegisterParams(MeshParams):
+class RegisterParams(MeshParams, PictureParams):
     """The JSON of the ``params`` field of /v1/register: the baseline's region and frame as
     for /v1/flatten (``region`` is the part to align on), the landmarks, the mode and the
-    units."""
+    units; zones to draw on the overlay picture."""
 
     MESH_PART: ClassVar[str] = "baseline"
     FILE_PARTS: ClassVar[dict[str, str]] = {
@@ -812,6 +812,19 @@ class RegisterParams(MeshParams):
     units: choice(LengthUnit) | KnownDistance = Field(
         description="The baseline's length unit, or a known distance: the residuals in mm."
     )
+    zones: Annotated[list[Zone], Field(max_length=256)] = Field(
+        [], description="Zones drawn on the baseline's map (as for /v1/measure), for the picture."
+    )
+    output: output_choice(
+        (Output.JSON, Output.SVG, Output.PNG),
+        "json (application/json), svg (image/svg+xml) or png (image/png): the baseline's map "
+        "with the baseline's and the follow-up's region boundaries and the zones.",
+    ) = None
+
+    @model_validator(mode="after")
+    def _names_tell_apart(self) -> RegisterParams:
+        check_names("zones", self.zones)
+        return self
 
     model_config = ConfigDict(
         json_schema_extra={"examples": [{**MESH_PARAMS_EXAMPLE, "units": "mm"}]}

@@ -5,6 +5,7 @@ sample (moved, noisy, cropped) lands back on it, and its map on the baseline's."
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ from .test_measure import PARAMS as SCALP
 pytestmark = pytest.mark.anyio
 
 PARAMS = {**SCALP, "units": "mm"}
+ARTIFACTS = Path(__file__).parent.parent / "artifacts"
 TURN = Rotation.from_euler("zyx", [0.6, -0.3, 0.4])
 SHIFT = np.array([30.0, -12.0, 8.0])
 
@@ -148,3 +150,19 @@ async def test_the_command_line_registers_two_files(client, tmp_path):
     command = ["register", str(SAMPLES[NAME].path), str(follow), *frame, "--units", "mm"]
     assert main([*command, "--out", str(out)]) == 0
     assert json.loads(out.read_bytes()) == (await register(client, {}, data)).json()
+
+
+@pytest.mark.parametrize("output", ["svg", "png"])
+async def test_the_overlay_shows_both_boundaries_and_the_zones(client, output):
+    data, _, _, _ = follow_up()
+    zone = {"name": "crown", "outer": {"x": [-1.8, -1.4, -1.4, -1.8], "y": [1.4, 1.4, 1.7, 1.7]}}
+    response = await register(client, {"zones": [zone], "output": output}, data)
+    assert response.status_code == 200, response.text
+    if output == "svg":
+        text = response.text
+        assert 'class="boundary"' in text and 'class="curve"' in text and 'class="zone"' in text
+        assert "follow-up: boundary" in text and "crown" in text
+    else:
+        assert response.content.startswith(b"\x89PNG")
+        (ARTIFACTS / "register-overlay.png").parent.mkdir(exist_ok=True)
+        (ARTIFACTS / "register-overlay.png").write_bytes(response.content)

@@ -99,7 +99,7 @@ def _svg_overlays(p: Picture) -> list[str]:
             style = f'fill="{colour}" fill-opacity="0.3" fill-rule="evenodd"'
             kind = "zone"
         else:
-            d = "M" + _rows(overlay.rings[0], "%.1f %.1fL")[:-1]
+            d = "".join("M" + _rows(ring, "%.1f %.1fL")[:-1] for ring in overlay.rings)
             style, kind = 'fill="none"', "curve"
         x, y = overlay.anchor
         parts.append(

@@ -13,7 +13,7 @@ from transforms import Layout
 
 from ..encoding import plain
 from ..jobs import charge, picture_bytes
-from ..params import FlattenParams, MeasureParams, PictureParams, SitesParams
+from ..params import FlattenParams, MeasureParams, PictureParams, RegisterParams, SitesParams
 from ..problems import Problem
 from ..schemas import Metrics, ResolvedParams, Validation
 from . import Output
@@ -22,7 +22,7 @@ from .glb import layout_uv, region_glb
 from .picture import Drawn, describe
 
 if TYPE_CHECKING:
-    from ..operations import Measured, MeshRegion, Placed
+    from ..operations import Measured, MeshRegion, Placed, Registered
 
 #: Vertex ids travel in the GLB as float32 (glTF allows no 32-bit integer attributes).
 FLOAT32_EXACT = 2**24
@@ -199,3 +199,30 @@ SITES_RENDERERS = {
     Output.SVG: sites_svg,
     Output.PNG: sites_png,
 }
+
+
+# -- a follow-up registered ------------------------------------------------------------------
+
+
+def registered_svg(registered: Registered, params: RegisterParams) -> bytes:
+    """The baseline's map with its region's boundary, the follow-up's region's boundary
+    (mapped with the frame the answer gives it) and the zones, as SVG."""
+    return to_svg(_picture(registered.region, params, _overlay(registered)))
+
+
+def registered_png(registered: Registered, params: RegisterParams) -> bytes:
+    """The same picture as PNG (its raster charged first)."""
+    region = registered.region
+    charge(picture_bytes(params.image_width, params.image_height, len(region.mesh.faces)))
+    return to_png(_picture(region, params, _overlay(registered)))
+
+
+def _overlay(registered: Registered) -> tuple[Drawn, ...]:
+    edges = registered.follow_boundary
+    follow = Drawn(tuple(edges), False, "follow-up", f"boundary, {len(edges):,} edges")
+    zones = tuple(Drawn(zone.rings, True, zone.name, "zone") for zone in registered.zones)
+    return (follow, *zones)
+
+
+#: The forms of a registration besides JSON, by :class:`Output`.
+REGISTER_RENDERERS = {Output.SVG: registered_svg, Output.PNG: registered_png}

@@ -13,7 +13,7 @@ from transforms import Layout
 
 from ..encoding import plain
 from ..jobs import charge, picture_bytes
-from ..params import FlattenParams, MeasureParams, PictureParams, RegisterParams, SitesParams
+from ..params import FlattenParams, PictureParams, SitesParams
 from ..problems import Problem
 from ..schemas import Metrics, ResolvedParams, Validation
 from . import Output
@@ -72,18 +72,6 @@ def glb(region: MeshRegion, params: FlattenParams, sites=None) -> bytes:
     return region_glb(positions, uv, flat.vertex_ids, flat.faces, region.faces, extras, sites)
 
 
-def svg(region: MeshRegion, params: FlattenParams) -> bytes:
-    """The picture of the region's map as SVG, ``params.image_width`` by ``image_height``."""
-    return to_svg(_picture(region, params))
-
-
-def png(region: MeshRegion, params: FlattenParams) -> bytes:
-    """The same picture as PNG, its raster charged to the job's memory budget first
-    (:func:`service.jobs.picture_bytes`)."""
-    charge(picture_bytes(params.image_width, params.image_height, len(region.mesh.faces)))
-    return to_png(_picture(region, params))
-
-
 def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...] = (), sites=None):
     resolved = plain(ResolvedParams.of_region(region))
     x, y = region.layout  # repaired when untangled
@@ -91,23 +79,6 @@ def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...]
     return describe(
         flat, resolved, len(region.faces), params.image_width, params.image_height, drawn, sites
     )
-
-
-#: The forms of a flattened region besides JSON, by :class:`Output`.
-RENDERERS = {Output.GLB: glb, Output.SVG: svg, Output.PNG: png}
-
-
-def measured_svg(measured: Measured, params: MeasureParams) -> bytes:
-    """The region's map with the zones filled, named and labelled with their areas, and the
-    curves with their lengths, as SVG."""
-    return to_svg(_picture(measured.region, params, _drawn(measured)))
-
-
-def measured_png(measured: Measured, params: MeasureParams) -> bytes:
-    """The same picture as PNG (its raster charged first, as for /v1/flatten)."""
-    region = measured.region
-    charge(picture_bytes(params.image_width, params.image_height, len(region.mesh.faces)))
-    return to_png(_picture(region, params, _drawn(measured)))
 
 
 def _drawn(measured: Measured) -> tuple[Drawn, ...]:
@@ -135,8 +106,32 @@ def _length_text(length: float, mm_per_unit: float | None) -> str:
     return f"{length * mm_per_unit:.1f} mm"
 
 
-#: The forms of measured zones besides JSON, by :class:`Output`.
-MEASURE_RENDERERS = {Output.SVG: measured_svg, Output.PNG: measured_png}
+def map_renderers(region_of, drawn_of, sites_of=lambda result: None) -> dict:
+    """The SVG and PNG renderers, ``(result, params) -> bytes``, of a result's region's map
+    (``region_of(result)``) with ``drawn_of(result)`` (zones, curves) and ``sites_of(result)``
+    ((n, 2) layout points or None) over it; the PNG's raster charged first, as for
+    /v1/flatten."""
+
+    def as_svg(result, params: PictureParams) -> bytes:
+        picture = _picture(region_of(result), params, drawn_of(result), sites_of(result))
+        return to_svg(picture)
+
+    def as_png(result, params: PictureParams) -> bytes:
+        region = region_of(result)
+        charge(picture_bytes(params.image_width, params.image_height, len(region.mesh.faces)))
+        return to_png(_picture(region, params, drawn_of(result), sites_of(result)))
+
+    return {Output.SVG: as_svg, Output.PNG: as_png}
+
+
+#: The forms of a flattened region besides JSON, by :class:`Output`: the GLB, and the picture
+#: of its map, ``params.image_width`` by ``image_height``.
+RENDERERS = {Output.GLB: glb, **map_renderers(lambda region: region, lambda region: ())}
+
+
+#: The forms of measured zones besides JSON, by :class:`Output`: the map with the zones
+#: filled, named and labelled with their areas, and the curves with their lengths.
+MEASURE_RENDERERS = map_renderers(lambda measured: measured.region, _drawn)
 
 
 # -- sites ---------------------------------------------------------------------------------
@@ -172,18 +167,6 @@ def sites_glb(placed: Placed, params: SitesParams) -> bytes:
     return glb(placed.region, params, sites)
 
 
-def sites_svg(placed: Placed, params: SitesParams) -> bytes:
-    """The region's map with the zones and the sites (up to ``SVG_SITES`` of them) as SVG."""
-    return to_svg(_picture(placed.region, params, _site_zones(placed), placed.map_points))
-
-
-def sites_png(placed: Placed, params: SitesParams) -> bytes:
-    """The same picture as PNG, every site drawn (its raster charged first)."""
-    region = placed.region
-    charge(picture_bytes(params.image_width, params.image_height, len(region.mesh.faces)))
-    return to_png(_picture(region, params, _site_zones(placed), placed.map_points))
-
-
 def _site_zones(placed: Placed) -> tuple[Drawn, ...]:
     return tuple(
         Drawn(zone.outline.rings, True, zone.name, f"{zone.quota:,} sites")
@@ -196,25 +179,12 @@ def _site_zones(placed: Placed) -> tuple[Drawn, ...]:
 SITES_RENDERERS = {
     Output.PLY: sites_ply,
     Output.GLB: sites_glb,
-    Output.SVG: sites_svg,
-    Output.PNG: sites_png,
+    # The map with the zones and the sites (an SVG draws up to SVG_SITES of them).
+    **map_renderers(lambda placed: placed.region, _site_zones, lambda placed: placed.map_points),
 }
 
 
 # -- a follow-up registered ------------------------------------------------------------------
-
-
-def registered_svg(registered: Registered, params: RegisterParams) -> bytes:
-    """The baseline's map with its region's boundary, the follow-up's region's boundary
-    (mapped with the frame the answer gives it) and the zones, as SVG."""
-    return to_svg(_picture(registered.region, params, _overlay(registered)))
-
-
-def registered_png(registered: Registered, params: RegisterParams) -> bytes:
-    """The same picture as PNG (its raster charged first)."""
-    region = registered.region
-    charge(picture_bytes(params.image_width, params.image_height, len(region.mesh.faces)))
-    return to_png(_picture(region, params, _overlay(registered)))
 
 
 def _overlay(registered: Registered) -> tuple[Drawn, ...]:
@@ -224,5 +194,7 @@ def _overlay(registered: Registered) -> tuple[Drawn, ...]:
     return (follow, *zones)
 
 
-#: The forms of a registration besides JSON, by :class:`Output`.
-REGISTER_RENDERERS = {Output.SVG: registered_svg, Output.PNG: registered_png}
+#: The forms of a registration besides JSON, by :class:`Output`: the baseline's map with its
+#: region's boundary, the follow-up's (mapped with the frame the answer gives it) and the
+#: zones.
+REGISTER_RENDERERS = map_renderers(lambda registered: registered.region, _overlay)

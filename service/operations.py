@@ -50,7 +50,7 @@ from transforms import (
 )
 from transforms import selection as select
 from transforms.region import flagged_mask
-from transforms.registration import Registration, Surface, register
+from transforms.registration import Registration, RegistrationAmbiguous, Surface, register
 from transforms.sites import (
     SPACING_RULE,
     SitePart,
@@ -859,7 +859,16 @@ def register_scans(mesh: Mesh, params: RegisterParams, settings: Settings) -> Re
     moving = Surface.of(follow.vertices, follow.faces)
     pairs = _landmark_pairs(mesh, follow, params)
     similar = params.mode is RegisterMode.SIMILARITY
-    found = register(moving, base, pairs, scale=similar, focus=focus)
+    try:
+        found = register(moving, base, pairs, scale=similar, focus=focus)
+    except RegistrationAmbiguous as error:
+        raise Problem(
+            422,
+            f"follow_up: could not register it: {error}; give the landmarks of both scans (or "
+            "mode similarity, if the scans differ in scale)",
+            "invalid-request",
+            "follow_up",
+        ) from None
     on_base = found.residuals * mm_per_unit <= OVERLAP_MM
     overlap = float(on_base.mean())
     if overlap < MIN_OVERLAP:

@@ -773,6 +773,16 @@ class SitesParams(MeshParams, PictureParams):
     )
 
 
+#: Landmarks at vertices of the examples' unit icosahedron (the left and right tragi on
+#: either side of x, the nasion in front, +y, and the inion behind).
+_EXAMPLE_LANDMARKS = {
+    "nasion": [0.0, 0.525731112, 0.850650808],
+    "inion": [0.0, -0.525731112, 0.850650808],
+    "left_tragus": [-0.850650808, 0.0, 0.525731112],
+    "right_tragus": [0.850650808, 0.0, 0.525731112],
+}
+
+
 class RegisterMode(StrEnum):
     """What a registration may change of the follow-up."""
 
@@ -827,5 +837,13 @@ class RegisterParams(MeshParams, PictureParams):
         return self
 
     model_config = ConfigDict(
-        json_schema_extra={"examples": [{**MESH_PARAMS_EXAMPLE, "units": "mm"}]}
+        json_schema_extra={
+            "examples": [
+                {
+                    **MESH_PARAMS_EXAMPLE,
+                    "units": "mm",
+                    "landmarks": {"baseline": _EXAMPLE_LANDMARKS, "follow_up": _EXAMPLE_LANDMARKS},
+                }
+            ]
+        }
     )

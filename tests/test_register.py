@@ -115,8 +115,6 @@ async def test_a_scaled_follow_up_needs_similarity(client):
     assert similar["scale"] == pytest.approx(1 / 1.04, rel=0.003)
     distance, _ = errors(similar["transform"], truth, moved)
     assert distance < 0.5
-    rigid = (await register(client, {}, data)).json()
-    assert rigid["scale"] == pytest.approx(1.0) and rigid["rms_mm"] > 2 * similar["rms_mm"]
 
 
 async def test_a_scan_of_something_else_is_refused(client):
@@ -124,7 +122,7 @@ async def test_a_scan_of_something_else_is_refused(client):
     box = trimesh.creation.box(extents=[150, 180, 200]).subdivide().subdivide().subdivide()
     data = obj_of(np.asarray(box.vertices), np.asarray(box.faces))
     body = problem(await register(client, {}, data), 422, "follow_up")
-    assert "could not register it" in body["detail"] and "within 2 mm" in body["detail"]
+    assert "could not register it" in body["detail"]
 
 
 async def test_bad_register_requests_name_the_part_or_field(client):
@@ -166,3 +164,19 @@ async def test_the_overlay_shows_both_boundaries_and_the_zones(client, output):
         assert response.content.startswith(b"\x89PNG")
         (ARTIFACTS / "register-overlay.png").parent.mkdir(exist_ok=True)
         (ARTIFACTS / "register-overlay.png").write_bytes(response.content)
+
+
+async def test_a_follow_up_cropped_in_front_is_not_turned_round(client):
+    """The face cut away (its front 40 % gone): the moments' axes come in another order, and
+    a start turned half round must not win."""
+    vertices, faces = load_sample(NAME)
+    front = np.asarray(vertices)[faces].mean(axis=1)[:, 1] < 40
+    answer = (await register(client, {}, obj_of(np.asarray(vertices), faces[front]))).json()
+    distance, angle = errors(answer["transform"], np.eye(4), np.asarray(vertices))
+    assert distance < 0.5 and angle < 0.2, (distance, angle)
+
+
+async def test_a_scaled_follow_up_in_rigid_mode_is_refused_not_misaligned(client):
+    data, _, _, _ = follow_up(scale=1.05)
+    body = problem(await register(client, {}, data), 422, "follow_up")
+    assert "could not register it" in body["detail"]

@@ -10,6 +10,7 @@ trimesh's ICP is point-to-point, which slides along a smooth head and converges 
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +24,12 @@ from .arrays import cross_rows, triangle_areas, unit_rows
 SAMPLES = 20_000
 #: ICP rounds at the most (and for comparing starts), and the step (radians, and in units
 #: of the median pair distance) that ends them.
-MAX_ROUNDS, COARSE_ROUNDS, SETTLED = 60, 25, 1e-4
+MAX_ROUNDS, COARSE_ROUNDS, SETTLED = 60, 15, 1e-4
+#: The starts are compared on every ``COARSE_EVERY``-th sample.
+COARSE_EVERY = 20
+#: Alignments farther apart than this (degrees) are distinct; two distinct ones whose shares
+#: of samples on the baseline differ by less than ``AMBIGUOUS`` are refused.
+DISTINCT_DEG, AMBIGUOUS = 10.0, 0.1
 #: Pairs farther apart than this many times the ``TRIM_QUANTILE`` of their distances are
 #: left out of a round: up to about two thirds of either surface may have no counterpart.
 TRIM, TRIM_QUANTILE = 2.5, 30.0
@@ -64,12 +70,14 @@ class Surface:
 @dataclass(frozen=True)
 class Registration:
     """A 4x4 ``matrix`` taking the follow-up onto the baseline (``scale`` 1 when rigid);
-    ``residuals`` are the follow-up samples' point-to-plane distances to the baseline (n,);
-    ``paired`` which of them lie within the trimming distance at the end."""
+    ``residuals`` are the follow-up samples' point-to-plane distances to the baseline (n,),
+    ``distances`` to their nearest baseline samples; ``paired`` which of them lie within the
+    trimming distance at the end."""
 
     matrix: np.ndarray
     scale: float
     residuals: np.ndarray
+    distances: np.ndarray
     paired: np.ndarray
 
 
@@ -86,24 +94,25 @@ def from_pairs(source: np.ndarray, target: np.ndarray, scale: bool) -> np.ndarra
 
 
 def moment_starts(source: Surface, target: Surface) -> list[np.ndarray]:
-    """4x4 starts that take ``source``'s centroid and principal axes onto ``target``'s, in
-    the four proper ways the axes' signs allow."""
-    starts = []
+    """4x4 starts that take ``source``'s centroid onto ``target``'s and its principal axes
+    onto theirs, in each of the 24 proper ways (the axes' order and signs): a cropped scan's
+    axes may come in another order than the whole one's."""
     frames = []
     for surface in (source, target):
         centre = surface.points.mean(axis=0)
         _, _, axes = np.linalg.svd(surface.points - centre, full_matrices=False)
         frames.append((centre, axes))
     (c_s, a_s), (c_t, a_t) = frames
-    for signs in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-        flip = np.diag([signs[0], signs[1], signs[0] * signs[1]])
-        rotation = a_t.T @ flip @ a_s
-        if np.linalg.det(rotation) < 0:
-            rotation = a_t.T @ (flip @ np.diag([1, 1, -1])) @ a_s
-        matrix = np.eye(4)
-        matrix[:3, :3] = rotation
-        matrix[:3, 3] = c_t - rotation @ c_s
-        starts.append(matrix)
+    starts = []
+    for order in itertools.permutations(range(3)):
+        for signs in itertools.product((1, -1), repeat=3):
+            rotation = a_t.T @ (np.diag(signs) @ a_s[list(order)])
+            if np.linalg.det(rotation) < 0:
+                continue
+            matrix = np.eye(4)
+            matrix[:3, :3] = rotation
+            matrix[:3, 3] = c_t - rotation @ c_s
+            starts.append(matrix)
     return starts
 
 
@@ -160,7 +169,19 @@ def measured(source: Surface, target: Surface, matrix: np.ndarray, tree=None) ->
     gap = moved - target.points[nearest]
     residuals = np.abs(np.einsum("pd,pd->p", gap, target.normals[nearest]))
     factor = float(np.cbrt(np.linalg.det(matrix[:3, :3])))
-    return Registration(matrix, factor, residuals, distance <= _trim(distance))
+    return Registration(matrix, factor, residuals, distance, distance <= _trim(distance))
+
+
+class RegistrationAmbiguous(ValueError):
+    """Two different alignments fit the follow-up about as well: the surfaces alone cannot
+    tell them apart (landmarks can)."""
+
+    def __init__(self, angle: float, shares: tuple[float, float]):
+        self.angle, self.shares = angle, shares
+        super().__init__(
+            f"two alignments {angle:.0f} degrees apart fit about as well ({shares[0]:.0%} and "
+            f"{shares[1]:.0%} of the follow-up on the baseline)"
+        )
 
 
 def register(
@@ -171,28 +192,63 @@ def register(
     focus: Surface | None = None,
 ) -> Registration:
     """The follow-up (``source``) registered to the baseline (``target``, the whole scan):
-    from the landmarks' ``pairs`` ((k, 3) each, follow-up then baseline) when given, else
-    from the one of :func:`moment_starts` whose ICP on a tenth of the samples leaves the least
-    trimmed residual per paired share; refined on all the samples, then on ``focus`` (the
-    part of the baseline to align on) when given. The residuals are against the whole
-    baseline."""
+    from the landmarks' ``pairs`` ((k, 3) each, follow-up then baseline) when given; else
+    each of :func:`moment_starts` is refined on a tenth of the samples, the two best distinct
+    ones (by the share of samples on the target) on all of them, and the better kept, unless
+    the other fits about as well (``AMBIGUOUS``). Then refined on ``focus`` (the part of the
+    baseline to align on) when given; the residuals are against the whole baseline.
+
+    Raises
+    ------
+    RegistrationAmbiguous
+        Without landmarks, two alignments more than ``DISTINCT_DEG`` apart leave shares on
+        the baseline within ``AMBIGUOUS`` of each other.
+    """
     if pairs is not None:
-        start = from_pairs(*pairs, scale=scale)
+        found = icp(source, target, from_pairs(*pairs, scale=scale), scale)
     else:
-        coarse_source, coarse_target = source.every(10), target.every(10)
-        trials = [
-            icp(coarse_source, coarse_target, start, scale, rounds=COARSE_ROUNDS)
-            for start in moment_starts(source, target)
-        ]
-        start = min(trials, key=_badness).matrix
-    found = icp(source, target, start, scale)
+        found = _best_of_moments(source, target, scale)
     if focus is not None:
         found = measured(source, target, icp(source, focus, found.matrix, scale).matrix)
     return found
 
 
-def _badness(found: Registration) -> float:
-    """The trimmed residual's RMS over the share of samples paired: low for a close fit of
-    much of the surface."""
-    paired = found.residuals[found.paired]
-    return float(np.sqrt(np.mean(paired**2))) / max(float(found.paired.mean()), 1e-9)
+def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registration:
+    coarse_source, coarse_target = source.every(COARSE_EVERY), target.every(COARSE_EVERY)
+    coarse_tolerance = _on_surface(coarse_target)
+    trials = [
+        icp(coarse_source, coarse_target, start, scale, rounds=COARSE_ROUNDS)
+        for start in moment_starts(source, target)
+    ]
+    trials.sort(key=lambda trial: -_share(trial, coarse_tolerance))
+    best = [trials[0]]
+    best += [t for t in trials[1:] if _angle(t.matrix, trials[0].matrix) > DISTINCT_DEG][:1]
+    tolerance = _on_surface(target)
+    refined = sorted(
+        (icp(source, target, trial.matrix, scale) for trial in best),
+        key=lambda found: -_share(found, tolerance),
+    )
+    if len(refined) > 1 and _angle(refined[0].matrix, refined[1].matrix) > DISTINCT_DEG:
+        shares = (_share(refined[0], tolerance), _share(refined[1], tolerance))
+        if shares[0] - shares[1] < AMBIGUOUS:
+            raise RegistrationAmbiguous(_angle(refined[0].matrix, refined[1].matrix), shares)
+    return refined[0]
+
+
+def _on_surface(surface: Surface) -> float:
+    """How close a sample must be to a surface's samples to lie on it: twice their median
+    spacing."""
+    distance, _ = cKDTree(surface.points).query(surface.points, k=2)
+    return 2.0 * float(np.median(distance[:, 1]))
+
+
+def _share(found: Registration, tolerance: float) -> float:
+    """The share of the samples within ``tolerance`` of the target's nearest sample."""
+    return float(np.mean(found.distances <= tolerance))
+
+
+def _angle(first: np.ndarray, second: np.ndarray) -> float:
+    """Degrees between the rotations of two 4x4 transforms (their scales divided out)."""
+    turn = first[:3, :3] @ second[:3, :3].T
+    turn /= np.cbrt(np.linalg.det(turn))
+    return float(np.degrees(Rotation.from_matrix(turn).magnitude()))

@@ -353,6 +353,56 @@ def test_grafts_placed_in_a_zone_show_on_the_map_the_head_and_in_the_table(serve
     assert not problems, problems
 
 
+#: Which side of the head each landmark is clicked from.
+VIEWS = {
+    "nasion": "front",
+    "inion": "back",
+    "left_tragus": "left",
+    "right_tragus": "right",
+    "vertex": "top",
+}
+
+
+def test_landmarks_clicked_on_the_head_give_the_map_the_heads_frame(server):
+    """Place on the head, then each landmark clicked where the page shows it, from its side
+    of the head (the whole mesh is loaded for it): the page records surface points near the
+    landmarks, and the map flattened with them has the frame /v1/flatten gives them."""
+    from .test_landmarks import on_head
+
+    targets = on_head()
+    problems: list[str] = []
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        assert page.locator("#pick").is_disabled()
+        flatten_sample(page)
+        page.click("#pick")
+        page.wait_for_selector(
+            "#landmark-list[data-state=picking]", state="attached", timeout=30_000
+        )
+        for name, side in VIEWS.items():
+            page.select_option("#landmark", name)
+            page.click(f"button.view[data-view={side}]")
+            page.wait_for_timeout(200)  # a frame with the new view
+            x, y = page.evaluate("(p) => window.meshflatDemo.project(p)", targets[name])
+            page.mouse.click(x, y)
+        listed = page.locator("#landmark-list")
+        assert listed.get_attribute("data-count") == "5"
+        points = json.loads(listed.get_attribute("data-points"))
+        for name, target in targets.items():
+            assert math.dist(points[name], target) < 3.0, (name, points[name], target)
+        page.screenshot(path=str(ARTIFACTS / "demo-landmarks.png"), full_page=True)
+        page.check("#use-landmarks")
+        page.click("#go")
+        page.wait_for_selector("body[data-state=shown]", timeout=60_000)
+        shown = [float(c) for c in page.locator("#center").input_value().split(",")]
+        region = PARAMS["region"]
+        expected = post(server, "/v1/flatten", {"region": region, "sigma": 0.3,
+                                                 "frame": {"landmarks": points}})  # fmt: skip
+        assert shown == pytest.approx(expected["params"]["center"], abs=1e-4)
+        assert "seam-free" in page.locator("#summary").inner_text()
+    assert not problems, problems
+
+
 def test_docs_page_lists_the_operations_with_nothing_fetched_from_elsewhere(server):
     """/docs works behind a firewall: Swagger UI's script and styles come from the service
     (fastapi-offline), and the page lists every route of the document."""

@@ -67,7 +67,11 @@ function params() {
   const cone = { axis: vector('axis'), half_angle_deg: Number($('angle').value) };
   if ($('apex').value.trim()) cone.apex = vector('apex');
   const p = { region: { cone }, layout: $('layout').value };
-  if ($('auto').checked) {
+  if ($('use-landmarks').checked) {
+    // The head's frame: centre and rotation from the landmarks, sigma as given (or fitted).
+    p.frame = { landmarks: { ...landmarks.points } };
+    p.sigma = $('sigma').value.trim() ? Number($('sigma').value) : 'auto';
+  } else if ($('auto').checked) {
     // Chosen by the service, and the map untangled: one piece, every triangle the right way.
     const rotation = $('up').value.trim() ? { pole: 'auto', up: vector('up') } : 'auto';
     Object.assign(p, { center: 'auto', rotation, sigma: 'auto', untangle: true });
@@ -363,6 +367,106 @@ function closeZone() {
   measure();
 }
 
+// -- landmarks placed on the whole head -----------------------------------------------------
+
+const LANDMARKS = ['nasion', 'inion', 'left_tragus', 'right_tragus', 'vertex'];
+const REQUIRED = LANDMARKS.slice(0, 4);
+const landmarks = { points: {}, head: null, markers: {}, picking: false, frame: null };
+const raycaster = new THREE.Raycaster();
+
+// The whole mesh, faint, for clicking the landmarks the region leaves out (the tragi, the
+// nasion): /v1/flatten's GLB of every face, in the file's coordinates as the region's.
+async function loadHead() {
+  if (landmarks.head || !map) return;
+  const p = { ...map.params, region: null, untangle: false };
+  const response = await post('/v1/flatten', map.mesh, p, 'model/gltf-binary');
+  const gltf = await new GLTFLoader().parseAsync(await response.arrayBuffer(), '');
+  gltf.scene.traverse((node) => {
+    if (node.isMesh) node.material = new THREE.MeshLambertMaterial({ color: 0xb8c4cc, transparent: true, opacity: 0.55, side: THREE.DoubleSide });
+  });
+  landmarks.head = gltf.scene;
+  landmarks.head.name = 'head';
+  scene.add(landmarks.head);
+}
+
+async function startPicking() {
+  $('pick').disabled = true;
+  try {
+    await loadHead();
+    landmarks.picking = true;
+    $('view').classList.add('picking');
+    $('landmark-list').dataset.state = 'picking';
+  } catch (error) {
+    setStatus(error.message, true);
+  } finally {
+    $('pick').disabled = !map;
+  }
+}
+
+function markLandmark(name, point) {
+  if (landmarks.markers[name]) scene.remove(landmarks.markers[name]);
+  const size = map ? map.size / 60 : 1;
+  const marker = new THREE.Mesh(new THREE.SphereGeometry(size, 12, 8), new THREE.MeshBasicMaterial({ color: 0xd55e00 }));
+  marker.position.set(...point);
+  scene.add(marker);
+  landmarks.markers[name] = marker;
+}
+
+function listLandmarks() {
+  const placed = LANDMARKS.filter((name) => landmarks.points[name]);
+  $('landmark-list').textContent = placed.map((n) => `${n}: ${landmarks.points[n].map((c) => c.toFixed(2)).join(', ')}`).join('\n');
+  $('landmark-list').dataset.count = String(placed.length);
+  $('landmark-list').dataset.points = JSON.stringify(landmarks.points);
+  const ready = REQUIRED.every((name) => landmarks.points[name]);
+  $('use-landmarks').disabled = !ready;
+  if (!ready) $('use-landmarks').checked = false;
+}
+
+// A click on the 3D view while placing: the head's surface point under it, for the landmark
+// selected; then the next one is selected.
+function pickLandmark(event) {
+  if (!landmarks.picking || !landmarks.head) return;
+  const box = renderer.domElement.getBoundingClientRect();
+  const pointer = new THREE.Vector2(((event.clientX - box.left) / box.width) * 2 - 1, -((event.clientY - box.top) / box.height) * 2 + 1);
+  raycaster.setFromCamera(pointer, camera);
+  const [hit] = raycaster.intersectObject(landmarks.head, true);
+  if (!hit) return;
+  const name = $('landmark').value;
+  landmarks.points[name] = hit.point.toArray();
+  markLandmark(name, landmarks.points[name]);
+  listLandmarks();
+  const next = LANDMARKS[(LANDMARKS.indexOf(name) + 1) % LANDMARKS.length];
+  $('landmark').value = next;
+}
+
+function clearLandmarks() {
+  Object.values(landmarks.markers).forEach((marker) => scene.remove(marker));
+  Object.assign(landmarks, { points: {}, markers: {}, picking: false });
+  $('view').classList.remove('picking');
+  $('landmark').value = LANDMARKS[0];
+  listLandmarks();
+}
+
+// The camera from a side of the head, by the frame of the map shown: local +Z is the front,
+// -Y (away from the pole) the top, +X the right.
+function viewFrom(side) {
+  if (!map) return;
+  const [x, y, z] = map.rotation.map((row) => new THREE.Vector3(...row));
+  const direction = { front: z, back: z.clone().negate(), right: x, left: x.clone().negate(), top: y.clone().negate() }[side];
+  camera.position.copy(controls.target).add(direction.multiplyScalar(map.size * 3));
+  camera.up.copy(side === 'top' ? z : y.clone().negate());
+  controls.update();
+}
+
+// For tests and integrations: where a world point shows in the page's pixels.
+window.meshflatDemo = {
+  project(point) {
+    const box = renderer.domElement.getBoundingClientRect();
+    const ndc = new THREE.Vector3(...point).project(camera);
+    return [box.left + ((ndc.x + 1) / 2) * box.width, box.top + ((1 - ndc.y) / 2) * box.height];
+  },
+};
+
 // -- the page -----------------------------------------------------------------------------
 
 function clearPresets() {
@@ -394,6 +498,11 @@ async function flatten(event) {
   $('go').disabled = true;
   $('draw').disabled = true;
   $('place-sites').disabled = true;
+  $('pick').disabled = true;
+  if (landmarks.head) scene.remove(landmarks.head);
+  landmarks.head = null;
+  landmarks.picking = false;
+  $('view').classList.remove('picking');
   clearZone();
   map = null;
   document.body.dataset.state = 'flattening';
@@ -420,8 +529,11 @@ async function flatten(event) {
     const { method, sigma, center, rotation } = extras.params;
     const json = gltf.parser.json;
     const uv = json.accessors[json.meshes[0].primitives[0].attributes.TEXCOORD_0];
-    map = { mesh, params: { ...p, method, sigma, center, rotation }, uv: { ...extras.uv, max: uv.max } };
+    const { frame: _frame, ...resolved } = p; // the landmarks resolve to this centre and rotation
+    const size = new THREE.Box3().setFromObject(gltf.scene).getBoundingSphere(new THREE.Sphere()).radius;
+    map = { mesh, params: { ...resolved, method, sigma, center, rotation }, uv: { ...extras.uv, max: uv.max }, rotation, size };
     $('draw').disabled = false;
+    $('pick').disabled = false;
     $('place-sites').disabled = false;
     document.body.dataset.vertices = String(vertices);
     document.body.dataset.state = 'shown';
@@ -444,6 +556,10 @@ $('form').addEventListener('submit', flatten);
 $('draw').addEventListener('click', startZone);
 $('clear-zone').addEventListener('click', clearZone);
 $('place-sites').addEventListener('click', placeSites);
+$('pick').addEventListener('click', startPicking);
+$('clear-landmarks').addEventListener('click', clearLandmarks);
+$('view').addEventListener('click', pickLandmark);
+document.querySelectorAll('button.view').forEach((button) => button.addEventListener('click', () => viewFrom(button.dataset.view)));
 $('units').addEventListener('change', () => zone.closed && measure());
 $('map').addEventListener('click', addPoint);
 $('map').addEventListener('dblclick', closeZone);

@@ -12,8 +12,7 @@ They know nothing of HTTP. Bad input surfaces as the core's
 from __future__ import annotations
 
 import io
-from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cache
 
 import numpy as np
@@ -50,7 +49,14 @@ from transforms import (
 )
 from transforms import selection as select
 from transforms.region import flagged_mask
-from transforms.registration import Registration, RegistrationAmbiguous, Surface, register
+from transforms.registration import (
+    Registration,
+    RegistrationAmbiguous,
+    Surface,
+    apply,
+    on_surface_distance,
+    register,
+)
 from transforms.sites import (
     SPACING_RULE,
     SitePart,
@@ -593,7 +599,7 @@ def place(mesh: Mesh, params: SitesParams, settings: Settings) -> Placed:
     else:
         found = list(_zone_parts(triangles, params, outlines, open_faces))
     unit_area = mm_per_unit**2 / 100.0  # cm² per mesh unit²
-    expected = [float(np.dot(part.weight, part.density)) * unit_area for part in found]
+    expected = [float(np.dot(part.core.area, part.core.density)) * unit_area for part in found]
     total = params.count if params.count is not None else sum(expected)
     check_count(round(total), settings.max_sites, "sites", "MESHFLAT_MAX_SITES")
     quotas = _quotas(expected, params.count)
@@ -602,7 +608,7 @@ def place(mesh: Mesh, params: SitesParams, settings: Settings) -> Placed:
     parts, results = [], []
     for part, quota, count in zip(found, quotas, expected, strict=True):
         # The density placed: as asked, scaled to the quota (a count, or rounding).
-        placed = part.density * unit_area * (quota / count if count > 0 else 0.0)
+        placed = part.core.density * unit_area * (quota / count if count > 0 else 0.0)
         if asked is None:  # the default rule (13.1) at the density placed
             with np.errstate(divide="ignore"):
                 spacing = SPACING_RULE / np.sqrt(placed)
@@ -614,7 +620,7 @@ def place(mesh: Mesh, params: SitesParams, settings: Settings) -> Placed:
         results.append(part.result(quota, least, unit_area))
     sites = _placed(triangles, parts, params, mm_per_unit)
     normals = site_normals(triangles.surface_points, triangles.faces, sites, region.frame.center)
-    map_points = np.einsum("pk,pkd->pd", sites.weights, triangles.corners(sites.triangles))
+    map_points = triangles.on_map(sites.triangles, sites.weights)
     theta, phi, _ = world_to_angles(sites.points, region.frame, region.chart)
     return Placed(
         region, triangles, sites, normals, map_points, theta, phi, tuple(results),
@@ -662,36 +668,30 @@ def _placed(triangles: MapTriangles, parts: list[SitePart], params: SitesParams,
 
 @dataclass(frozen=True)
 class _Part:
-    """A zone's (or the region's) triangles open to sites: their area in it and the density
-    asked for on each (per cm²)."""
+    """A zone's (or the region's) triangles open to sites, as the core's part before its
+    quota and spacing (known once every part's expected count is), with what the answer says
+    of the zone: its outline, its whole surface area and the one density asked for (None for
+    a density map). ``core.density`` is the density asked for on each triangle, per cm²."""
 
-    name: str
+    core: SitePart
     outline: Outline | None
-    triangles: np.ndarray
-    weight: np.ndarray
-    density: np.ndarray
-    partial: np.ndarray | None
-    inside: Callable[[np.ndarray, np.ndarray], np.ndarray] | None
-    whole: np.ndarray | None  # the whole areas of the triangles a zone cuts
     area: float
-    asked: float | None  # the one density of a zone, None for a density map
+    asked: float | None
 
     def sites(self, quota: int, spacing: np.ndarray) -> SitePart:
         """The core's part: ``quota`` sites at ``spacing`` ((j,) float) on these triangles."""
-        return SitePart(
-            self.triangles, self.weight, quota, spacing, self.density, self.partial,
-            self.inside, self.whole, self.name,
-        )  # fmt: skip
+        return replace(self.core, quota=quota, spacing=spacing)
 
     def result(self, quota: int, spacing: float | None, unit_area: float) -> SiteZoneResult:
-        open_area = float(self.weight[self.density > 0].sum())
+        weight, density = self.core.area, self.core.density
+        open_area = float(weight[density > 0].sum())
         mean = self.asked
         if mean is None:  # a density map: its mean over the area it puts sites on
-            mean = float(np.dot(self.weight, self.density) / open_area) if open_area else 0.0
+            mean = float(np.dot(weight, density) / open_area) if open_area else 0.0
         open_cm2 = open_area * unit_area
         achieved = quota / open_cm2 if open_cm2 > 0 else 0.0
         return SiteZoneResult(
-            self.name, self.outline, self.area, open_area, mean, quota, spacing, achieved
+            self.core.name, self.outline, self.area, open_area, mean, quota, spacing, achieved
         )
 
 
@@ -702,10 +702,8 @@ def _zone_parts(triangles: MapTriangles, params: SitesParams, outlines, open_fac
         faces = np.flatnonzero(open_faces)
         asked = float(params.density_per_cm2)
         density = np.full(len(faces), asked)
-        yield _Part(
-            "region", None, faces, area[faces], density, None, None, None, float(area.sum()),
-            asked,
-        )  # fmt: skip
+        core = SitePart(faces, area[faces], 0, 0.0, density, name="region")
+        yield _Part(core, None, float(area.sum()), asked)
         return
     for outline, zone in zip(outlines, params.zones, strict=True):
         cover = cover_zone(triangles, outline.rings)
@@ -717,13 +715,13 @@ def _zone_parts(triangles: MapTriangles, params: SitesParams, outlines, open_fac
         density = np.full(int(keep.sum()), asked)
 
         def inside(faces, weights, cover=cover):
-            corners = triangles.corners(faces)
-            return cover.winding(np.einsum("pk,pkd->pd", weights, corners)) != 0
+            return cover.winding(triangles.on_map(faces, weights)) != 0
 
-        yield _Part(
-            outline.name, outline, faces[keep], weight[keep], density, partial[keep], inside,
-            area[faces[keep]], cover.total(area), asked,
+        core = SitePart(
+            faces[keep], weight[keep], 0, 0.0, density, partial[keep], inside,
+            area[faces[keep]], outline.name,
         )  # fmt: skip
+        yield _Part(core, outline, cover.total(area), asked)
 
 
 def _density_image(params: SitesParams) -> np.ndarray | None:
@@ -781,10 +779,8 @@ def _density_map_part(region: MeshRegion, triangles: MapTriangles, image, open_f
     density[shown] = image[row[shown], column[shown]]
     faces = np.flatnonzero(open_faces)
     area = triangles.surface_area
-    return _Part(
-        "density map", None, faces, area[faces], density[faces], None, None, None,
-        float(area.sum()), None,
-    )  # fmt: skip
+    core = SitePart(faces, area[faces], 0, 0.0, density[faces], name="density map")
+    return _Part(core, None, float(area.sum()), None)
 
 
 def _quotas(expected: list[float], count: int | None) -> list[int]:
@@ -901,9 +897,9 @@ def _follow_boundary(follow: Mesh, found, focus: Surface, frame: Frame, region) 
     registered centroids lie on the baseline's region (within two sample spacings of its
     samples), flattened with the baseline's frame expressed for the follow-up."""
     centroids = follow.vertices[follow.faces].mean(axis=1)
-    moved = centroids @ found.matrix[:3, :3].T + found.matrix[:3, 3]
-    spacing = np.median(cKDTree(focus.points).query(focus.points, k=2)[0][:, 1])
-    near = cKDTree(focus.points).query(moved)[0] <= 2.0 * spacing
+    moved = apply(found.matrix, centroids)
+    tree = cKDTree(focus.points)
+    near = tree.query(moved)[0] <= on_surface_distance(focus, tree)
     if not near.any():
         return np.empty((0, 2, 2))
     flat = flatten_region(follow.vertices, follow.faces[near], frame, region.chart,

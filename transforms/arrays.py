@@ -273,6 +273,19 @@ def triangle_areas(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return nx
 
 
+def face_cross(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(m, 3) float: each triangle's sides' cross product ``(p1 - p0) x (p2 - p0)``: its normal
+    following the winding, twice its area long."""
+    corners = points[faces]
+    return cross_rows(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+
+
+def combine(values: np.ndarray, faces: np.ndarray, triangles, weights) -> np.ndarray:
+    """(p, d) float: the corners' ``values`` ((k, d), per vertex) of ``faces[triangles]``
+    combined with barycentric ``weights`` ((p, 3))."""
+    return np.einsum("pk,pkd->pd", weights, values[faces[triangles]])
+
+
 def blocks(n: int, size: int | None = None):
     """Slices ``[start, stop)`` covering ``range(n)`` in steps of ``size`` (``BLOCK_ROWS``)."""
     size = size or BLOCK_ROWS

@@ -14,7 +14,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .arrays import as_faces, as_points, triangle_areas
+from .arrays import as_faces, as_points, combine, triangle_areas
 from .cellgrid import CellGrid, CellIndex
 from .errors import TransformInputError
 
@@ -137,8 +137,11 @@ class MapTriangles:
 
     def lift(self, triangles: np.ndarray, weights: np.ndarray) -> np.ndarray:
         """(p, 3) float: the surface points with ``weights`` ((p, 3)) in ``triangles``."""
-        corners = self.surface_points[self.faces[triangles]]
-        return np.einsum("pk,pkd->pd", weights, corners)
+        return combine(self.surface_points, self.faces, triangles, weights)
+
+    def on_map(self, triangles: np.ndarray, weights: np.ndarray) -> np.ndarray:
+        """(p, 2) float: the map points with ``weights`` ((p, 3)) in ``triangles``."""
+        return combine(self.map_points, self.faces, triangles, weights)
 
     def locate(self, points) -> tuple[np.ndarray, np.ndarray]:
         """The triangle that holds each map point, and the point's weights in it.

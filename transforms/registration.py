@@ -18,7 +18,8 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 from trimesh.registration import procrustes
 
-from .arrays import cross_rows, triangle_areas, unit_rows
+from .arrays import combine, cross_rows, face_cross, triangle_areas, unit_rows
+from .sampling import systematic_picks
 
 #: Samples drawn on each surface (area-weighted, the same for any pose of it).
 SAMPLES = 20_000
@@ -45,22 +46,14 @@ class Surface:
     @classmethod
     def of(cls, vertices: np.ndarray, faces: np.ndarray, count: int = SAMPLES) -> Surface:
         """Samples at evenly spaced points of the faces' cumulative area (systematic, so the
-        same surface in any pose gives the same samples), each at its face's centroid plus a
-        fixed spread, with the face's normal."""
-        areas = triangle_areas(vertices, faces)
-        cumulative = np.cumsum(areas)
-        picks = (np.arange(count) + 0.5) * (cumulative[-1] / count)
-        face = np.minimum(np.searchsorted(cumulative, picks, side="right"), len(faces) - 1)
-        # Where in its face a pick falls: the pick's share of the face's area, spread evenly.
-        share = (picks - (cumulative[face] - areas[face])) / np.maximum(areas[face], 1e-300)
-        root, t = np.sqrt(np.clip(share, 0.0, 1.0)), np.full(count, 0.5)
-        weights = np.column_stack([1.0 - root, root * (1.0 - t), root * t])
-        corners = vertices[faces[face]]
-        points = np.einsum("pk,pkd->pd", weights, corners)
-        normals, _ = unit_rows(
-            cross_rows(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        )
-        return cls(points, normals)
+        same surface in any pose gives the same samples; :func:`systematic_picks`), each at
+        the share of its face's area it falls at (from the first corner, halfway between the
+        other two), with the face's normal."""
+        face, share = systematic_picks(triangle_areas(vertices, faces), count)
+        root = np.sqrt(share)
+        weights = np.column_stack([1.0 - root, 0.5 * root, 0.5 * root])
+        normals, _ = unit_rows(face_cross(vertices, faces[face]))
+        return cls(combine(vertices, faces, face, weights), normals)
 
     def every(self, step: int) -> Surface:
         """Every ``step``-th sample: a coarser surface for comparing starts."""
@@ -71,14 +64,12 @@ class Surface:
 class Registration:
     """A 4x4 ``matrix`` taking the follow-up onto the baseline (``scale`` 1 when rigid);
     ``residuals`` are the follow-up samples' point-to-plane distances to the baseline (n,),
-    ``distances`` to their nearest baseline samples; ``paired`` which of them lie within the
-    trimming distance at the end."""
+    ``distances`` to their nearest baseline samples."""
 
     matrix: np.ndarray
     scale: float
     residuals: np.ndarray
     distances: np.ndarray
-    paired: np.ndarray
 
 
 def apply(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -161,15 +152,14 @@ def _trim(distance: np.ndarray) -> float:
 
 def measured(source: Surface, target: Surface, matrix: np.ndarray, tree=None) -> Registration:
     """``matrix`` with the residuals of ``source``'s samples against ``target``: their
-    point-to-plane distances to the nearest target samples, and which are within the
-    trimming distance."""
+    point-to-plane distances to the nearest target samples, and those samples' distances."""
     tree = cKDTree(target.points) if tree is None else tree
     moved = apply(matrix, source.points)
     distance, nearest = tree.query(moved)
     gap = moved - target.points[nearest]
     residuals = np.abs(np.einsum("pd,pd->p", gap, target.normals[nearest]))
     factor = float(np.cbrt(np.linalg.det(matrix[:3, :3])))
-    return Registration(matrix, factor, residuals, distance, distance <= _trim(distance))
+    return Registration(matrix, factor, residuals, distance)
 
 
 class RegistrationAmbiguous(ValueError):
@@ -193,10 +183,11 @@ def register(
 ) -> Registration:
     """The follow-up (``source``) registered to the baseline (``target``, the whole scan):
     from the landmarks' ``pairs`` ((k, 3) each, follow-up then baseline) when given; else
-    each of :func:`moment_starts` is refined on a tenth of the samples, the two best distinct
-    ones (by the share of samples on the target) on all of them, and the better kept, unless
-    the other fits about as well (``AMBIGUOUS``). Then refined on ``focus`` (the part of the
-    baseline to align on) when given; the residuals are against the whole baseline.
+    each of :func:`moment_starts` is refined on every ``COARSE_EVERY``-th sample, the two
+    best distinct ones (by the share of samples on the target) on all of them, and the better
+    kept, unless the other fits about as well (``AMBIGUOUS``). Then refined on ``focus`` (the
+    part of the baseline to align on) when given; the residuals are against the whole
+    baseline.
 
     Raises
     ------
@@ -215,7 +206,7 @@ def register(
 
 def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registration:
     coarse_source, coarse_target = source.every(COARSE_EVERY), target.every(COARSE_EVERY)
-    coarse_tolerance = _on_surface(coarse_target)
+    coarse_tolerance = on_surface_distance(coarse_target)
     trials = [
         icp(coarse_source, coarse_target, start, scale, rounds=COARSE_ROUNDS)
         for start in moment_starts(source, target)
@@ -223,7 +214,7 @@ def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registrat
     trials.sort(key=lambda trial: -_share(trial, coarse_tolerance))
     best = [trials[0]]
     best += [t for t in trials[1:] if _angle(t.matrix, trials[0].matrix) > DISTINCT_DEG][:1]
-    tolerance = _on_surface(target)
+    tolerance = on_surface_distance(target)
     refined = sorted(
         (icp(source, target, trial.matrix, scale) for trial in best),
         key=lambda found: -_share(found, tolerance),
@@ -235,10 +226,11 @@ def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registrat
     return refined[0]
 
 
-def _on_surface(surface: Surface) -> float:
-    """How close a sample must be to a surface's samples to lie on it: twice their median
-    spacing."""
-    distance, _ = cKDTree(surface.points).query(surface.points, k=2)
+def on_surface_distance(surface: Surface, tree: cKDTree | None = None) -> float:
+    """How close a point must be to a surface's samples to lie on it: twice their median
+    spacing (``tree``: a k-d tree of them, when at hand)."""
+    tree = cKDTree(surface.points) if tree is None else tree
+    distance, _ = tree.query(surface.points, k=2)
     return 2.0 * float(np.median(distance[:, 1]))
 
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .arrays import cross_rows, unit_rows
+from .arrays import combine, face_cross, unit_rows
 
 #: Random sequential adsorption of disks of diameter ``r`` jams at ``JAMMING / r**2`` sites per
 #: unit area (a coverage of 0.547 of the plane).
@@ -177,12 +177,7 @@ def place_sites(
         which.append(np.full(len(found), number))
     triangles, weights = np.concatenate(triangles), np.concatenate(weights)
     part = np.concatenate(which) if which else np.empty(0, dtype=np.int64)
-    return Sites(triangles, weights, lift(points, faces, triangles, weights), part)
-
-
-def lift(points, faces, triangles, weights) -> np.ndarray:
-    """(p, 3) float: the points with barycentric ``weights`` ((p, 3)) in ``triangles``."""
-    return np.einsum("pk,pkd->pd", weights, points[faces[triangles]])
+    return Sites(triangles, weights, combine(points, faces, triangles, weights), part)
 
 
 class _Kept:
@@ -246,7 +241,7 @@ def _adsorb(points, faces, part: SitePart, rng, kept: _Kept):
             keep = np.ones(size, dtype=bool)
             keep[check] = part.inside(triangles[check], weights[check])
             triangles, weights, spacing = triangles[keep], weights[keep], spacing[keep]
-        candidates = lift(points, faces, triangles, weights)
+        candidates = combine(points, faces, triangles, weights)
         clear = kept.clear_of(candidates, spacing)
         triangles, weights, candidates = triangles[clear], weights[clear], candidates[clear]
         first = _first_apart(kept.recent_points(), candidates, spacing[clear])[:need]
@@ -288,7 +283,7 @@ def _first_apart(recent: np.ndarray, candidates: np.ndarray, spacing: np.ndarray
     return np.flatnonzero(apart[len(recent) :])
 
 
-def vertex_normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def vertex_normals(points: np.ndarray, faces: np.ndarray, cross=None) -> np.ndarray:
     """(k, 3) float: unit vertex normals, each the sum of its faces' normals weighted by
     their areas (the faces' sides' cross products, summed), following the faces' winding;
     zero for a vertex of no face with area.
@@ -297,9 +292,9 @@ def vertex_normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
     ----------
     points : (k, 3) float
     faces : (m, 3) int
+    cross : (m, 3) float or None, :func:`~transforms.arrays.face_cross` when at hand
     """
-    corners = points[faces]
-    normals = cross_rows(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals = face_cross(points, faces) if cross is None else cross
     summed = np.zeros((len(points), 3))
     for c in range(3):
         for k in range(3):
@@ -313,14 +308,12 @@ def site_normals(points: np.ndarray, faces: np.ndarray, sites: Sites, center) ->
     (:func:`vertex_normals`) interpolated with the sites' weights, pointing away from
     ``center`` ((3,) float): all turned over when the faces wind inwards (their normals'
     sum, weighted by area, points towards it)."""
-    normals = vertex_normals(points, faces)
-    corners = points[faces]
-    face_normals = cross_rows(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    outward = np.einsum("md,md->", face_normals, corners.mean(axis=1) - np.asarray(center))
-    if outward < 0:
+    cross = face_cross(points, faces)
+    normals = vertex_normals(points, faces, cross)
+    centroids = points[faces].mean(axis=1)
+    if np.einsum("md,md->", cross, centroids - np.asarray(center)) < 0:
         normals = -normals
-    at_sites = np.einsum("pk,pkd->pd", sites.weights, normals[faces[sites.triangles]])
-    unit, _ = unit_rows(at_sites)
+    unit, _ = unit_rows(combine(normals, faces, sites.triangles, sites.weights))
     return unit
 
 

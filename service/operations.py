@@ -807,8 +807,10 @@ def _quotas(expected: list[float], count: int | None) -> list[int]:
 
 #: A follow-up point lies on the baseline when within this distance of it (mm).
 OVERLAP_MM = 2.0
-#: The least share of the follow-up's area on the baseline for a registration to be given.
-MIN_OVERLAP = 0.3
+#: The least share of the follow-up's area on the baseline for a registration to be given:
+#: most of it (a cropped follow-up lies on the baseline whole; a rigid fit of a scan 5 %
+#: larger leaves about a third on it).
+MIN_OVERLAP = 0.5
 
 
 @dataclass(frozen=True)

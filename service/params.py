@@ -210,7 +210,8 @@ class LandmarkFrame(_Strict):
 
 
 class Scalp(_Strict):
-    """The scalp by anatomy: the surface above a plane through the brow and the inion."""
+    """The scalp by anatomy: the surface above a plane through the brow and the inion, the
+    piece of it joined to the top of the head (docs/math.md, section 14)."""
 
     landmarks: Landmarks
     offset_mm: Number = Field(

@@ -666,7 +666,7 @@ class RegisterResponse(Answer):
     scale: float = Field(description="Its scale: 1 for rigid.")
     seeded_by: Literal["landmarks", "moments"] = Field(
         description="What the registration started from: the landmarks of both scans, or "
-        "the scans' moments (24 starts, the best kept)."
+        "the scans' moments (their principal axes in 24 turns, the best kept)."
     )
     overlap: float = Field(
         description="The share of the follow-up's area within overlap_distance_mm of the "

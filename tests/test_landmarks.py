@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from transforms import Landmarks, TransformInputError
+from transforms import Chart, Landmarks, PoleCap, TransformInputError, flatten_region
 from transforms.landmarks import CENTER_RAISE, OFF_SURFACE, distance_to_triangles
+from transforms.topology import face_components
 
 from .conftest import load_sample, sphere_mesh
 from .test_api import flatten, obj_of, problem
@@ -24,6 +25,17 @@ NEAR = {
     "right_tragus": [80, -10, -20],
     "vertex": [0, -20, 100],
 }
+#: The same spots on ``lee-perry-smith.obj`` (Y up, the face towards +Z, no units).
+NEAR_LEE_PERRY_SMITH = {
+    "nasion": [0, 1.75, 2.16],
+    "inion": [-0.09, 1.43, -1.89],
+    "left_tragus": [1.63, 1.37, 0.03],
+    "right_tragus": [-1.80, 1.31, 0.05],
+    "vertex": [0, 4, 0],
+}
+
+
+CHART = Chart.distorted(PoleCap.from_sigma(0.3))
 
 
 def on_head(vertices: np.ndarray = VERTICES) -> dict[str, list[float]]:
@@ -126,6 +138,23 @@ def test_the_scalp_is_above_the_brow_and_the_inion_and_shrinks_as_the_offset_gro
     assert centroids[:, 2].min() > -40  # above the neck and the chin
     there = Landmarks.of({k: moved(v) for k, v in on_head().items()})
     np.testing.assert_array_equal(there.scalp_faces(moved(VERTICES), FACES, 10.0), faces)
+
+
+def test_the_scalp_is_one_piece_that_the_landmark_frame_sees_whole():
+    """Lee Perry-Smith's eye sockets and the tops of his ears rise above the boundary plane
+    apart from the scalp; left in, they fold on the map."""
+    vertices, faces = load_sample("lee-perry-smith.obj")
+    points = {
+        name: vertices[np.argmin(np.linalg.norm(vertices - np.asarray(spot), axis=1))]
+        for name, spot in NEAR_LEE_PERRY_SMITH.items()
+    }
+    landmarks = Landmarks.of(points)
+    region = landmarks.scalp_faces(vertices, faces, landmarks.width * 10 / 145)
+    pieces = face_components(faces[region])
+    assert len(region) > 1000 and len(np.unique(pieces)) == 1
+    flat = flatten_region(vertices, faces[region], landmarks.frame(), CHART)
+    check = flat.validation
+    assert check.seam_free and check.star_shaped and check.boundary_loops == 1
 
 
 # -- the API ----------------------------------------------------------------------------------

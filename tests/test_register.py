@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from service.cli import main
 from service.samples import SAMPLES
+from transforms import registration
 
 from .conftest import load_sample
 from .test_api import flatten, obj_of, problem
@@ -180,3 +181,23 @@ async def test_a_scaled_follow_up_in_rigid_mode_is_refused_not_misaligned(client
     data, _, _, _ = follow_up(scale=1.05)
     body = problem(await register(client, {}, data), 422, "follow_up")
     assert "could not register it" in body["detail"]
+
+
+def test_a_head_and_shoulders_scan_cropped_below_registers_without_landmarks():
+    """Lee Perry-Smith with his shoulders, the lowest 20 % of faces cut away: the centroids no
+    longer match, and the starts matching the scan's top end find the way."""
+    vertices, faces = load_sample("lee-perry-smith.obj")
+    vertices = np.array(vertices)
+    size = float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    moved = TURN.apply(vertices) + SHIFT * size / 500
+    moved += np.random.default_rng(3).normal(scale=size * 1e-4, size=moved.shape)
+    height = vertices[faces].mean(axis=1)[:, 1]
+    kept = faces[height > np.quantile(height, 0.2)]
+    found = registration.register(
+        registration.Surface.of(moved, kept), registration.Surface.of(vertices, faces)
+    )
+    truth = np.eye(4)
+    truth[:3, :3] = TURN.as_matrix().T
+    truth[:3, 3] = -truth[:3, :3] @ (SHIFT * size / 500)
+    distance, angle = errors(found.matrix, truth, moved)
+    assert distance < 2e-3 * size and angle < 0.5, (distance, angle)

@@ -3,7 +3,7 @@
 import numpy as np
 
 from transforms import region_edges
-from transforms.topology import RegionEdges
+from transforms.topology import RegionEdges, face_components
 
 from .conftest import grid_mesh, sphere_mesh
 
@@ -79,3 +79,13 @@ def test_threads_give_the_same_edges():
 def test_empty_boundary_has_no_loops():
     empty = np.zeros((0, 2), dtype=np.int64)
     assert RegionEdges(boundary=empty, outline=empty).boundary_loops() == 0
+
+
+def test_faces_sharing_an_edge_are_one_piece_and_a_shared_vertex_is_not():
+    # Two triangles on an edge, and a third touching them at one vertex only.
+    faces = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 5]])
+    pieces = face_components(faces)
+    assert pieces[0] == pieces[1] != pieces[2]
+    _, faces = sphere_mesh(10, 12)
+    assert len(np.unique(face_components(faces))) == 1
+    assert len(face_components(np.zeros((0, 3), dtype=np.int64))) == 0

@@ -19,6 +19,7 @@ import numpy as np
 from .arrays import as_points
 from .errors import TransformInputError
 from .frames import Frame
+from .topology import face_components
 
 #: The landmarks, in the order they are checked; the vertex is optional.
 LANDMARK_NAMES = ("nasion", "inion", "left_tragus", "right_tragus", "vertex")
@@ -154,16 +155,21 @@ class Landmarks:
                 )
 
     def scalp_faces(self, vertices: np.ndarray, faces: np.ndarray, offset: float) -> np.ndarray:
-        """(j,) int: the faces whose centroid lies above the scalp's boundary plane (eq. 14.3):
-        through the nasion and the inion raised by ``offset`` (mesh units), level from left
-        to right."""
+        """(j,) int: the faces whose centroid lies above the scalp's boundary plane (eq. 14.3),
+        through the nasion and the inion raised by ``offset`` (mesh units) and level from left
+        to right, and that are joined by shared edges to the one farthest along ``up`` (the
+        top of the head: the eye sockets' and the ears' tops are left out)."""
         right, _, up = self.axes()
         brow, back = self.nasion + offset * up, self.inion + offset * up
         normal = _unit(np.cross(brow - back, right))
         if np.dot(normal, up) < 0:
             normal = -normal
         centroids = vertices[faces].mean(axis=1)
-        return np.flatnonzero((centroids - brow) @ normal > 0)
+        above = np.flatnonzero((centroids - brow) @ normal > 0)
+        if len(above) == 0:
+            return above
+        pieces = face_components(faces[above])
+        return above[pieces == pieces[np.argmax(centroids[above] @ up)]]
 
 
 def _unit(vector: np.ndarray) -> np.ndarray:

@@ -24,10 +24,14 @@ from .sampling import systematic_picks
 #: Samples drawn on each surface (area-weighted, the same for any pose of it).
 SAMPLES = 20_000
 #: ICP rounds at the most (and for comparing starts), and the step (radians, and in units
-#: of the median pair distance) that ends them.
+#: of the pairs' RMS distance from their centroid) that ends them.
 MAX_ROUNDS, COARSE_ROUNDS, SETTLED = 60, 15, 1e-4
-#: The starts are compared on every ``COARSE_EVERY``-th sample.
-COARSE_EVERY = 20
+#: The starts are compared on every ``COARSE_EVERY``-th sample; the ``REFINED_STARTS`` that
+#: put the most of them on the baseline are refined there.
+COARSE_EVERY, REFINED_STARTS = 20, 24
+#: A follow-up shorter than the baseline along an axis by more than this share of the
+#: baseline's extent is taken as cropped there (:func:`moment_starts`).
+CROPPED = 0.1
 #: Alignments farther apart than this (degrees) are distinct; two distinct ones whose shares
 #: of samples on the baseline differ by less than ``AMBIGUOUS`` are refused.
 DISTINCT_DEG, AMBIGUOUS = 10.0, 0.1
@@ -85,15 +89,19 @@ def from_pairs(source: np.ndarray, target: np.ndarray, scale: bool) -> np.ndarra
 
 
 def moment_starts(source: Surface, target: Surface) -> list[np.ndarray]:
-    """4x4 starts that take ``source``'s centroid onto ``target``'s and its principal axes
-    onto theirs, in each of the 24 proper ways (the axes' order and signs): a cropped scan's
-    axes may come in another order than the whole one's."""
+    """4x4 starts that take ``source``'s principal axes onto ``target``'s in each of the 24
+    proper ways (the axes' order and signs: a cropped scan's axes may come in another order
+    than the whole one's), each with the translation that matches the centroids and, along
+    every axis of ``target`` on which the turned ``source`` is shorter by more than
+    ``CROPPED`` of its extent, the two that match its one end or the other: a cropped scan's
+    centroid is not the whole one's."""
     frames = []
     for surface in (source, target):
         centre = surface.points.mean(axis=0)
         _, _, axes = np.linalg.svd(surface.points - centre, full_matrices=False)
         frames.append((centre, axes))
     (c_s, a_s), (c_t, a_t) = frames
+    target_low, target_high = _extent(target.points @ a_t.T)
     starts = []
     for order in itertools.permutations(range(3)):
         for signs in itertools.product((1, -1), repeat=3):
@@ -104,7 +112,18 @@ def moment_starts(source: Surface, target: Surface) -> list[np.ndarray]:
             matrix[:3, :3] = rotation
             matrix[:3, 3] = c_t - rotation @ c_s
             starts.append(matrix)
+            low, high = _extent(apply(matrix, source.points) @ a_t.T)
+            shorter = (high - low) < (1.0 - CROPPED) * (target_high - target_low)
+            for axis in np.flatnonzero(shorter):
+                for shift in (target_low[axis] - low[axis], target_high[axis] - high[axis]):
+                    moved = matrix.copy()
+                    moved[:3, 3] += shift * a_t[axis]
+                    starts.append(moved)
     return starts
+
+
+def _extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return points.min(axis=0), points.max(axis=0)
 
 
 def icp(
@@ -139,7 +158,9 @@ def icp(
         update[:3, :3] = turn
         update[:3, 3] = centre + step[3:6] - turn @ centre
         matrix = update @ matrix
-        size = np.median(distance) + 1e-300
+        # The pairs' spread: a step of SETTLED moves the points by about as much as a turn
+        # of SETTLED radians does.
+        size = float(np.sqrt(np.mean(np.einsum("pd,pd->p", arm, arm)))) + 1e-300
         moving = np.linalg.norm(step[3:6]) + abs(grow - 1.0) * float(np.abs(arm).max())
         if np.linalg.norm(step[:3]) < SETTLED and moving < SETTLED * size:
             break
@@ -206,15 +227,26 @@ def register(
 
 def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registration:
     coarse_source, coarse_target = source.every(COARSE_EVERY), target.every(COARSE_EVERY)
-    coarse_tolerance = on_surface_distance(coarse_target)
-    trials = [
-        icp(coarse_source, coarse_target, start, scale, rounds=COARSE_ROUNDS)
-        for start in moment_starts(source, target)
+    coarse_tree = cKDTree(coarse_target.points)
+    coarse_tolerance = on_surface_distance(coarse_target, coarse_tree)
+    starts = moment_starts(source, target)
+    landed = [
+        float(np.mean(coarse_tree.query(apply(start, coarse_source.points))[0] <= coarse_tolerance))
+        for start in starts
     ]
-    trials.sort(key=lambda trial: -_share(trial, coarse_tolerance))
+    trials = [
+        icp(coarse_source, coarse_target, starts[i], scale, rounds=COARSE_ROUNDS)
+        for i in np.argsort(landed, kind="stable")[::-1][:REFINED_STARTS]
+    ]
+    # Ranked on the whole baseline: the coarse samples lie too far apart to tell a head
+    # turned half round from the right one.
+    tree = cKDTree(target.points)
+    tolerance = on_surface_distance(target, tree)
+    trials.sort(
+        key=lambda trial: -_share(measured(coarse_source, target, trial.matrix, tree), tolerance)
+    )
     best = [trials[0]]
     best += [t for t in trials[1:] if _angle(t.matrix, trials[0].matrix) > DISTINCT_DEG][:1]
-    tolerance = on_surface_distance(target)
     refined = sorted(
         (icp(source, target, trial.matrix, scale) for trial in best),
         key=lambda found: -_share(found, tolerance),

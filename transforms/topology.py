@@ -43,6 +43,25 @@ class RegionEdges:
         return int(connected_components(graph, directed=False)[0])
 
 
+def face_components(faces: np.ndarray) -> np.ndarray:
+    """(m,) int: the label of each face's piece, faces ((m, 3) int) that share an edge being
+    in one piece; labels count from 0."""
+    if len(faces) == 0:
+        return np.zeros(0, dtype=np.int64)
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, edge_ids = np.unique(edges, axis=0, return_inverse=True)
+    # A graph on faces and edges together: each face joined to its three edges.
+    count = len(faces) + int(edge_ids.max()) + 1
+    graph = coo_matrix(
+        (
+            np.ones(len(edge_ids), dtype=np.int8),
+            (np.repeat(np.arange(len(faces)), 3), len(faces) + edge_ids.ravel()),
+        ),
+        shape=(count, count),
+    )
+    return connected_components(graph, directed=False)[1][: len(faces)]
+
+
 #: Per half-edge value summed per edge: the count in the low bits, (side + 1)^2 above. Two
 #: uses with sides -1 and +1 (a smooth interior edge) sum to exactly 2 + (4 << count bits);
 #: any other count or pair of sides gives another sum. int32 values (half the memory to

@@ -17,7 +17,13 @@ from .encoding import Timings, encode
 from .jobs import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE
 from .meshio import Mesh
 from .outputs import Output
-from .outputs.render import MEASURE_RENDERERS, REGISTER_RENDERERS, RENDERERS, SITES_RENDERERS
+from .outputs.render import (
+    MEASURE_RENDERERS,
+    REGISTER_RENDERERS,
+    RENDERERS,
+    SITES_RENDERERS,
+    TRANSFER_RENDERERS,
+)
 from .params import (
     FitParams,
     FlattenParams,
@@ -28,6 +34,7 @@ from .params import (
     PointsRequest,
     RegisterParams,
     SitesParams,
+    TransferParams,
 )
 from .problems import ErrorPlaces
 from .schemas import (
@@ -39,6 +46,7 @@ from .schemas import (
     PointsResponse,
     RegisterResponse,
     SitesResponse,
+    TransferResponse,
     ValidateResponse,
 )
 from .settings import Settings
@@ -99,7 +107,10 @@ class MeshCapability(Capability):
     def answer(
         self, mesh: Mesh, params: MeshParams, settings: Settings, output: Output, timings: Timings
     ) -> bytes:
-        """The answer's bytes in ``output`` (one of :attr:`outputs`)."""
+        """The answer's bytes in ``output`` (one of :attr:`outputs`); the operation sees it as
+        ``params.output`` (chosen by the Accept header, or the command line's file name)."""
+        if "output" in type(params).model_fields and params.output is not output:
+            params = params.model_copy(update={"output": output})
         with timings.measure("compute"):
             result = self.operation(mesh, params, settings)
         return self.render(result, params, output, timings)
@@ -275,6 +286,27 @@ MESH_CAPABILITIES = (
         operation=operations.register_scans,
         response=RegisterResponse,
         renderers=REGISTER_RENDERERS,
+    ),
+    MeshCapability(
+        name="transfer",
+        path="/v1/transfer",
+        summary="Carry values between the map and the mesh",
+        description="Multipart like /v1/flatten, on the grid of the PNG answer (params."
+        "image_width by image_height; pixel centres at half-integers, rows down with theta; "
+        "docs/math.md section 16). Image to mesh: an `image` part (a PNG of that size, "
+        "painted over the map) and `value_range`; answers a value a region vertex (bilinear "
+        "at its map position) and a face (the mean over its map triangle, with the share "
+        "covered). Mesh to image: `values` (one a vertex of the file, or the name of a "
+        "per-vertex property of the file), drawn linear inside each triangle; answers them "
+        "as a 16-bit grey PNG and the coverage mask (data: URLs in the JSON, or one 16-bit "
+        "grey and alpha PNG with params.output png). Look-ups: params.output face_ids or "
+        "barycentric answers the file's face id a pixel (-1 outside) and the centre's "
+        "weights in its corners, little-endian behind a 16-byte header (the README says "
+        "how to read it).",
+        params=TransferParams,
+        operation=operations.transfer,
+        response=TransferResponse,
+        renderers=TRANSFER_RENDERERS,
     ),
 )
 

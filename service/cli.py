@@ -231,13 +231,14 @@ def run(args: argparse.Namespace) -> bytes:
 
     capability = MESH_COMMANDS[args.command]
     settings = Settings.from_env()
-    output = _output(capability, args.out)
     work = "fitting" if args.command == "fit" or args.auto else "flattening"
     progress = Progress(["reading", work, "writing"], args.progress or sys.stderr.isatty())
     with core_errors_as_problems(MESH_FORM):
         with progress.step("reading"):
             params = mesh_params(capability.params, orjson.dumps(params_of(args)))
             params.with_parts(_file_parts(args, capability.params))
+            # params.output, when given, names the form; else --out's extension does.
+            output = getattr(params, "output", None) or _output(capability, args.out)
             path = Path(args.mesh)
             try:
                 data = path.read_bytes()

@@ -11,12 +11,10 @@ They know nothing of HTTP. Bad input surfaces as the core's
 
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass, replace
 from functools import cache
 
 import numpy as np
-from PIL import Image
 from scipy.spatial import cKDTree
 
 from transforms import (
@@ -34,6 +32,7 @@ from transforms import (
     Method,
     PoleCap,
     Polyline,
+    TransformInputError,
     Untangled,
     ZoneCover,
     angles_to_world,
@@ -44,6 +43,7 @@ from transforms import (
     layout_xy,
     lift_curve,
     locate,
+    pixels,
     untangle,
     world_to_angles,
 )
@@ -68,10 +68,12 @@ from transforms.sites import (
 )
 from transforms.viewpoint import check_center_sees_area
 
+from .images import read_png, refusal
 from .inputs import load_other_mesh
 from .jobs import MAP_BYTES_PER_FACE, SITE_BYTES, charge
 from .meshio import Mesh, format_of, read_mesh
 from .outlines import Outline, checked_curve, checked_zone, overlaps
+from .outputs import Output
 from .outputs.picture import Framing
 from .params import (
     DEFAULT_SIGMA,
@@ -89,6 +91,8 @@ from .params import (
     RegisterMode,
     RegisterParams,
     SitesParams,
+    TextureMask,
+    TransferParams,
 )
 from .problems import Problem
 from .samples import SAMPLES
@@ -160,6 +164,10 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
         landmarks = checked_landmarks(mesh, scalp.landmarks, "region.scalp.landmarks")
         offset = scalp.offset_mm / _mm_per_unit(scalp.units, "params.region.scalp.units")
         faces = landmarks.scalp_faces(mesh.vertices, mesh.faces, offset)
+    elif region.vertex_color is not None or region.feature_id is not None:
+        faces = _painted_faces(mesh, region)
+    elif region.texture_mask is not None:
+        faces = _masked_faces(mesh, region.texture_mask, params.part("mask"))
     elif region.faces is not None:
         faces = select.faces_listed(region.faces, n_faces)
     elif region.vertices is not None:
@@ -169,6 +177,63 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
     faces = select.nonempty(faces)
     resolved = None if region is None else region.model_dump(exclude_unset=True)
     return Selection(faces, _center(mesh, faces, params.center), resolved)
+
+
+def _painted_faces(mesh: Mesh, region) -> np.ndarray:
+    """The faces of a region painted in the file's vertex colours or ids.
+
+    Raises
+    ------
+    TransformInputError
+        The file has no such colours or attribute (naming what it has), or no face is in.
+    """
+    attributes = mesh.attributes
+    if region.vertex_color is not None:
+        paint = region.vertex_color
+        if attributes.colors is None:
+            raise TransformInputError(
+                "region.vertex_color",
+                f"the {mesh.format.upper()} file has no vertex colours; it has "
+                f"{attributes.described()}",
+            )
+        return select.faces_by_color(
+            mesh.faces, attributes.colors, paint.channel, paint.min, paint.rule
+        )
+    wanted = region.feature_id
+    for per_face, values in ((False, attributes.vertex), (True, attributes.face)):
+        if wanted.attribute in values:
+            return select.faces_by_ids(
+                mesh.faces, values[wanted.attribute], wanted.values, per_face, wanted.rule
+            )
+    raise TransformInputError(
+        "region.feature_id.attribute",
+        f"the {mesh.format.upper()} file has no attribute {wanted.attribute!r}; it has "
+        f"{attributes.described()}",
+    )
+
+
+def _masked_faces(mesh: Mesh, mask: TextureMask, data: bytes | None) -> np.ndarray:
+    """The faces under the form's ``mask`` PNG, read through the mesh's texture coordinates.
+
+    Raises
+    ------
+    Problem
+        422: no mask part, or not a readable PNG.
+    TransformInputError
+        The file has no texture coordinates (naming what it has), or no face is in.
+    """
+    if data is None:
+        raise refusal("mask", "region.texture_mask needs the mask: a multipart part 'mask', a PNG")
+    attributes = mesh.attributes
+    if attributes.uv is None:
+        raise TransformInputError(
+            "region.texture_mask",
+            f"the {mesh.format.upper()} file has no texture coordinates (glTF TEXCOORD_0, OBJ "
+            f"vt, PLY u v); it has {attributes.described()}",
+        )
+    image = read_png(data, "mask")
+    shade = image.values if image.alpha is None else image.values * image.alpha
+    return select.faces_by_mask(attributes.uv, attributes.uv_faces, shade, mask.min)
 
 
 def region_faces(mesh: Mesh, selection: Selection) -> np.ndarray:
@@ -736,7 +801,7 @@ def _density_image(params: SitesParams) -> np.ndarray | None:
     data = params.part("density_map")
 
     def refuse(words: str) -> Problem:
-        return Problem(422, f"density_map: {words}", "invalid-request", "density_map")
+        return refusal("density_map", words)
 
     if params.density_range is None:
         if data is not None:
@@ -744,26 +809,10 @@ def _density_image(params: SitesParams) -> np.ndarray | None:
         return None
     if data is None:
         raise refuse("density_range needs the map: a multipart part 'density_map', a grey PNG")
-    try:
-        image = Image.open(io.BytesIO(data))
-        if image.format != "PNG":
-            raise refuse(f"a PNG, not {image.format}")
-        size = (params.image_width, params.image_height)
-        if image.size != size:  # known from the header, before any pixel is decoded
-            raise refuse(
-                f"{image.size[0]} x {image.size[1]} pixels; the PNG answer's framing is "
-                f"params.image_width x image_height, {size[0]} x {size[1]}"
-            )
-        if image.mode not in ("L", "LA"):
-            raise refuse(
-                f"8-bit grey (mode L, or LA: the alpha is left out), not mode {image.mode}"
-            )
-        charge(16 * size[0] * size[1])
-        grey = np.asarray(image.getchannel(0), dtype=np.float64)
-    except (OSError, ValueError, SyntaxError) as error:
-        raise refuse(f"not a readable PNG ({type(error).__name__})") from None
+    size = (params.image_width, params.image_height)
+    grey = read_png(data, "density_map", size, grey_only=True).values
     low, high = params.density_range
-    return low + (high - low) * grey / 255.0
+    return low + (high - low) * grey
 
 
 def _density_map_part(region: MeshRegion, triangles: MapTriangles, image, open_faces) -> _Part:
@@ -992,3 +1041,153 @@ def _sample_info(name: str) -> SampleInfo:
 
 def sample_infos() -> list[SampleInfo]:
     return [_sample_info(name) for name in SAMPLES]
+
+
+# -- values between the map and the mesh ---------------------------------------------------
+
+#: Bytes a pixel of a transfer's grid may cost: ids, weights, values and their encoding.
+TRANSFER_BYTES_PER_PIXEL = 48
+
+
+@dataclass(frozen=True)
+class Transferred:
+    """Values carried between the region's map and its mesh (docs/math.md, section 16), on
+    the PNG answer's grid (``framing``, ``width`` x ``height``).
+
+    Attributes
+    ----------
+    region : MeshRegion
+    value_range : (low, high) or None
+    vertex_values : (k,) float or None, a value a region vertex (``flat.vertex_ids``), NaN
+        where the image reaches neither it nor its faces: an image carried onto the mesh
+    face_values, coverage : (m,) float or None, a value (NaN with no coverage) and the share
+        covered a region face
+    image : (h, w) float or None, the values drawn, 0 to 1 of the range
+    ids : (h, w) int or None, the file's face id at each pixel, -1 where none
+    weights : (h, w, 3) float32 or None, the pixel centre's weights in that face's corners
+    """
+
+    region: MeshRegion
+    width: int
+    height: int
+    value_range: tuple[float, float] | None = None
+    vertex_values: np.ndarray | None = None
+    face_values: np.ndarray | None = None
+    coverage: np.ndarray | None = None
+    image: np.ndarray | None = None
+    ids: np.ndarray | None = None
+    weights: np.ndarray | None = None
+
+
+def transfer(mesh: Mesh, params: TransferParams, settings: Settings) -> Transferred:
+    """An image painted over the map carried onto the mesh (the ``image`` part), values a
+    vertex drawn on the map (``values``), or, for ``output`` face_ids or barycentric, the
+    look-up images; on the grid of the PNG answer."""
+    data = params.part("image")
+    lookup = params.output in (Output.FACE_IDS, Output.BARYCENTRIC)
+    if data is not None and params.values is not None:
+        raise refusal("image", "send an image part or params.values, not both")
+    if params.output is Output.PNG and params.values is None:
+        raise TransformInputError(
+            "values", "output png draws params.values: send them (an image part answers JSON)"
+        )
+    if data is None and params.values is None and not lookup:
+        raise refusal(
+            "image",
+            "nothing to carry: send an image part (the map painted over), params.values (to "
+            "draw), or ask for params.output face_ids or barycentric (the look-up images)",
+        )
+    width, height = params.image_width, params.image_height
+    values = None if params.values is None else _vertex_values(mesh, params.values)
+    image = None if data is None else read_png(data, "image", (width, height))
+    region = flatten(mesh, params, settings)
+    charge(TRANSFER_BYTES_PER_PIXEL * width * height)
+    x, y = region.layout
+    at = Framing.of(x, y, region.flat.layout, width, height).pixels(np.column_stack([x, y]))
+    corners = at[region.flat.faces]
+    found = Transferred(region, width, height)
+    if image is not None:
+        found = _image_to_mesh(region, image, at, corners, params)
+    elif values is not None:
+        found = _values_to_image(region, values[region.flat.vertex_ids], corners, params, settings)
+    if lookup:
+        ids = pixels.face_ids(corners, height, width, settings.threads)
+        weights = pixels.barycentric(corners, ids) if params.output is Output.BARYCENTRIC else None
+        found = replace(found, ids=_file_ids(region, ids), weights=weights)
+    return found
+
+
+def _values_to_image(region: MeshRegion, values, corners, params: TransferParams, settings):
+    """The region vertices' ``values`` drawn linear inside each triangle, 0 to 1 of the
+    range (``value_range``, or the values' least and largest)."""
+    low, high = params.value_range or (float(values.min()), float(values.max()))
+    scaled = (values - low) / (high - low) if high > low else np.zeros_like(values)
+    width, height = params.image_width, params.image_height
+    image, ids = pixels.vertex_image(
+        corners, scaled[region.flat.faces], height, width, settings.threads
+    )
+    return Transferred(
+        region, width, height, (low, high), image=np.clip(image, 0, 1), ids=_file_ids(region, ids)
+    )
+
+
+def _image_to_mesh(region: MeshRegion, image, at, corners, params: TransferParams) -> Transferred:
+    """The image's values at the region's vertices and over its faces (eq. 16.2): a vertex
+    reads the pixels the map covers only (a border vertex's neighbours off the map are no
+    part of it), weighed by the alpha."""
+    low, high = params.value_range or (0.0, 1.0)
+    height, width = image.values.shape
+    means, coverage = pixels.face_means(corners, image.values, image.alpha)
+    on_map = pixels.face_ids(corners, height, width) >= 0
+    weight = on_map if image.alpha is None else on_map * image.alpha
+    sampled, on = pixels.bilinear(image.values, at, weight)
+    # A vertex whose four nearest centres are all off the map (the tip of a sliver on the
+    # border): the mean of its faces' values.
+    faces = region.flat.faces
+    known = np.isfinite(means)
+    count = np.bincount(faces[known].ravel(), minlength=len(at))
+    total = np.bincount(faces[known].ravel(), np.repeat(means[known], 3), minlength=len(at))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sampled = np.where(on, sampled, total / count)
+    vertex_values = low + (high - low) * sampled  # NaN where nothing reaches the vertex
+    face_values = low + (high - low) * means  # NaN stays NaN: no coverage
+    return Transferred(region, width, height, (low, high), vertex_values, face_values, coverage)
+
+
+def _file_ids(region: MeshRegion, ids: np.ndarray) -> np.ndarray:
+    """The grid of region face positions as the file's face ids (-1 stays)."""
+    return np.where(ids >= 0, region.faces[np.maximum(ids, 0)], -1).astype(np.int32)
+
+
+def _vertex_values(mesh: Mesh, values) -> np.ndarray:
+    """(n,) float: ``params.values``, one a vertex of the file, or the file's per-vertex
+    property of that name.
+
+    Raises
+    ------
+    TransformInputError
+        Not one a vertex, a property the file lacks, or a NaN among them.
+    """
+    if isinstance(values, str):
+        found = mesh.attributes.vertex.get(values)
+        if found is None:
+            raise TransformInputError(
+                "values",
+                f"the {mesh.format.upper()} file has no per-vertex property {values!r}; it has "
+                f"{mesh.attributes.described()}",
+            )
+        array = np.asarray(found, dtype=np.float64)
+    else:
+        array = np.asarray(values, dtype=np.float64)
+        if len(array) != len(mesh.vertices):
+            raise TransformInputError(
+                "values",
+                f"{len(array):,} values; the file has {len(mesh.vertices):,} vertices (one "
+                "value a vertex, in the file's order)",
+            )
+    bad = np.flatnonzero(~np.isfinite(array))
+    if bad.size:
+        raise TransformInputError(
+            "values", f"vertex {int(bad[0])}'s value is not a number", indices=bad
+        )
+    return array

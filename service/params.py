@@ -16,7 +16,7 @@ from typing import Annotated, ClassVar, Literal
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, model_validator
 
 from transforms import Layout, Method
-from transforms.selection import NAMED_CENTERS
+from transforms.selection import NAMED_CENTERS, Channel, CornerRule
 
 from .meshio import FORMATS
 from .outputs import Output
@@ -237,9 +237,55 @@ class Cone(_Strict):
     )
 
 
+class VertexColor(_Strict):
+    """The faces painted in the file's vertex colours."""
+
+    channel: choice(Channel) = Field(
+        description="The colour channel read (r, g, b, a, or the luminance, Rec. 709's "
+        "0.2126 r + 0.7152 g + 0.0722 b), each 0 to 1 (8- and 16-bit colours are scaled)."
+    )
+    min: Number = Field(0.5, ge=0, le=1, description="A vertex passes at this value or above.")
+    rule: choice(CornerRule) = Field(
+        CornerRule.ALL,
+        description="How many of a face's three vertices must pass: all, any or majority.",
+    )
+
+
+class FeatureId(_Strict):
+    """The faces of some ids of a per-vertex or per-face attribute of the file."""
+
+    attribute: str = Field(
+        "_FEATURE_ID_0",
+        min_length=1,
+        max_length=256,
+        description="A glTF vertex attribute (_FEATURE_ID_0, as EXT_mesh_features names "
+        "them) or a PLY vertex or face property, by name.",
+    )
+    values: Annotated[list[Number], Field(min_length=1, max_length=10_000)] = Field(
+        description="The ids that are in."
+    )
+    rule: choice(CornerRule) = Field(
+        CornerRule.ALL,
+        description="For a per-vertex attribute: how many of a face's vertices must hold "
+        "one of the ids.",
+    )
+
+
+class TextureMask(_Strict):
+    """The faces under a mask painted in the mesh's own texture coordinates."""
+
+    min: Number = Field(
+        0.5,
+        ge=0,
+        le=1,
+        description="A face is in when the mask's mean over its triangle in texture space "
+        "(grey 0 to 1, the luminance of a colour mask; 0 off the image) is at least this.",
+    )
+
+
 class Region(_Strict):
-    """Which faces: exactly one of ``faces``, ``vertices``, ``groups``, ``cone`` or
-    ``scalp``."""
+    """Which faces: exactly one of ``faces``, ``vertices``, ``groups``, ``cone``, ``scalp``,
+    ``vertex_color``, ``feature_id`` or ``texture_mask``."""
 
     model_config = ConfigDict(json_schema_extra=lambda schema: _one_property(schema))
 
@@ -263,13 +309,27 @@ class Region(_Strict):
         "inion raised by offset_mm, level from ear to ear (docs/math.md, section 14).",
     )
 
+    vertex_color: VertexColor = Field(
+        None,
+        description="Faces whose vertices' colour channel is at least min (by rule).",
+    )
+    feature_id: FeatureId = Field(
+        None,
+        description="Faces whose id in a vertex or face attribute of the file is listed.",
+    )
+    texture_mask: TextureMask = Field(
+        None,
+        description="Faces under the mask PNG sent as the form's part 'mask', read through "
+        "the mesh's texture coordinates (glTF TEXCOORD_0, OBJ vt, PLY u v).",
+    )
+
     @model_validator(mode="after")
     def _exactly_one(self) -> Region:
-        kinds = ("faces", "vertices", "groups", "cone", "scalp")
+        kinds = tuple(type(self).model_fields)
         given = [name for name in kinds if name in self.model_fields_set]
         if len(given) != 1:
             raise ValueError(
-                "give exactly one of faces, vertices, groups, cone or scalp"
+                f"give exactly one of {', '.join(kinds[:-1])} or {kinds[-1]}"
                 + (f", not {' and '.join(given)}" if given else "")
             )
         return self
@@ -397,7 +457,10 @@ class MeshParams(ChartParams):
     #: The form's part holding the mesh the route works on.
     MESH_PART: ClassVar[str] = "mesh"
     #: The form's file parts besides the mesh that the route reads: name -> what it is.
-    FILE_PARTS: ClassVar[dict[str, str]] = {}
+    FILE_PARTS: ClassVar[dict[str, str]] = {
+        "mask": "A PNG painted in the mesh's texture coordinates (grey, or colour read as "
+        "its luminance; 8 or 16 bits): the mask of region.texture_mask."
+    }
     #: Those the command line takes as positional arguments after the mesh.
     POSITIONAL_PARTS: ClassVar[tuple[str, ...]] = ()
     #: Their file names and bytes, as sent (:meth:`with_parts`).
@@ -715,10 +778,11 @@ class SitesParams(MeshParams, PictureParams):
     ) = None
 
     FILE_PARTS: ClassVar[dict[str, str]] = {
+        **MeshParams.FILE_PARTS,
         "density_map": "A grey PNG (8 bits) in the framing of the PNG answer: image_width by "
         "image_height pixels, the map where the PNG answer draws it. Each region triangle takes "
         "the density of the pixel under its centroid on the map: params.density_range maps "
-        "grey 0-255 to sites per cm²."
+        "grey 0-255 to sites per cm².",
     }
 
     @model_validator(mode="after")
@@ -798,6 +862,60 @@ class ScanLandmarks(_Strict):
     follow_up: Landmarks | None = None
 
 
+class TransferParams(MeshParams, PictureParams):
+    """The JSON of the ``params`` field of /v1/transfer: as for /v1/flatten, and what crosses
+    between the map and the mesh (docs/math.md, section 16)."""
+
+    FILE_PARTS: ClassVar[dict[str, str]] = {
+        **MeshParams.FILE_PARTS,
+        "image": "A PNG in the framing of the PNG answer (image_width by image_height pixels, "
+        "the map where the PNG answer draws it; 8- or 16-bit grey, grey and alpha, RGB or "
+        "RGBA, a colour read as its luminance, the alpha as the coverage): its values "
+        "carried onto the mesh's vertices and faces.",
+    }
+
+    values: Annotated[list[Number], Field(min_length=1)] | str | None = Field(
+        None,
+        description="Values a vertex to draw on the map: one a vertex of the file (in its "
+        "order), or the name of a per-vertex property of the file (a PLY property, a glTF "
+        "custom attribute such as _FEATURE_ID_0).",
+    )
+    value_range: tuple[Number, Number] | None = Field(
+        None,
+        description="With an image part: the values its black and white stand for (default "
+        "[0, 1]). With values: the values drawn as 0 and 65535 (default: their least and "
+        "largest over the region).",
+    )
+    output: output_choice(
+        (Output.JSON, Output.PNG, Output.FACE_IDS, Output.BARYCENTRIC),
+        "json (application/json): the values carried; png (image/png): with values, the "
+        "16-bit grey and alpha PNG of them (the alpha 65535 where a triangle holds the pixel); "
+        "face_ids or barycentric (application/octet-stream): the look-up images, a "
+        "little-endian array behind a 16-byte header (the README says how to read it).",
+    ) = None
+
+    @model_validator(mode="after")
+    def _one_way(self) -> TransferParams:
+        if self.value_range is not None and not self.value_range[0] < self.value_range[1]:
+            raise ValueError("value_range: [low, high] with low < high")
+        return self
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                # A value a vertex of the 12-vertex icosahedron of the examples, drawn.
+                {
+                    **MESH_PARAMS_EXAMPLE,
+                    "values": [float(k) for k in range(12)],
+                    "image_width": 480,
+                    "image_height": 360,
+                },
+                {**MESH_PARAMS_EXAMPLE, "output": "face_ids"},
+            ]
+        }
+    )
+
+
 class RegisterParams(MeshParams, PictureParams):
     """The JSON of the ``params`` field of /v1/register: the baseline's region and frame as
     for /v1/flatten (``region`` is the part to align on), the landmarks, the mode and the
@@ -805,8 +923,9 @@ class RegisterParams(MeshParams, PictureParams):
 
     MESH_PART: ClassVar[str] = "baseline"
     FILE_PARTS: ClassVar[dict[str, str]] = {
+        **MeshParams.FILE_PARTS,
         "follow_up": "The follow-up scan of the same head (OBJ, glTF, GLB, PLY or STL; its "
-        "format from its file name)."
+        "format from its file name).",
     }
     #: The parts the command line takes as positional arguments after the mesh.
     POSITIONAL_PARTS: ClassVar[tuple[str, ...]] = ("follow_up",)

@@ -10,9 +10,12 @@ have or a missing one, and a test validates every route's answer against the doc
 
 from __future__ import annotations
 
+import base64
+import io
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
+from PIL import Image
 from pydantic import BaseModel, Field, PrivateAttr
 
 from transforms import Layout, Method
@@ -22,7 +25,15 @@ from .meshio import FORMATS
 from .params import Region, choice
 
 if TYPE_CHECKING:
-    from .operations import Angles, Located, Measured, MeshRegion, Placed, Registered
+    from .operations import (
+        Angles,
+        Located,
+        Measured,
+        MeshRegion,
+        Placed,
+        Registered,
+        Transferred,
+    )
 
 
 class Answer(BaseModel):
@@ -670,7 +681,7 @@ class RegisterResponse(Answer):
     )
     overlap: float = Field(
         description="The share of the follow-up's area within overlap_distance_mm of the "
-        "baseline's region after registration (a registration below 0.3 is refused)."
+        "baseline's region after registration (a registration below half is refused)."
     )
     overlap_distance_mm: float = Field(description="The distance overlap counts within, mm.")
     rms_mm: float = Field(description="RMS of the residuals over the overlap, mm.")
@@ -729,3 +740,92 @@ class SampleInfo(Answer):
     credit: str
     licence: str
     url: str = Field(description="Where to download it.")
+
+
+def _nullable(values: np.ndarray) -> list:
+    """Floats with None where NaN (an answer carries no NaN)."""
+    return np.where(np.isnan(values), None, values).tolist()
+
+
+def _data_url(png: bytes) -> str:
+    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+
+
+class TransferredVertices(Answer):
+    ids: list[int] = Field(description="The file's ids of the region's vertices.")
+    values: list[float | None] = Field(
+        description="The image at each vertex's map position, read bilinearly between the "
+        "four nearest pixel centres and mapped to value_range; null off the image."
+    )
+
+
+class TransferredFaces(Answer):
+    ids: list[int] = Field(description="The file's ids of the region's faces.")
+    values: list[float | None] = Field(
+        description="The image's mean over each face's triangle on the map (the pixels whose "
+        "centres it holds; a triangle holding fewer than 4, 10 samples between them), weighed "
+        "by the alpha, mapped to value_range; null where coverage is 0."
+    )
+    coverage: list[float] = Field(
+        description="The share of each face's map triangle on the image, times the alpha's "
+        "mean over it (docs/math.md, eq. 16.2)."
+    )
+
+
+class TransferResponse(Answer):
+    params: ResolvedParams
+    image_width: int = Field(description="The grid's width, pixels (the PNG answer's).")
+    image_height: int = Field(description="The grid's height, pixels.")
+    value_range: list[float] | None = Field(
+        description="The values black and white stand for (an image carried onto the mesh), "
+        "or the values drawn as 0 and 65535 (values drawn on the map); null for look-ups."
+    )
+    vertices: TransferredVertices | None = Field(
+        None, description="An image part carried onto the region's vertices."
+    )
+    faces: TransferredFaces | None = Field(
+        None, description="An image part carried onto the region's faces."
+    )
+    image: str | None = Field(
+        None,
+        description="params.values drawn on the map, linear inside each triangle: a 16-bit "
+        "grey PNG as a data: URL (0 and 65535 the ends of value_range).",
+    )
+    mask: str | None = Field(
+        None,
+        description="Where the drawing holds a triangle: an 8-bit grey PNG as a data: URL (255 "
+        "where a triangle holds the pixel's centre, 0 elsewhere).",
+    )
+
+    @classmethod
+    def of(cls, transferred: Transferred) -> TransferResponse:
+        region = transferred.region
+        found = {}
+        if transferred.vertex_values is not None:
+            found["vertices"] = TransferredVertices.build(
+                ids=region.flat.vertex_ids, values=_nullable(transferred.vertex_values)
+            )
+            found["faces"] = TransferredFaces.build(
+                ids=region.faces,
+                values=_nullable(transferred.face_values),
+                coverage=transferred.coverage,
+            )
+        if transferred.image is not None:
+            found["image"] = _data_url(_png(np.rint(transferred.image * 65535), "I;16"))
+            found["mask"] = _data_url(_png((transferred.ids >= 0) * 255, "L"))
+        value_range = transferred.value_range
+        return cls.build(
+            params=ResolvedParams.of_region(region),
+            image_width=transferred.width,
+            image_height=transferred.height,
+            value_range=None if value_range is None else list(value_range),
+            **found,
+        )
+
+
+def _png(pixels: np.ndarray, mode: str) -> bytes:
+    """A PNG of ``pixels`` in Pillow's ``mode`` (``I;16``: 16-bit grey, ``L``: 8-bit)."""
+    dtype = np.uint16 if mode == "I;16" else np.uint8
+    out = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(pixels, dtype=dtype)).save(out, format="PNG")
+    return out.getvalue()

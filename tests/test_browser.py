@@ -14,6 +14,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
+import numpy as np
 import pytest
 
 from service.samples import SAMPLES
@@ -400,6 +401,54 @@ def test_landmarks_clicked_on_the_head_give_the_map_the_heads_frame(server):
                                                  "frame": {"landmarks": points}})  # fmt: skip
         assert shown == pytest.approx(expected["params"]["center"], abs=1e-4)
         assert "seam-free" in page.locator("#summary").inner_text()
+    assert not problems, problems
+
+
+def test_a_region_painted_in_vertex_colours_is_flattened_from_an_uploaded_ply(server, tmp_path):
+    """A PLY whose top of the head is painted red, uploaded: "the file's vertex colours" as
+    the region sends vertex_color (red at least 0.5) and the map shows the painted faces,
+    as many as the API selects for the same request."""
+    from .test_painted import PAINTED, ply_with
+
+    red = np.where(PAINTED, 255, 0).astype(np.uint8)
+    data = ply_with(
+        {"red": ("uchar", red), "green": ("uchar", 0 * red), "blue": ("uchar", 0 * red)}
+    )
+    painted = tmp_path / "painted-head.ply"
+    painted.write_bytes(data)
+    params = {
+        "region": {"vertex_color": {"channel": "r", "min": 0.5}},
+        "layout": "theta_phi",
+        "center": "bbox_center",
+    }
+    response = httpx.post(
+        f"{server}/v1/flatten",
+        files={"mesh": (painted.name, data)},
+        data={"params": json.dumps(params)},
+        headers={"X-API-Key": KEY},
+        timeout=60,
+    )
+    assert response.status_code == 200, response.text
+    faces = len(response.json()["faces"]["ids"])
+
+    problems: list[str] = []
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        page.fill("#apikey", KEY)
+        page.locator("#apikey").blur()
+        page.set_input_files("#file", str(painted))
+        page.select_option("#region-kind", "vertex_color")
+        page.select_option("#channel", "r")
+        page.fill("#color-min", "0.5")
+        assert page.locator("#axis").is_hidden() and page.locator("#channel").is_visible()
+        page.click("#go")
+        page.wait_for_selector("body[data-state=shown]", timeout=60_000)
+        # The map holds the painted faces: as many as the API selects from the colours.
+        legend = page.locator("#map svg g.legend").text_content()
+        assert f"region: {faces:,} triangles" in legend
+        page.wait_for_timeout(500)
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "demo-painted.png"), full_page=True)
     assert not problems, problems
 
 

@@ -35,14 +35,15 @@ app = create_app(Settings(api_keys=(KEY,), max_sites=20_000))
 # is still checked to be a documented problem that conforms to its schema. /v1/sites also
 # answers 422 to zones that overlap, a density without units or a spacing the sites do not
 # fit at, and 413 to more sites than the limit; /v1/register 422 to a follow-up that cannot
-# be read or registered.
+# be read or registered; /v1/transfer 422 to an image part that is not a PNG of the
+# picture's size, an image and values together, values not one a vertex, or nothing to carry.
 CONFIG = SchemathesisConfig.from_dict(
     {
         "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx"]}},
         "operations": [
             {
                 "include-path-regex": (
-                    "^/v1/(flatten|validate|fit|locate|measure|register|points|points/inverse)$"
+                    "^/v1/(flatten|validate|fit|locate|measure|register|transfer|points|points/inverse)$"
                 ),
                 "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx", "422"]}},
             },

@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from enum import StrEnum
 
 import numpy as np
 
 from .arrays import as_direction, triangle_areas, unit_rows
 from .errors import TransformInputError
+from .pixels import face_means
 
 #: The named centres: the area-weighted centroid or the bounding-box centre of the faces.
 NAMED_CENTERS = ("centroid", "bbox_center")
@@ -200,3 +202,126 @@ def nonempty(faces: np.ndarray) -> np.ndarray:
     if len(faces) == 0:
         raise EmptyRegionError("region", "selects no faces")
     return faces
+
+
+# -- regions painted on the file: colours, ids, a texture mask (docs/math.md, section 16) --
+
+
+class Channel(StrEnum):
+    """What of a vertex's colour a threshold reads."""
+
+    R = "r"
+    G = "g"
+    B = "b"
+    A = "a"
+    LUMINANCE = "luminance"
+
+    def of(self, colors: np.ndarray) -> np.ndarray:
+        """(n,) float: the channel of ``colors`` ((n, 4) RGBA in [0, 1]); the luminance is
+        Rec. 709's weighted sum of the stored red, green and blue."""
+        if self is Channel.LUMINANCE:
+            return colors[:, :3] @ np.array([0.2126, 0.7152, 0.0722])
+        return colors[:, "rgba".index(self.value)].astype(np.float64)
+
+
+class CornerRule(StrEnum):
+    """How many of a face's three vertices must pass for the face to be in."""
+
+    ALL = "all"
+    ANY = "any"
+    MAJORITY = "majority"
+
+    def faces(self, faces: np.ndarray, passes: np.ndarray) -> np.ndarray:
+        """(j,) int: the ids of ``faces`` ((m, 3) int) whose corners pass by this rule
+        (``passes``: (n,) bool a vertex)."""
+        count = passes[faces].sum(axis=1)
+        need = {CornerRule.ALL: 3, CornerRule.ANY: 1, CornerRule.MAJORITY: 2}[self]
+        return np.flatnonzero(count >= need)
+
+
+def faces_by_color(
+    faces: np.ndarray,
+    colors: np.ndarray,
+    channel: Channel,
+    minimum: float,
+    rule: CornerRule,
+    field: str = "region.vertex_color",
+) -> np.ndarray:
+    """(j,) int: the faces whose vertices' ``channel`` is at least ``minimum``, by ``rule``.
+
+    Raises
+    ------
+    EmptyRegionError
+        No face passes; the message gives the channel's range over the vertices.
+    """
+    values = channel.of(colors)
+    found = rule.faces(faces, values >= minimum)
+    if len(found) == 0:
+        raise EmptyRegionError(
+            field,
+            f"no face has {rule.value} of its vertices with {channel.value} >= {minimum:g}; "
+            f"the vertices' {channel.value} runs from {values.min():.4g} to {values.max():.4g}",
+        )
+    return found
+
+
+def faces_by_ids(
+    faces: np.ndarray,
+    values: np.ndarray,
+    wanted: Sequence[float],
+    per_face: bool,
+    rule: CornerRule = CornerRule.ALL,
+    field: str = "region.feature_id",
+) -> np.ndarray:
+    """(j,) int: the faces whose id (``values``: (m,) a face when ``per_face``, else (n,) a
+    vertex, taken by ``rule``) is one of ``wanted``.
+
+    Raises
+    ------
+    EmptyRegionError
+        None is; the message lists some of the ids the attribute holds.
+    """
+    listed = np.isin(values, np.asarray(wanted, dtype=np.float64))
+    found = np.flatnonzero(listed) if per_face else rule.faces(faces, listed)
+    if len(found) == 0:
+        present = np.unique(values[np.isfinite(values)])
+        shown = ", ".join(f"{v:g}" for v in present[:10]) + (", ..." if len(present) > 10 else "")
+        raise EmptyRegionError(
+            field, f"no face has one of the ids {list(wanted)}; the attribute holds {shown}"
+        )
+    return found
+
+
+def faces_by_mask(
+    uv: np.ndarray,
+    uv_faces: np.ndarray,
+    mask: np.ndarray,
+    minimum: float,
+    field: str = "region.texture_mask",
+) -> np.ndarray:
+    """(j,) int: the faces whose mean of ``mask`` ((h, w) in [0, 1]) over their triangle in
+    texture space is at least ``minimum`` (:func:`pixels.face_means`; the mask is 0 off the
+    image, and a face with a corner without texture coordinates is out).
+
+    ``uv`` ((k, 2)) has ``(0, 0)`` at the image's top-left corner and ``(1, 1)`` at its
+    bottom-right; ``uv_faces`` ((m, 3) int) its row at each face corner, -1 for none.
+
+    Raises
+    ------
+    EmptyRegionError
+        No face passes; the message gives the range of the faces' means.
+    """
+    height, width = mask.shape
+    textured = np.flatnonzero((uv_faces >= 0).all(axis=1))
+    corners = uv[uv_faces[textured]] * np.array([width, height], dtype=np.float64)
+    means, coverage = face_means(corners, mask)
+    means = np.where(np.isnan(means), 0.0, means * coverage)  # 0 off the image
+    found = textured[means >= minimum]
+    if len(found) == 0:
+        top = float(means.max()) if len(means) else 0.0
+        raise EmptyRegionError(
+            field,
+            f"no face's mean of the mask reaches {minimum:g} (the largest is {top:.4g}, over "
+            f"{len(textured):,} faces with texture coordinates)",
+        )
+    return found

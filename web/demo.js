@@ -66,7 +66,10 @@ function params() {
   const center = $('center').value.trim();
   const cone = { axis: vector('axis'), half_angle_deg: Number($('angle').value) };
   if ($('apex').value.trim()) cone.apex = vector('apex');
-  const p = { region: { cone }, layout: $('layout').value };
+  // The faces painted in the file's vertex colours (all three vertices at the level), or the cone.
+  const painted = { channel: $('channel').value, min: Number($('color-min').value) };
+  const region = $('region-kind').value === 'vertex_color' ? { vertex_color: painted } : { cone };
+  const p = { region, layout: $('layout').value };
   if ($('use-landmarks').checked) {
     // The head's frame: centre and rotation from the landmarks, sigma as given (or fitted).
     p.frame = { landmarks: { ...landmarks.points } };
@@ -468,6 +471,13 @@ window.meshflatDemo = {
 };
 
 // -- the page -----------------------------------------------------------------------------
+
+// The region's own fields: the cone's, or the colour threshold's.
+$('region-kind').addEventListener('change', () => {
+  const painted = $('region-kind').value === 'vertex_color';
+  for (const label of document.querySelectorAll('.cone-only')) label.hidden = painted;
+  for (const label of document.querySelectorAll('.color-only')) label.hidden = !painted;
+});
 
 function clearPresets() {
   // A file of one's own: the sample's region and frame do not fit it; the service chooses.

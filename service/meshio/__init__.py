@@ -34,7 +34,8 @@ class Reader:
 _GLTF_RULES = (
     "glTF triangles come primitive by primitive in document order (the default scene's nodes "
     "depth first, children in order, each node's mesh's primitives in order) with node "
-    "transforms applied; groups are mesh and node names."
+    "transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom "
+    "scalar attributes such as _FEATURE_ID_0 are kept."
 )
 
 READERS: dict[str, Reader] = {
@@ -47,7 +48,8 @@ READERS: dict[str, Reader] = {
             "model/obj",
             "OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; "
             "negative references count back; groups are ``g`` (each name), ``o`` and "
-            "``usemtl`` names.",
+            "``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by "
+            "the references' ``v/vt``) are kept.",
         ),
         Reader("gltf", "glTF (embedded buffers)", read_gltf, "model/gltf+json", _GLTF_RULES),
         Reader("glb", "GLB", read_glb, "model/gltf-binary", _GLTF_RULES),
@@ -58,8 +60,9 @@ READERS: dict[str, Reader] = {
             "application/octet-stream",
             "PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, "
             "``-1`` ending a strip) give their triangles with the strip's winding, joins that "
-            "repeat a vertex left out; faces and strips count in the header's order; other "
-            "elements and properties are skipped.",
+            "repeat a vertex left out; faces and strips count in the header's order; vertex "
+            "colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex "
+            "and face properties are kept, other elements and list properties skipped.",
         ),
         Reader(
             "stl",

@@ -12,7 +12,10 @@ Rules (the API documentation repeats them):
   meshes in order;
 * triangle lists, strips and fans are read; points and lines are refused, and so are files
   that require an extension (Draco or meshopt compression, for example);
-* groups are mesh names and node names.
+* groups are mesh names and node names;
+* a primitive's ``COLOR_0`` (white where a primitive has none), ``TEXCOORD_0`` and custom
+  scalar attributes (``_FEATURE_ID_0``, ...; the first ``MAX_PROPERTIES``) are kept a
+  vertex (:class:`mesh.Attributes`); other attributes are skipped.
 
 Every value of the JSON is type-checked where it is read, and every count is checked against
 the limits and against the bytes that hold it before anything is allocated for it.
@@ -38,7 +41,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .mesh import Limits, Mesh, MeshFormatError, MeshTooLargeError, check_counts, checked_vertices
+from .attributes import kept_properties, unit_scale
+from .mesh import (
+    Attributes,
+    Limits,
+    Mesh,
+    MeshFormatError,
+    MeshTooLargeError,
+    check_counts,
+    checked_vertices,
+)
 
 _GLB_MAGIC = 0x46546C67  # "glTF"
 _JSON_CHUNK = 0x4E4F534A
@@ -308,6 +320,7 @@ class _Primitive:
     positions: _Accessor
     indices: _Accessor | None
     transform: np.ndarray
+    extras: dict[str, _Accessor]  # COLOR_0, TEXCOORD_0 and custom ("_" ...) attributes
 
     @property
     def triangle_count(self) -> int:
@@ -356,6 +369,7 @@ def _read_document(document: dict, binary, limits: Limits, fmt: str) -> Mesh:
         faces=faces,
         groups={name: np.array(spans, dtype=np.int64) for name, spans in groups.items()},
         format=fmt,
+        attributes=_read_extras(primitives, n_vertices, faces),
     )
 
 
@@ -426,10 +440,72 @@ def _primitives(doc: _Document, node_index: int, mesh_index, transform) -> list[
         indices = None
         if "indices" in primitive:
             indices = doc.accessor(primitive["indices"], f"{where} indices", (1,), _INDEX_TYPES)
+        extras = _extra_accessors(doc, attributes, where, positions.count)
         primitives.append(
-            _Primitive(where, node_index, mesh_index, mode, positions, indices, transform)
+            _Primitive(where, node_index, mesh_index, mode, positions, indices, transform, extras)
         )
     return primitives
+
+
+#: The attributes read besides POSITION: name -> (accepted widths, component types).
+_COLOR_TYPES = (5126, 5121, 5123)
+_EXTRAS = {"COLOR_0": ((3, 4), _COLOR_TYPES), "TEXCOORD_0": ((2,), _COLOR_TYPES)}
+
+
+def _extra_accessors(doc: _Document, attributes: dict, where: str, count: int) -> dict:
+    """The primitive's COLOR_0, TEXCOORD_0 and custom (``_FEATURE_ID_0``, ...) scalar
+    attributes, checked to hold one element a vertex."""
+    found = {}
+    for name, index in attributes.items():
+        if name in _EXTRAS:
+            widths, types = _EXTRAS[name]
+        elif isinstance(name, str) and name.startswith("_"):
+            widths, types = (1,), tuple(_COMPONENT_TYPES)
+        else:
+            continue
+        accessor = doc.accessor(index, f"{where} {name}", widths, types)
+        if accessor.count != count:
+            raise MeshFormatError(
+                f"{where} {name} holds {accessor.count:,} elements but POSITION {count:,}"
+            )
+        normalized = doc.item("accessors", index, where).get("normalized") is True
+        found[name] = (accessor, normalized or accessor.dtype.kind == "f")
+    return found
+
+
+def _read_extras(primitives: list[_Primitive], n_vertices: int, faces: np.ndarray):
+    """The vertices' colours, texture coordinates and custom attributes, primitive by
+    primitive (a primitive without one: white, no texture coordinates, NaN)."""
+    names = sorted({name for p in primitives for name in p.extras})
+    if not names:
+        return Attributes()
+    colors = np.ones((n_vertices, 4), dtype=np.float32) if "COLOR_0" in names else None
+    uv = np.full((n_vertices, 2), np.nan) if "TEXCOORD_0" in names else None
+    custom = kept_properties([name for name in names if name.startswith("_")])
+    values = {name: np.full(n_vertices, np.nan) for name in custom}
+    offset = 0
+    for primitive in primitives:
+        count = primitive.positions.count
+        for name, (accessor, unit) in primitive.extras.items():
+            if name.startswith("_") and name not in values:
+                continue
+            view = accessor.view()
+            scale = unit_scale(accessor.dtype) if unit else 1.0
+            for start in range(0, count, _BLOCK):
+                block = slice(offset + start, offset + min(start + _BLOCK, count))
+                part = view[start : start + _BLOCK].astype(np.float64) * scale
+                if name == "COLOR_0":
+                    colors[block, : part.shape[1]] = np.clip(np.nan_to_num(part), 0.0, 1.0)
+                elif name == "TEXCOORD_0":
+                    uv[block] = part
+                else:
+                    values[name][block] = part[:, 0]
+        offset += count
+    uv_faces = None
+    if uv is not None:
+        missing = np.isnan(uv[:, 0])
+        uv_faces = np.where(missing[faces], -1, faces) if missing.any() else faces
+    return Attributes(colors=colors, uv=uv, uv_faces=uv_faces, vertex=values)
 
 
 def _triangles(indices: np.ndarray | None, mode: int, first: int, count: int) -> np.ndarray:

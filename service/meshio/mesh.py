@@ -40,6 +40,45 @@ class Limits:
 
 
 @dataclass(frozen=True)
+class Attributes:
+    """What a file says of its vertices and faces besides where they are, in its own order.
+
+    Attributes
+    ----------
+    colors : (n, 4) float32 RGBA in [0, 1] a vertex, or None (PLY ``red green blue
+        alpha``, glTF ``COLOR_0``, OBJ ``v x y z r g b``; alpha 1 where the file has none)
+    uv : (k, 2) float64 texture coordinates, or None (glTF ``TEXCOORD_0`` and PLY ``u v``
+        a vertex, OBJ ``vt`` lines), in glTF's convention: ``(0, 0)`` the image's top-left
+        corner, ``v`` growing down (OBJ's and PLY's ``v``, which grows up, is read as
+        ``1 - v``)
+    uv_faces : (m, 3) int64, the row of ``uv`` at each face corner (-1: the file gives that
+        corner none), or None
+    vertex : name -> (n,) float64, numeric values a vertex (PLY scalar vertex properties
+        other than the position, the colour and the UVs; glTF attributes such as
+        ``_FEATURE_ID_0``)
+    face : name -> (m,) float64, numeric values a face (PLY scalar face properties, each
+        polygon's value on every triangle it fans into)
+    """
+
+    colors: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    uv_faces: np.ndarray | None = None
+    vertex: dict[str, np.ndarray] = field(default_factory=dict)
+    face: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def described(self) -> str:
+        """What the file has, in words, for a refusal that names it."""
+        have = []
+        if self.colors is not None:
+            have.append("vertex colours")
+        if self.uv is not None:
+            have.append("texture coordinates")
+        have += [f"vertex property {name!r}" for name in self.vertex]
+        have += [f"face property {name!r}" for name in self.face]
+        return ", ".join(have) if have else "no colours, texture coordinates or properties"
+
+
+@dataclass(frozen=True)
 class Mesh:
     """A triangle mesh in the file's own order.
 
@@ -51,12 +90,14 @@ class Mesh:
         glTF mesh and node names); ranges, not ids, so a name on many faces costs nothing
         until a request asks for it
     format : str, the reader that produced it
+    attributes : :class:`Attributes`, the file's colours, texture coordinates and properties
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     groups: dict[str, np.ndarray] = field(default_factory=dict)
     format: str = ""
+    attributes: Attributes = field(default_factory=Attributes)
 
     def group_faces(self, names: list[str]) -> np.ndarray:
         """Ascending face ids in any of the groups ``names``

@@ -4,8 +4,11 @@ faces).
 
 Rules (the API documentation repeats them):
 
-* vertex ``i`` is the file's ``i``-th ``v`` line (0-based); ``vt``, ``vn`` and other lines
-  are ignored, as are the texture and normal parts of ``f`` references (``v/vt/vn``);
+* vertex ``i`` is the file's ``i``-th ``v`` line (0-based); a ``v x y z r g b`` line gives
+  the vertex a colour (0 to 1, or 0 to 255 when any number exceeds 1; white where a line
+  gives none); ``vt`` lines and the texture part of ``f`` references (``v/vt/vn``) give each
+  face corner its texture coordinates (:class:`mesh.Attributes`); ``vn`` and other lines,
+  and the normal parts of references, are ignored;
 * a polygon ``f a b c d ...`` becomes the triangles ``(a, b, c), (a, c, d), ...`` in that
   order, so face ids count triangles in file order;
 * negative references count back from the last vertex defined so far (OBJ's rule);
@@ -42,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .mesh import (
+    Attributes,
     Limits,
     Mesh,
     MeshFormatError,
@@ -66,7 +70,7 @@ from .text import (
 )
 
 _HASH, _SLASH = 35, 47
-_OTHER, _VERTEX, _FACE, _GROUP, _OBJECT, _MATERIAL = range(6)
+_OTHER, _VERTEX, _FACE, _TEXCOORD, _GROUP, _OBJECT, _MATERIAL = range(7)
 
 #: Distinct names a file may give its groups: each costs a few hundred bytes of dictionary
 #: however short it is written, so without a bound a file of names alone could cost over
@@ -93,13 +97,29 @@ def read_obj(data: bytes | memoryview, limits: Limits) -> Mesh:
     out = _Output(
         np.empty((counted.vertices, 3), dtype=np.float64),
         np.empty((counted.triangles, 3), dtype=np.int64),
+        colors=_no_colours(counted.vertices) if counted.coloured else None,
+        uv=np.zeros((counted.texcoords, 2)) if counted.texcoords else None,
+        uv_faces=np.empty((counted.triangles, 3), np.int64) if counted.texcoords else None,
     )
     filled = _Pass(buffer, out, kept=counted.kept).run()
     if out.bad_vertices:
         first, line = out.first_bad
         raise vertex_error(first, out.vertices[first], out.bad_vertices, line)
     groups = out.names.ranges(filled.triangles)
-    return Mesh(vertices=out.vertices, faces=out.faces, groups=groups, format="obj")
+    return Mesh(
+        vertices=out.vertices,
+        faces=out.faces,
+        groups=groups,
+        format="obj",
+        attributes=out.attributes(),
+    )
+
+
+def _no_colours(count: int) -> np.ndarray:
+    """(count, 4) float32: RGB not given (NaN), alpha 1."""
+    colors = np.full((count, 4), np.nan, dtype=np.float32)
+    colors[:, 3] = 1.0
+    return colors
 
 
 @dataclass
@@ -112,6 +132,24 @@ class _Output:
     names: _Names = field(default_factory=lambda: _Names())
     bad_vertices: int = 0
     first_bad: tuple[int, int] = (0, 0)
+    colors: np.ndarray | None = None  # (n, 4) float32, when a v line gives r g b
+    uv: np.ndarray | None = None  # (k, 2) float, the vt lines' u and v
+    uv_faces: np.ndarray | None = None  # (m, 3) int, each corner's vt (-1: none)
+
+    def attributes(self) -> Attributes:
+        """The colours (0 to 255 when any exceeds 1, as some writers put them, else 0 to
+        1) and texture coordinates read (``v`` turned over: an OBJ's grows up the image)."""
+        colors, uv = self.colors, self.uv
+        if colors is not None:
+            rgb = colors[:, :3]
+            given = ~np.isnan(rgb[:, 0])
+            if np.max(rgb[given], initial=0.0) > 1.0:
+                rgb /= 255.0
+            rgb[~given] = 1.0  # a vertex without a colour: white
+            np.clip(np.nan_to_num(rgb), 0.0, 1.0, out=rgb)
+        if uv is not None:
+            uv[:, 1] = 1.0 - uv[:, 1]
+        return Attributes(colors=colors, uv=uv, uv_faces=self.uv_faces)
 
     def check(self, start: int, count: int, line_of) -> None:
         """Note those of the ``count`` vertices from ``start`` that are out of range
@@ -132,9 +170,10 @@ class _Open:
     kind: int | None = None
     in_comment: bool = False
     count: int = 0  # numbers (a vertex) or corners (a face) so far
-    vertex: int = 0  # a vertex line's vertex id
-    numbers: list = field(default_factory=list)  # a vertex's first three numbers
+    vertex: int = 0  # a vertex (or vt) line's vertex (or texture coordinate) id
+    numbers: list = field(default_factory=list)  # a vertex's first six numbers
     prefix: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    uv_prefix: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     text: tuple[int, int] | None = None  # an o/usemtl name's bytes in the file
 
 
@@ -154,6 +193,7 @@ class _Pass(ChunkWalk):
     def __init__(self, buffer: np.ndarray, out: _Output | None = None, kept=None) -> None:
         self.buffer, self.out, self.kept = buffer, out, {} if kept is None else kept
         self.line = self.vertices = self.triangles = self.face_lines = 0
+        self.texcoords = self.coloured = 0  # vt lines, and v lines with a colour
         self.open: _Open | None = None
         self.room = _KEPT_BYTES  # for lines kept
 
@@ -184,6 +224,8 @@ class _Pass(ChunkWalk):
         if self.out is not None:
             self._fill_lines(lines, kind, triangles)
         self.vertices += int(np.count_nonzero(vertex_lines))
+        self.coloured += int(np.count_nonzero(vertex_lines & (numbers >= 6)))
+        self.texcoords += int(np.count_nonzero(kind == _TEXCOORD))
         self.face_lines += int(np.count_nonzero(face_lines))
         self.triangles += int(triangles.sum())
 
@@ -193,17 +235,25 @@ class _Pass(ChunkWalk):
         if vertex_lines.any():
             at = np.flatnonzero(vertex_lines)
             start = self.vertices
-            out.vertices[start : start + len(at)] = _vertices(lines, at)
+            rows = slice(start, start + len(at))
+            out.vertices[rows] = _vertices(lines, at, out.colors, rows)
             out.check(start, len(at), lambda k: lines.line(at[k]))
+        texcoord_lines = kind == _TEXCOORD
+        if out.uv is not None and texcoord_lines.any():
+            at = np.flatnonzero(texcoord_lines)
+            out.uv[self.texcoords : self.texcoords + len(at)] = _texcoords(lines, at)
         at = np.flatnonzero(kind == _FACE)
         if at.size:
-            refs = _references(lines, at)
+            refs, uv_refs = _references(lines, at, out.uv is not None)
+            corners, where = lines.numbers[at], _Lazy(lines, at)
             defined = self.vertices + np.cumsum(vertex_lines)[at]  # vertices before each line
-            resolved = _resolve(
-                refs, lines.numbers[at], defined, len(out.vertices), _Lazy(lines, at)
-            )
-            start = self.triangles
-            fan_into(out.faces[start : start + int(triangles.sum())], resolved, lines.numbers[at])
+            resolved = _resolve(refs, corners, defined, len(out.vertices), where)
+            start, count = self.triangles, int(triangles.sum())
+            fan_into(out.faces[start : start + count], resolved, corners)
+            if uv_refs is not None:
+                defined = self.texcoords + np.cumsum(texcoord_lines)[at]
+                uv_ids = _resolve_texcoords(uv_refs, corners, defined, len(out.uv), where)
+                fan_into(out.uv_faces[start : start + count], uv_ids, corners)
         naming = np.flatnonzero(kind >= _GROUP)
         if naming.size:
             before = self.triangles + np.cumsum(triangles) - triangles
@@ -229,7 +279,7 @@ class _Pass(ChunkWalk):
             starts, ends = starts[1:], ends[1:]
             self._begin_line(state)
         state.in_comment |= bool((chunk == _HASH).any())
-        if state.kind == _VERTEX:
+        if state.kind in (_VERTEX, _TEXCOORD):
             self._vertex_piece(state, chunk, starts, ends)
         elif state.kind == _FACE:
             self._face_piece(state, chunk, starts, ends)
@@ -242,6 +292,8 @@ class _Pass(ChunkWalk):
     def _begin_line(self, state: _Open) -> None:
         if state.kind == _VERTEX:
             state.vertex, self.vertices = self.vertices, self.vertices + 1
+        elif state.kind == _TEXCOORD:
+            state.vertex, self.texcoords = self.texcoords, self.texcoords + 1
         elif state.kind == _FACE:
             self.face_lines += 1
         elif state.kind >= _GROUP and self.out is not None:
@@ -255,9 +307,9 @@ class _Pass(ChunkWalk):
         if values is None:
             raise _unreadable("vertex coordinates", state.line)
         had = len(state.numbers)
-        state.numbers += values[: 3 - had].tolist()
-        if had < 3 <= len(state.numbers):
-            self.out.vertices[state.vertex] = state.numbers
+        state.numbers += values[: 6 - had].tolist()
+        if state.kind == _VERTEX and had < 3 <= len(state.numbers):
+            self.out.vertices[state.vertex] = state.numbers[:3]
             self.out.check(state.vertex, 1, lambda _: state.line)
 
     def _face_piece(self, state: _Open, chunk, starts, ends) -> None:
@@ -267,18 +319,34 @@ class _Pass(ChunkWalk):
         if self.out is not None and len(starts):
             origin = int(starts[0])
             text = spans_text(chunk[origin : ends[-1]], starts - origin, ends - origin)
-            bad = _without_tails(text, origin, Tokens(starts, ends, starts > 0))
+            tokens = Tokens(starts, ends, starts > 0)
+            uv_refs = None
+            if self.out.uv is not None:
+                uv_refs = _texture_references(text, origin, tokens, np.arange(len(starts)))
+            bad = _without_tails(text, origin, tokens)
             refs = None if bad >= 0 else parse_numbers(text, np.int64, len(starts))
             if refs is None:
                 raise _unreadable("face references", state.line)
             one = np.array([len(refs)])
             ids = _resolve(refs, one, self.vertices, len(self.out.vertices), [state.line])
-            items = np.concatenate((state.prefix, ids))
-            if triangles:
-                start = self.triangles
-                fan_into(self.out.faces[start : start + triangles], items, np.array([corners]))
-            state.prefix = items[[0, -1]] if len(items) >= 2 else items
+            state.prefix = self._fan(state.prefix, ids, corners, triangles, self.out.faces)
+            if uv_refs is not None:
+                ids = _resolve_texcoords(
+                    uv_refs, one, self.texcoords, len(self.out.uv), [state.line]
+                )
+                state.uv_prefix = self._fan(
+                    state.uv_prefix, ids, corners, triangles, self.out.uv_faces
+                )
         self.triangles += triangles
+
+    def _fan(self, prefix, ids, corners: int, triangles: int, out: np.ndarray) -> np.ndarray:
+        """Write the fan triangles of a polygon's piece (``prefix``: its first and last ids
+        so far) into ``out`` from :attr:`triangles`; the new prefix."""
+        items = np.concatenate((prefix, ids))
+        if triangles:
+            start = self.triangles
+            fan_into(out[start : start + triangles], items, np.array([corners]))
+        return items[[0, -1]] if len(items) >= 2 else items
 
     def _name_piece(self, state: _Open, begin: int, starts, ends) -> None:
         if not len(starts):
@@ -293,9 +361,15 @@ class _Pass(ChunkWalk):
 
     def _end_line(self, state: _Open) -> None:
         if self.out is None:
+            self.coloured += int(state.kind == _VERTEX and state.count >= 6)
             return
         if state.kind == _VERTEX:
             _refuse_short(np.array([state.count]), lambda _: state.line, "vertex", _XYZ)
+            if self.out.colors is not None and len(state.numbers) >= 6:
+                self.out.colors[state.vertex, :3] = state.numbers[3:6]
+        if state.kind == _TEXCOORD and self.out.uv is not None:
+            numbers = state.numbers + [0.0] * (2 - len(state.numbers))
+            self.out.uv[state.vertex] = numbers[:2]
         if state.kind == _FACE:
             _refuse_short(np.array([state.count]), lambda _: state.line, "face", _CORNERS)
         if state.kind in (_OBJECT, _MATERIAL) and state.text:
@@ -318,6 +392,7 @@ def _kinds(lines: Lines) -> np.ndarray:
     starts = tokens.starts[key]
     kind = _LETTERS[lines.chunk[starts]]
     kind[tokens.ends[key] - starts != 1] = _OTHER  # "vt", "vn", "fo", ...
+    kind[lines.keyword(b"vt")] = _TEXCOORD
     kind[lines.keyword(b"usemtl")] = _MATERIAL
     return kind
 
@@ -325,9 +400,8 @@ def _kinds(lines: Lines) -> np.ndarray:
 def _kind_of(chunk: np.ndarray, start: int, end: int) -> int:
     """The kind of a line whose keyword is ``chunk[start:end]``."""
     word = bytes(chunk[start : min(end, start + 7)])  # a keyword is short; a token may not be
-    return {b"v": _VERTEX, b"f": _FACE, b"g": _GROUP, b"o": _OBJECT, b"usemtl": _MATERIAL}.get(
-        word, _OTHER
-    )
+    kinds = {b"v": _VERTEX, b"vt": _TEXCOORD, b"f": _FACE, b"g": _GROUP, b"o": _OBJECT}
+    return {**kinds, b"usemtl": _MATERIAL}.get(word, _OTHER)
 
 
 @dataclass(frozen=True)
@@ -356,9 +430,10 @@ def _refuse_short(counts: np.ndarray, line_of, noun: str, needs: str) -> None:
         raise MeshFormatError(f"{noun} on line {line} has {count} {needs}")
 
 
-def _vertices(lines: Lines, at: np.ndarray) -> np.ndarray:
-    """(len(at), 3) float: x, y, z of the vertex lines ``at`` (a 4th or more numbers are
-    ignored)."""
+def _vertices(lines: Lines, at: np.ndarray, colors: np.ndarray | None, rows: slice) -> np.ndarray:
+    """(len(at), 3) float: x, y, z of the vertex lines ``at``; the 4th to 6th numbers of
+    those with six or more, a colour ``r g b``, go to ``colors[rows]`` (when there is one;
+    ``v x y z w`` gives none)."""
     counts = lines.numbers[at]
     _refuse_short(counts, lambda k: lines.line(at[k]), "vertex", _XYZ)
     values, bad = parse_spans(*numbers_text(lines, at), counts, np.float64)
@@ -367,7 +442,27 @@ def _vertices(lines: Lines, at: np.ndarray) -> np.ndarray:
     if np.all(counts == 3):
         return values.reshape(-1, 3)
     offsets = np.cumsum(counts) - counts
+    if colors is not None:
+        coloured = np.flatnonzero(counts >= 6)
+        colors[rows][coloured, :3] = values[offsets[coloured, None] + np.arange(3, 6)]
     return values[offsets[:, None] + np.arange(3)]
+
+
+def _texcoords(lines: Lines, at: np.ndarray) -> np.ndarray:
+    """(len(at), 2) float: u and v of the ``vt`` lines ``at`` (v 0 where a line gives u
+    alone; a w ignored)."""
+    counts = lines.numbers[at]
+    if np.any(counts < 1):
+        raise _unreadable("texture coordinates", lines.line(at[int(np.argmin(counts))]))
+    values, bad = parse_spans(*numbers_text(lines, at), counts, np.float64)
+    if values is None:
+        raise _unreadable("texture coordinates", lines.line(at[bad]))
+    offsets = np.cumsum(counts) - counts
+    uv = np.zeros((len(at), 2))
+    uv[:, 0] = values[offsets]
+    second = counts >= 2
+    uv[second, 1] = values[offsets[second] + 1]
+    return uv
 
 
 def _without_tails(text: np.ndarray, origin: int, tokens: Tokens) -> int:
@@ -386,12 +481,20 @@ def _without_tails(text: np.ndarray, origin: int, tokens: Tokens) -> int:
     return int(holder[empty[0]]) if empty.size else -1
 
 
-def _references(lines: Lines, at: np.ndarray) -> np.ndarray:
-    """(corners,) int64: the references of the face lines ``at``, in order."""
+def _references(
+    lines: Lines, at: np.ndarray, texture: bool
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """(corners,) int64: the vertex references of the face lines ``at``, in order; with
+    ``texture``, their texture references too (0 where a corner has none)."""
     counts = lines.numbers[at]
     _refuse_short(counts, lambda k: lines.line(at[k]), "face", _CORNERS)
     text, starts, ends = numbers_text(lines, at)
     origin = int(lines.tokens.starts[lines.key[at[0]] + 1])
+    uv_refs = None
+    if texture:
+        corner_tokens = np.repeat(lines.key[at] + 1 - (np.cumsum(counts) - counts), counts)
+        corner_tokens += np.arange(len(corner_tokens))
+        uv_refs = _texture_references(text, origin, lines.tokens, corner_tokens)
     tail = _without_tails(text, origin, lines.tokens)
     if tail >= 0:
         line = np.searchsorted(lines.key, tail, side="right") - 1
@@ -399,10 +502,46 @@ def _references(lines: Lines, at: np.ndarray) -> np.ndarray:
     refs, bad = parse_spans(text, starts, ends, counts, np.int64)
     if refs is None:
         raise _unreadable("face references", lines.line(at[bad]))
-    return refs
+    return refs, uv_refs
 
 
-def _resolve(refs, corners, defined, n_vertices: int, lines) -> np.ndarray:
+def _texture_references(text, origin: int, tokens: Tokens, corners: np.ndarray) -> np.ndarray:
+    """(len(corners),) int64: the texture part of each face reference ``v/vt/vn`` among the
+    ascending tokens ``corners`` of ``text`` (the chunk's bytes from ``origin`` on), 0
+    where a reference has none (``v`` or ``v//vn``)."""
+    found = np.zeros(len(corners), dtype=np.int64)
+    slashes = positions(text == _SLASH)
+    if not slashes.size:
+        return found
+    slashes += origin
+    holder = np.searchsorted(tokens.starts, slashes, side="right") - 1
+    holders, first, count = np.unique(holder, return_index=True, return_counts=True)
+    begin = slashes[first] + 1
+    token_end = tokens.ends[holders]
+    end = np.where(count > 1, slashes[np.minimum(first + 1, len(slashes) - 1)], token_end)
+    given = np.flatnonzero(end > begin)
+    if not given.size:
+        return found
+    spans = spans_text(text, begin[given] - origin, end[given] - origin)
+    values = parse_numbers(spans, np.int64, len(given))
+    if values is None:
+        raise MeshFormatError("unreadable texture references: a v/vt/vn's vt must be a number")
+    found[np.searchsorted(corners, holders[given])] = values
+    return found
+
+
+def _resolve_texcoords(refs, corners, defined, n_texcoords: int, lines) -> np.ndarray:
+    """As :func:`_resolve`, for texture references: 0 (none) becomes -1."""
+    none = refs == 0
+    if n_texcoords == 0 and not none.all():
+        raise MeshFormatError("a face refers to a texture coordinate, but the file has no vt lines")
+    refs[none] = 1
+    ids = _resolve(refs, corners, defined, n_texcoords, lines, noun="texture coordinate")
+    ids[none] = -1
+    return ids
+
+
+def _resolve(refs, corners, defined, n_vertices: int, lines, noun: str = "vertex") -> np.ndarray:
     """(corners.sum(),) int64 0-based vertex ids of 1-based or negative (relative)
     references ``refs``, in place; ``defined`` vertices precede each polygon (``lines``:
     their 0-based lines, for the message)."""
@@ -417,8 +556,9 @@ def _resolve(refs, corners, defined, n_vertices: int, lines) -> np.ndarray:
         k = int(np.flatnonzero(bad)[0])
         line = lines[int(np.searchsorted(np.cumsum(corners), k, side="right"))] + 1
         raise MeshFormatError(
-            f"face on line {line} refers to vertex {int(refs[k])}, but the file has "
-            f"{n_vertices} vertices (references count from 1, or back from -1)"
+            f"face on line {line} refers to {noun} {int(refs[k])}, but the file has "
+            f"{n_vertices} {noun.replace('vertex', 'vertice')}s (references count from 1, or "
+            "back from -1)"
         )
     refs -= 1
     if before is not None:

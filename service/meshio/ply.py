@@ -12,8 +12,11 @@ Rules (the API documentation repeats them):
   ``-1``) is no triangle and is left out;
 * the file's faces are the triangles of its ``face`` and ``tristrips`` elements, element by
   element in the order of the header, row by row;
-* other elements (edges, materials, ...) and properties (colours, normals, confidence) are
-  skipped; list counts may be of any integer type.
+* the vertex element's colour (``red green blue alpha``), texture coordinates (``u v``,
+  ``s t``) and first ``MAX_PROPERTIES`` other scalar properties, and the face element's
+  scalar properties (each polygon's value on every triangle it fans into; NaN on a strip's
+  triangles), are kept (:class:`mesh.Attributes`); other elements (edges, materials, ...)
+  and list properties are skipped; list counts may be of any integer type.
 
 Every count the header declares is checked against the limits and against the bytes that
 follow before anything is allocated for it. The body is read twice, a batch of rows at a
@@ -42,6 +45,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import text
+from .attributes import kept_properties, vertex_attributes
 from .mesh import (
     Limits,
     Mesh,
@@ -139,7 +143,13 @@ def read_ply(data: bytes | memoryview, limits: Limits) -> Mesh:
     vertices, faces = reader.fill(plan)
     if not faces.size:
         raise MeshFormatError("the PLY file holds no triangles")
-    return Mesh(vertices=checked_vertices(vertices), faces=faces, format="ply")
+    dtypes = {p.name: np.dtype(p.type) for p in vertex.properties}
+    attributes = replace(
+        vertex_attributes(reader.vertex_values, dtypes, faces), face=reader.face_values
+    )
+    return Mesh(
+        vertices=checked_vertices(vertices), faces=faces, format="ply", attributes=attributes
+    )
 
 
 def _what_to_read(elements: list, limits: Limits) -> tuple:
@@ -186,6 +196,10 @@ class _Body:
     def __init__(self, buffer: np.ndarray, order: str | None, vertex, indices: dict) -> None:
         self.buffer, self.order, self.vertex, self.indices = buffer, order, vertex, indices
         self.sink = _Sink(vertex.count)
+        #: The vertex element's other scalar properties, and the face element's scalar
+        #: properties a triangle, as :meth:`fill` reads them (name -> values).
+        self.vertex_values: dict[str, np.ndarray] = {}
+        self.face_values: dict[str, np.ndarray] = {}
 
     def plan(self, elements: list[_Element], body: int) -> list[tuple[_Element, list[_Batch]]]:
         """Every element's batches of rows, in order; counts the triangles (``sink``)."""
@@ -204,6 +218,17 @@ class _Body:
     def fill(self, plan) -> tuple[np.ndarray, np.ndarray]:
         """(n, 3) float vertices and (m, 3) int faces, read batch by batch."""
         vertices = np.empty((self.vertex.count, 3), dtype=np.float64)
+        scalars = [p.name for p in self.vertex.properties if p.count_type is None]
+        self.vertex_values = {
+            name: np.empty(self.vertex.count)
+            for name in kept_properties([n for n in scalars if n not in ("x", "y", "z")])
+        }
+        faces = next((element for element, _ in plan if element.name == "face"), None)
+        scalars = [p.name for p in faces.properties if p.count_type is None] if faces else []
+        self.face_values = {
+            name: np.full(self.sink.triangles, np.nan)  # NaN on strips' triangles
+            for name in kept_properties(scalars)
+        }
         self.sink = _Sink(self.vertex.count, np.empty((self.sink.triangles, 3), dtype=np.int64))
         for element, batches in plan:
             needed = element is self.vertex or element.name in self.indices
@@ -212,8 +237,11 @@ class _Body:
             for batch in batches:
                 if element is self.vertex:
                     columns = self._columns(element, batch)
+                    rows = slice(batch.row, batch.row + batch.rows)
                     for k, axis in enumerate("xyz"):
-                        vertices[batch.row : batch.row + batch.rows, k] = columns[axis]
+                        vertices[rows, k] = columns[axis]
+                    for name, values in self.vertex_values.items():
+                        values[rows] = columns[name]
                 elif needed:
                     self._triangles(element, batch)
                 else:
@@ -227,9 +255,14 @@ class _Body:
             if sizes is not None:  # counting needs only the polygons' sizes
                 self.sink.faces(None, sizes, batch.row)
                 return
-        items, sizes = self._columns(element, batch, only=name)
+        filling = self.sink.out is not None and element.name == "face" and self.face_values
+        columns = self._columns(element, batch) if filling else None
+        items, sizes = columns[name] if filling else self._columns(element, batch, only=name)
         if element.name == "face":
+            start = self.sink.triangles
             self.sink.faces(items, sizes, batch.row)
+            for key, values in self.face_values.items() if filling else ():
+                values[start : self.sink.triangles] = np.repeat(columns[key], sizes - 2)
         else:
             self.sink.strips(items, sizes, batch.row)
 

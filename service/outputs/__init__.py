@@ -17,6 +17,8 @@ class Output(StrEnum):
     SVG = "svg"
     PNG = "png"
     PLY = "ply"
+    FACE_IDS = "face_ids"
+    BARYCENTRIC = "barycentric"
 
     @property
     def media_type(self) -> str:
@@ -25,7 +27,7 @@ class Output(StrEnum):
     @property
     def binary(self) -> bool:
         """Whether the form is bytes rather than text."""
-        return self in (Output.GLB, Output.PNG, Output.PLY)
+        return self in (Output.GLB, Output.PNG, Output.PLY, Output.FACE_IDS, Output.BARYCENTRIC)
 
 
 _MEDIA_TYPES = {
@@ -35,6 +37,9 @@ _MEDIA_TYPES = {
     Output.PNG: "image/png",
     # No PLY media type is registered; this is the one in common use.
     Output.PLY: "application/ply",
+    # Look-up images: a little-endian array behind a 16-byte header (service.outputs.lookup).
+    Output.FACE_IDS: "application/octet-stream",
+    Output.BARYCENTRIC: "application/octet-stream",
 }
 
 

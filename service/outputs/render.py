@@ -13,16 +13,17 @@ from transforms import Layout
 
 from ..encoding import plain
 from ..jobs import charge, picture_bytes
-from ..params import FlattenParams, PictureParams, SitesParams
+from ..params import FlattenParams, PictureParams, SitesParams, TransferParams
 from ..problems import Problem
 from ..schemas import Metrics, ResolvedParams, Validation
 from . import Output
 from .draw import to_png, to_svg
 from .glb import layout_uv, region_glb
+from .lookup import grey_alpha_png16, lookup_bytes
 from .picture import Drawn, describe
 
 if TYPE_CHECKING:
-    from ..operations import Measured, MeshRegion, Placed, Registered
+    from ..operations import Measured, MeshRegion, Placed, Registered, Transferred
 
 #: Vertex ids travel in the GLB as float32 (glTF allows no 32-bit integer attributes).
 FLOAT32_EXACT = 2**24
@@ -198,3 +199,28 @@ def _overlay(registered: Registered) -> tuple[Drawn, ...]:
 #: region's boundary, the follow-up's (mapped with the frame the answer gives it) and the
 #: zones.
 REGISTER_RENDERERS = map_renderers(lambda registered: registered.region, _overlay)
+
+
+# -- values between the map and the mesh -------------------------------------------------------
+
+
+def _drawn_png(transferred: Transferred, params: TransferParams) -> bytes:
+    if transferred.image is None:
+        raise Problem(
+            406,
+            "output png draws params.values: send them (an image part answers JSON)",
+            "not-acceptable",
+            "params.output",
+        )
+    return grey_alpha_png16(transferred.image, transferred.ids >= 0)
+
+
+def _lookup(transferred: Transferred, params: TransferParams) -> bytes:
+    return lookup_bytes(transferred.ids, transferred.weights)
+
+
+TRANSFER_RENDERERS = {
+    Output.PNG: _drawn_png,
+    Output.FACE_IDS: _lookup,
+    Output.BARYCENTRIC: _lookup,
+}

@@ -1,0 +1,195 @@
+"""Benchmark of values carried between the map and the mesh (``make bench-transfer``).
+
+The region: ``make bench-measure``'s, ``fsaverage-head.ply`` subdivided 5 times and its scalp
+narrowed to 52 degrees (1,000,968 faces, one disk), flattened with fixed parameters. Its map
+is framed as the PNG answer frames it (:class:`service.outputs.picture.Framing`) on a
+4096 x 4096 grid and on a 2048 x 2048 one.
+
+* Image to mesh (4096 x 4096, a smooth grey image): meshflat's per-face means
+  (:func:`transforms.pixels.face_means`: the pixel runs, running sums, the small faces'
+  samples, the coverage) and per-vertex values (:func:`transforms.pixels.bilinear`). Target
+  (the issue): 1 s.
+* Mesh to image (2048 x 2048): a value a vertex drawn linear inside every triangle
+  (:func:`transforms.pixels.vertex_image`, with the face-id image). Target: 0.5 s.
+
+The peer, timed alternately in the same process: Pillow's ``ImageDraw.polygon`` filling each
+triangle with its id on an int32 image (one call a triangle), then the same numpy work on the
+id image (``np.bincount`` means; the affine values per pixel). Its fill rule differs from
+(16.1) on shared edges: the share of pixels where the two id images agree is reported, and
+the per-face means' largest difference over faces both fill.
+
+meshflat on one thread and on two (``threads``, numpy releasing the GIL); BLAS on one thread;
+the service's allocator settings; median of the runs after a warm-up.
+
+    python -m benchmarks.transfer_bench [--runs 5] [--write-docs]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from importlib.metadata import version
+
+import numpy as np
+from PIL import Image, ImageDraw
+
+from benchmarks.docs import publish
+from benchmarks.measure_bench import Region, progress
+from benchmarks.transforms_bench import footer
+from service.allocator import keep_large_blocks
+from service.outputs.picture import Framing
+from transforms import Layout, pixels
+
+#: The issue's targets, seconds.
+TARGET_TO_MESH, TARGET_TO_IMAGE = 1.0, 0.5
+BIG, SMALL = 4096, 2048
+
+
+def corners_on(region: Region, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The region's triangles (m, 3, 2) and vertices (k, 2) in pixels of a size x size PNG
+    answer's framing."""
+    framing = Framing.of(region.x, region.y, Layout.THETA_PHI, size, size)
+    at = framing.pixels(np.column_stack([region.x, region.y]))
+    return at[region.faces], at
+
+
+def smooth_image(size: int) -> np.ndarray:
+    rows, columns = np.mgrid[0:size, 0:size] / size
+    return 0.5 + 0.25 * np.sin(6 * columns) * np.cos(4 * rows)
+
+
+def ours_to_mesh(corners, at, image, threads: int) -> np.ndarray:
+    means, _ = pixels.face_means(corners, image, threads=threads)
+    pixels.bilinear(image, at)
+    return means
+
+
+def ours_to_image(corners, values, threads: int) -> np.ndarray:
+    image, _ = pixels.vertex_image(corners, values, SMALL, SMALL, threads)
+    return image
+
+
+def pillow_ids(corners: np.ndarray, size: int) -> np.ndarray:
+    """(size, size) int: each triangle filled with its id by ``ImageDraw.polygon`` (its
+    corners shifted by half a pixel: Pillow puts pixel centres on integers)."""
+    canvas = Image.new("I", (size, size), -1)
+    draw = ImageDraw.Draw(canvas)
+    shifted = corners - 0.5
+    for face, triangle in enumerate(shifted.tolist()):
+        draw.polygon([tuple(point) for point in triangle], fill=face)
+    return np.asarray(canvas)
+
+
+def peer_to_mesh(corners, image) -> tuple[np.ndarray, np.ndarray]:
+    ids = pillow_ids(corners, BIG).ravel()
+    held = ids >= 0
+    count = np.bincount(ids[held], minlength=len(corners))
+    total = np.bincount(ids[held], weights=image.ravel()[held], minlength=len(corners))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return total / count, ids
+
+
+def peer_to_image(corners, values) -> np.ndarray:
+    ids = pillow_ids(corners, SMALL)
+    plane = pixels.planes(corners, values)
+    rows, columns = np.nonzero(ids >= 0)
+    a, b, c = plane[ids[rows, columns]].T
+    image = np.zeros((SMALL, SMALL))
+    image[rows, columns] = a + b * (columns + 0.5) + c * (rows + 0.5)
+    return image
+
+
+def timed(work) -> tuple[float, object]:
+    start = time.perf_counter()
+    result = work()
+    return time.perf_counter() - start, result
+
+
+def measure(runs: int) -> str:
+    progress("building the region (1M faces) and flattening it")
+    region = Region.flattened()
+    big, at_big = corners_on(region, BIG)
+    small, _ = corners_on(region, SMALL)
+    image = smooth_image(BIG)
+    # A smooth value a vertex: the map's x and y mixed.
+    per_vertex = np.sin(region.x * 3) + np.cos(region.y * 2)
+    values = per_vertex[region.faces]
+    progress("warm-up")
+    ours_to_mesh(big, at_big, image, 1)
+    ours_to_image(small, values, 1)
+    times: dict[str, list[float]] = {k: [] for k in ("m1", "m2", "i1", "i2", "pm", "pi")}
+    peer_means = peer_ids = peer_image = None
+    for run in range(runs):
+        progress(f"run {run + 1} of {runs}")
+        times["m1"].append(timed(lambda: ours_to_mesh(big, at_big, image, 1))[0])
+        times["m2"].append(timed(lambda: ours_to_mesh(big, at_big, image, 2))[0])
+        seconds, (peer_means, peer_ids) = timed(lambda: peer_to_mesh(big, image))
+        times["pm"].append(seconds)
+        times["i1"].append(timed(lambda: ours_to_image(small, values, 1))[0])
+        times["i2"].append(timed(lambda: ours_to_image(small, values, 2))[0])
+        seconds, peer_image = timed(lambda: peer_to_image(small, values))
+        times["pi"].append(seconds)
+    ours_means = ours_to_mesh(big, at_big, image, 1)
+    ours_ids = pixels.face_ids(big, BIG, BIG).ravel()
+    agree_ids = float(np.mean(ours_ids == peer_ids))
+    both = np.isfinite(peer_means) & np.isfinite(ours_means)
+    mean_gap = float(np.abs(peer_means[both] - ours_means[both]).max())
+    ours_image = ours_to_image(small, values, 1)
+    image_gap = float(np.abs(ours_image - peer_image)[ours_image != 0].max())
+    median = {key: statistics.median(value) * 1e3 for key, value in times.items()}
+
+    def row(name: str, key: str, target: float | None) -> str:
+        met = "-" if target is None else ("yes" if median[key] <= target * 1e3 else "no")
+        goal = "-" if target is None else f"<= {target * 1e3:,.0f} ms"
+        return f"| {name} | {median[key]:,.1f} | {goal} | {met} |"
+
+    pillow = f"Pillow `ImageDraw.polygon` {version('pillow')}, a call a triangle"
+    lines = [
+        f"The region: {len(region.faces):,} faces, {len(region.x):,} vertices; median of {runs} "
+        "runs after a warm-up.",
+        "",
+        f"**Image to mesh** ({BIG} x {BIG} grey image: a value a face, its mean over the "
+        "triangle, and a value a vertex):",
+        "",
+        "| rasteriser | time (ms) | target | met |",
+        "|---|---:|---|---|",
+        row("meshflat, one thread", "m1", TARGET_TO_MESH),
+        row("meshflat, two threads", "m2", TARGET_TO_MESH),
+        row(f"{pillow}, then numpy", "pm", None),
+        "",
+        f"**Mesh to image** (a value a vertex drawn on a {SMALL} x {SMALL} grid, linear inside "
+        "each triangle):",
+        "",
+        "| rasteriser | time (ms) | target | met |",
+        "|---|---:|---|---|",
+        row("meshflat, one thread", "i1", TARGET_TO_IMAGE),
+        row("meshflat, two threads", "i2", TARGET_TO_IMAGE),
+        row(f"{pillow}, then numpy", "pi", None),
+        "",
+        f"Agreement: the two face-id images agree on {agree_ids:.2%} of the {BIG}² pixels (the "
+        "rest lie on shared edges, which the two fill rules give to different neighbours); "
+        f"the per-face means differ by at most {mean_gap:.3g} (grey 0 to 1), the drawn "
+        f"values by at most {image_gap:.3g} (values -2 to 2).",
+    ]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=5)
+    parser.add_argument("--write-docs", action="store_true", help="record in docs/benchmarks.md")
+    args = parser.parse_args(argv)
+    keep_large_blocks()
+    report = measure(args.runs) + "\n\n" + footer(f"numpy {np.__version__}")
+    publish(
+        "transfer-bench",
+        "Values between the map and the mesh (`make bench-transfer`)",
+        report,
+        args.write_docs,
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

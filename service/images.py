@@ -1,0 +1,98 @@
+"""PNG parts of a form read into arrays: a density map, a texture mask, an image painted over
+the map. One reader, so every part is checked alike: a PNG, its size from the header before
+a pixel is decoded, its memory charged to the job, a 422 naming the part otherwise."""
+
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass
+
+import numpy as np
+from PIL import Image
+
+from .jobs import charge
+from .problems import Problem
+
+#: Bytes a pixel costs while read: the decoded pixels and two float64 planes.
+BYTES_PER_PIXEL = 24
+#: The largest side of a PNG part (a texture mask of 8192 x 8192 is a large one).
+MAX_SIDE = 8192
+#: Grey from red, green and blue (Rec. 709, on the stored values).
+_LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass(frozen=True)
+class Png:
+    """A PNG's pixels: ``values`` (h, w) float in [0, 1] (grey, or the luminance of a colour
+    image), ``alpha`` (h, w) float in [0, 1] or None, ``bits`` a channel (8 or 16), ``mode``
+    Pillow's."""
+
+    values: np.ndarray
+    alpha: np.ndarray | None
+    bits: int
+    mode: str
+
+
+def refusal(part: str, words: str) -> Problem:
+    return Problem(422, f"{part}: {words}", "invalid-request", part)
+
+
+def read_png(
+    data: bytes, part: str, size: tuple[int, int] | None = None, grey_only: bool = False
+) -> Png:
+    """The PNG part ``part``: 8- or 16-bit grey, grey with alpha, RGB or RGBA (a palette
+    image as its RGB(A)); of ``size`` (width, height) when given.
+
+    Raises
+    ------
+    Problem
+        422 naming the part: not a PNG, another size, a mode it cannot be (``grey_only``:
+        only grey, with alpha or not, 8 bits).
+    """
+    try:
+        image = Image.open(io.BytesIO(data))
+        if image.format != "PNG":
+            raise refusal(part, f"a PNG, not {image.format}")
+        width, height = image.size
+        if size is not None and image.size != size:  # from the header: nothing decoded yet
+            raise refusal(
+                part,
+                f"{width} x {height} pixels; the PNG answer's framing is params.image_width x "
+                f"image_height, {size[0]} x {size[1]}",
+            )
+        if max(width, height) > MAX_SIDE:
+            raise refusal(part, f"{width} x {height} pixels; at most {MAX_SIDE} a side")
+        if grey_only and image.mode not in ("L", "LA"):
+            raise refusal(
+                part, f"8-bit grey (mode L, or LA: the alpha is left out), not mode {image.mode}"
+            )
+        charge(BYTES_PER_PIXEL * width * height)
+        return _pixels(image, part)
+    except (OSError, ValueError, SyntaxError, Image.DecompressionBombError) as error:
+        raise refusal(part, f"not a readable PNG ({type(error).__name__})") from None
+
+
+def _pixels(image: Image.Image, part: str) -> Png:
+    mode = image.mode
+    if mode == "P":
+        image = image.convert("RGBA" if "transparency" in image.info else "RGB")
+    if image.mode in ("L", "LA"):
+        values = np.asarray(image.getchannel(0), dtype=np.float64) / 255.0
+        alpha = image.getchannel(1) if image.mode == "LA" else None
+        bits = 8
+    elif image.mode in ("I;16", "I;16B", "I"):
+        raw = np.asarray(image, dtype=np.float64)
+        values, alpha, bits = raw / 65535.0, None, 16
+    elif image.mode in ("RGB", "RGBA"):
+        rgb = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
+        values = rgb @ _LUMA
+        alpha = image.getchannel(3) if image.mode == "RGBA" else None
+        bits = 8
+    else:
+        raise refusal(
+            part, f"grey, grey and alpha, RGB or RGBA, 8 or 16 bits; not mode {image.mode}"
+        )
+    if alpha is not None:
+        alpha = np.asarray(alpha, dtype=np.float64) / 255.0
+    np.clip(values, 0.0, 1.0, out=values)
+    return Png(values, alpha, bits, mode)

@@ -1,0 +1,197 @@
+"""Values between the map and the mesh (``POST /v1/transfer``, ``meshflat transfer``;
+docs/math.md, section 16): values drawn on the map come back onto the mesh, a picture of
+/v1/flatten painted over lands on the triangles under the paint, and the look-up images name
+the triangle and its weights at every pixel."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import struct
+import zlib
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from service.cli import main
+from service.outputs.lookup import read_lookup
+from service.samples import SAMPLES
+
+from .conftest import load_sample
+from .test_api import SCALP, problem
+from .test_painted import ply_with
+
+pytestmark = pytest.mark.anyio
+
+NAME = "fsaverage-head.ply"
+PARAMS = {**SCALP[NAME], "image_width": 900, "image_height": 600}
+VERTICES, FACES = load_sample(NAME)
+#: A smooth function of the surface: what a front end might measure a vertex.
+VALUES = VERTICES[:, 0] / 100 + (VERTICES[:, 1] / 120) ** 2
+
+
+async def transfer(client, params: dict, files: dict | None = None, data: bytes | None = None):
+    form = {"mesh": (NAME, SAMPLES[NAME].path.read_bytes() if data is None else data)}
+    form.update(files or {})
+    fields = {"params": json.dumps({**PARAMS, **params})}
+    return await client.post("/v1/transfer", files=form, data=fields)
+
+
+def png_of(url: str) -> np.ndarray:
+    return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))))
+
+
+def nullable(values) -> np.ndarray:
+    return np.array([np.nan if v is None else v for v in values], dtype=float)
+
+
+async def test_values_drawn_on_the_map_come_back_onto_the_mesh(client):
+    drawn = (await transfer(client, {"values": VALUES.tolist()})).json()
+    low, high = drawn["value_range"]
+    image, mask = png_of(drawn["image"]), png_of(drawn["mask"])
+    assert image.dtype == np.uint16 and image.shape == (600, 900) and mask.dtype == np.uint8
+    assert (image[mask == 0] == 0).all() and image.max() > 60000
+    png = base64.b64decode(drawn["image"].split(",", 1)[1])
+    back = await transfer(client, {"value_range": [low, high]}, {"image": ("map.png", png)})
+    answer = back.json()
+    ids, values = np.array(answer["vertices"]["ids"]), nullable(answer["vertices"]["values"])
+    spread = high - low
+    # Interpolation error: the function's change over about a pixel, far below its spread.
+    error = np.abs(values - VALUES[ids])
+    assert np.isfinite(values).all() and np.median(error) < 1e-3 * spread
+    assert error.max() < 0.02 * spread
+    face_ids = np.array(answer["faces"]["ids"])
+    face_values = nullable(answer["faces"]["values"])
+    # A face's mean over its triangle: its corners' mean, for a function linear on it.
+    np.testing.assert_allclose(
+        face_values, VALUES[FACES[face_ids]].mean(axis=1), atol=0.01 * spread
+    )
+    np.testing.assert_allclose(answer["faces"]["coverage"], 1.0)
+
+
+async def test_a_flatten_picture_painted_over_comes_back_onto_the_triangles_under_the_paint(
+    client,
+):
+    params = {**PARAMS, "output": "png"}
+    form = {"mesh": (NAME, SAMPLES[NAME].path.read_bytes())}
+    picture = await client.post("/v1/flatten", files=form, data={"params": json.dumps(params)})
+    canvas = np.asarray(Image.open(io.BytesIO(picture.content)).convert("RGB")).copy()
+    grey = np.zeros(canvas.shape[:2], dtype=np.uint8)
+    grey[250:330, 380:520] = 255  # a surgeon's rectangle, painted white over the map
+    painted = io.BytesIO()
+    Image.fromarray(grey).save(painted, format="PNG")
+    answer = (await transfer(client, {}, {"image": ("painted.png", painted.getvalue())})).json()
+    lookup = await transfer(client, {"output": "face_ids"})
+    ids, weights = read_lookup(lookup.content)
+    assert weights is None and ids.shape == (600, 900)
+    painted_area = np.zeros(ids.shape, dtype=bool)
+    painted_area[250:330, 380:520] = True
+    # Faces wholly under the paint (none of their pixels off it, a pixel clear of its edge),
+    # and faces wholly off it (none of their pixels within a pixel of it).
+    near = np.zeros(ids.shape, dtype=bool)
+    near[249:331, 379:521] = True
+    under = set(np.unique(ids[252:328, 382:518])) - set(np.unique(ids[~painted_area])) - {-1}
+    outside = set(np.unique(ids)) - set(np.unique(ids[near])) - {-1}
+    values = dict(zip(answer["faces"]["ids"], answer["faces"]["values"], strict=True))
+    assert under and all(values[face] == pytest.approx(1.0) for face in under)
+    assert outside and all(values[face] == pytest.approx(0.0) for face in outside)
+
+
+async def test_the_look_up_images_give_each_pixel_its_face_and_weights(client):
+    flat = (await transfer(client, {"output": "barycentric"})).content
+    ids, weights = read_lookup(flat)
+    held = ids >= 0
+    assert held.mean() > 0.2 and (ids[~held] == -1).all()
+    flattened = await client.post(
+        "/v1/flatten",
+        files={"mesh": (NAME, SAMPLES[NAME].path.read_bytes())},
+        data={"params": json.dumps(PARAMS)},
+    )
+    region = set(flattened.json()["faces"]["ids"])
+    assert set(np.unique(ids[held])) <= region
+    np.testing.assert_allclose(weights[held].sum(axis=1), 1.0, atol=1e-5)
+    assert (weights[held] > -1e-5).all() and (weights[~held] == 0).all()
+    # The weights read the values a vertex back as the drawing does, pixel by pixel.
+    drawn = (await transfer(client, {"values": VALUES.tolist()})).json()
+    low, high = drawn["value_range"]
+    image = png_of(drawn["image"]) / 65535 * (high - low) + low
+    rebuilt = np.einsum("pk,pk->p", weights[held], VALUES[FACES[ids[held]]])
+    np.testing.assert_allclose(rebuilt, image[held], atol=2e-4 * (high - low))
+
+
+def decode_grey_alpha_16(data: bytes) -> np.ndarray:
+    """(h, w, 2) uint16 of a 16-bit grey and alpha PNG with filter 0 rows (as written)."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height, depth, kind = struct.unpack(">IIBB", data[16:26])
+    assert (depth, kind) == (16, 4)
+    at, idat = 8, b""
+    while at < len(data):
+        (length,) = struct.unpack(">I", data[at : at + 4])
+        if data[at + 4 : at + 8] == b"IDAT":
+            idat += data[at + 8 : at + 8 + length]
+        at += 12 + length
+    rows = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(height, 1 + 4 * width)
+    assert (rows[:, 0] == 0).all()
+    return rows[:, 1:].copy().view(">u2").reshape(height, width, 2)
+
+
+async def test_the_png_answer_is_the_drawing_with_its_coverage_as_alpha(client):
+    answer = await transfer(client, {"values": VALUES.tolist(), "output": "png"})
+    assert answer.headers["content-type"] == "image/png"
+    pixels = decode_grey_alpha_16(answer.content)
+    drawn = (await transfer(client, {"values": VALUES.tolist()})).json()
+    np.testing.assert_array_equal(pixels[..., 0], png_of(drawn["image"]))
+    np.testing.assert_array_equal(pixels[..., 1], (png_of(drawn["mask"]) > 0) * 65535)
+
+
+async def test_values_may_name_a_vertex_property_of_the_file(client):
+    data = ply_with({"thickness": ("float", VALUES.astype(np.float32))})
+    by_name = (await transfer(client, {"values": "thickness"}, data=data)).json()
+    listed = (await transfer(client, {"values": VALUES.astype(np.float32).tolist()})).json()
+    assert by_name["value_range"] == pytest.approx(listed["value_range"])
+    np.testing.assert_array_equal(png_of(by_name["image"]), png_of(listed["image"]))
+
+
+async def test_bad_transfers_name_the_part_or_field(client):
+    red = io.BytesIO()
+    Image.new("L", (300, 200)).save(red, format="PNG")
+    small = {"image": ("small.png", red.getvalue())}
+    body = problem(await transfer(client, {}, small), 422, "image")
+    assert "300 x 200" in body["detail"] and "900 x 600" in body["detail"]
+    body = problem(await transfer(client, {"values": [1.0, 2.0]}), 422, "params.values")
+    assert f"{len(VERTICES):,} vertices" in body["detail"]
+    body = problem(await transfer(client, {"values": "thickness"}), 422, "params.values")
+    assert "no per-vertex property 'thickness'" in body["detail"]
+    body = problem(await transfer(client, {}), 422, "image")
+    assert "nothing to carry" in body["detail"]
+    right = io.BytesIO()
+    Image.new("L", (900, 600)).save(right, format="PNG")
+    both = {"image": ("map.png", right.getvalue())}
+    problem(await transfer(client, {"values": VALUES.tolist()}, both), 422, "image")
+    problem(await transfer(client, {"output": "png"}, both), 422, "params.values")
+    problem(await transfer(client, {"value_range": [1, 1], "values": [0.0]}), 422)
+
+
+def test_the_command_line_carries_an_image_onto_the_mesh(tmp_path, capsys):
+    mesh = tmp_path / NAME
+    mesh.write_bytes(SAMPLES[NAME].path.read_bytes())
+    params = json.dumps({**PARAMS, "values": VALUES.tolist()})
+    drawing = tmp_path / "drawing.png"
+    assert main(["transfer", str(mesh), "--params", params, "--out", str(drawing)]) == 0
+    assert decode_grey_alpha_16(drawing.read_bytes()).shape == (600, 900, 2)
+    painted = tmp_path / "painted.png"
+    Image.new("L", (900, 600), 128).save(painted)
+    out = tmp_path / "values.json"
+    size = json.dumps({**PARAMS})
+    assert (
+        main(["transfer", str(mesh), "--params", size, "--image", str(painted), "--out", str(out)])
+        == 0
+    )
+    answer = json.loads(out.read_text())
+    assert nullable(answer["faces"]["values"]) == pytest.approx(128 / 255)
+    lookup = tmp_path / "ids.bin"
+    ids_params = json.dumps({**PARAMS, "output": "face_ids"})
+    assert main(["transfer", str(mesh), "--params", ids_params, "--out", str(lookup)]) == 0
+    assert read_lookup(lookup.read_bytes())[0].shape == (600, 900)

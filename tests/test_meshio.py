@@ -645,6 +645,20 @@ def binary_ply_of_one_long_strip(size: int) -> bytes:
     )
 
 
+def binary_ply_of_byte_properties(size: int) -> bytes:
+    """Vertices with a colour and ten more one-byte properties (eight of them kept)."""
+    names = ["red", "green", "blue", "alpha", *(f"p{k}" for k in range(10))]
+    count = size // (12 + len(names))
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        f"element vertex {count}\nproperty float x\nproperty float y\nproperty float z\n"
+        + "".join(f"property uchar {name}\n" for name in names)
+        + "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+    ).encode()
+    rows = bytes(count * (12 + len(names)))
+    return header + rows + struct.pack("<B3i", 3, 0, 1, 2)
+
+
 def obj_of(unit: bytes, head: bytes = b"", tail: bytes = b""):
     return lambda size: repeated(unit, head, tail, size)
 
@@ -659,6 +673,12 @@ ADVERSARIAL = {
     "obj of f lines with tails": ("obj", obj_of(b"f 1/1/1 1/1/1 1/1/1\n", TRIANGLE)),
     "obj of relative f lines": ("obj", obj_of(b"f -1 -1 -1\n", TRIANGLE)),
     "obj of g lines": ("obj", obj_of(b"g a\n", TRIANGLE, b"f 1 2 3\n")),
+    "obj of vt lines": ("obj", obj_of(b"vt 0 0\n", TRIANGLE, b"f 1/1 2/1 3/1\n")),
+    "obj of f lines with texture references": (
+        "obj",
+        obj_of(b"f 1/1 1/1 1/1\n", TRIANGLE + b"vt 0 0\n"),
+    ),
+    "obj of coloured v lines": ("obj", obj_of(b"v 0 0 0 1 1 1\n", tail=b"f 1 2 3\n")),
     "obj of one long face": ("obj", obj_of(b" -1", TRIANGLE + b"f", b"\n")),
     "obj of one long vertex": ("obj", obj_of(b" 0", b"v", b"\n" + TRIANGLE + b"f 1 2 3\n")),
     "obj of one long comment": ("obj", obj_of(b"x", TRIANGLE + b"f 1 2 3\n#", b"\n")),
@@ -669,6 +689,7 @@ ADVERSARIAL = {
     "ascii ply of vertices": ("ply", ascii_ply_of_vertices),
     "binary ply of mixed polygons": ("ply", binary_ply_of_mixed_polygons),
     "binary ply of one long strip": ("ply", binary_ply_of_one_long_strip),
+    "binary ply of vertices with byte properties": ("ply", binary_ply_of_byte_properties),
 }
 
 

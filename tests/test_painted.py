@@ -302,3 +302,23 @@ async def test_painted_regions_refuse_what_the_file_lacks(client):
     files = {"mask": ("mask.png", b"not a png")}
     body = await refused({"texture_mask": {}}, textured_obj(uv), "x.obj", files, "mask")
     assert "not a readable PNG" in body["detail"]
+
+
+def test_the_command_line_sends_the_mask_part(tmp_path):
+    from service.cli import main
+
+    uv = np.column_stack([VERTICES[:, 0], VERTICES[:, 1]]) / 260 + 0.5
+    mesh, mask, out = tmp_path / "head.obj", tmp_path / "mask.png", tmp_path / "region.json"
+    mesh.write_bytes(textured_obj(uv))
+    left = np.zeros((64, 64))
+    left[:, :32] = 1.0
+    mask.write_bytes(mask_png(left))
+    params = json.dumps({"region": {"texture_mask": {"min": 0.5}}, "center": "bbox_center"})
+    assert (
+        main(["flatten", str(mesh), "--params", params, "--mask", str(mask), "--out", str(out)])
+        == 0
+    )
+    faces = json.loads(out.read_text())["faces"]["ids"]
+    u = uv[FACES][:, :, 0]
+    assert set(np.flatnonzero((u < 0.45).all(axis=1))) <= set(faces)
+    assert not set(faces) & set(np.flatnonzero((u > 0.55).all(axis=1)))

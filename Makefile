@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-locate bench-measure bench-sites bench-transfer bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-locate bench-measure bench-sites bench-transfer bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -56,6 +56,11 @@ bench-sites: $(VENV)/.installed-bench $(VENV)/.installed-sites-peers
 # the vertices' values to a 2048² image), against Pillow's ImageDraw a triangle at a time.
 bench-transfer: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.transfer_bench $(BENCH_ARGS)
+
+# A million-face scalp's map coloured by isometric distortion, PNG and SVG, against Pillow's
+# ImageDraw a triangle at a time.
+bench-picture: $(VENV)/.installed-bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.picture_bench $(BENCH_ARGS)
 
 # The head's frame with landmarks 2 mm off (100 trials), and a follow-up scan registered to
 # the baseline: how far the maps move on the scalp.

@@ -27,3 +27,25 @@ def publish(name: str, heading: str, report: str, write_docs: bool) -> None:
     print(report)
     if write_docs:
         record(name, heading, report)
+
+
+def run_report(
+    argv: list[str] | None, doc: str, name: str, heading: str, measure, runs: int = 5
+) -> int:
+    """A benchmark's command line: ``--runs`` and ``--write-docs``, the service's allocator
+    settings, then ``measure(runs)``'s report with the machine's footer, published."""
+    import argparse
+
+    import numpy as np
+
+    from benchmarks.transforms_bench import footer
+    from service.allocator import keep_large_blocks
+
+    parser = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=runs)
+    parser.add_argument("--write-docs", action="store_true", help="record in docs/benchmarks.md")
+    args = parser.parse_args(argv)
+    keep_large_blocks()
+    report = measure(args.runs) + "\n\n" + footer(f"numpy {np.__version__}")
+    publish(name, heading, report, args.write_docs)
+    return 0

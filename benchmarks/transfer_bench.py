@@ -26,7 +26,6 @@ the service's allocator settings; median of the runs after a warm-up.
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 from importlib.metadata import version
@@ -34,10 +33,8 @@ from importlib.metadata import version
 import numpy as np
 from PIL import Image, ImageDraw
 
-from benchmarks.docs import publish
+from benchmarks.docs import run_report
 from benchmarks.measure_bench import Region, progress
-from benchmarks.transforms_bench import footer
-from service.allocator import keep_large_blocks
 from service.outputs.picture import Framing
 from transforms import Layout, pixels
 
@@ -151,6 +148,17 @@ def measure(runs: int) -> str:
         return f"| {name} | {median[key]:,.1f} | {goal} | {met} |"
 
     pillow = f"Pillow `ImageDraw.polygon` {version('pillow')}, a call a triangle"
+
+    def table(keys: tuple[str, str, str], target: float) -> list[str]:
+        one, two, peer = keys
+        return [
+            "| rasteriser | time (ms) | target | met |",
+            "|---|---:|---|---|",
+            row("meshflat, one thread", one, target),
+            row("meshflat, two threads", two, target),
+            row(f"{pillow}, then numpy", peer, None),
+        ]
+
     lines = [
         f"The region: {len(region.faces):,} faces, {len(region.x):,} vertices; median of {runs} "
         "runs after a warm-up.",
@@ -158,20 +166,12 @@ def measure(runs: int) -> str:
         f"**Image to mesh** ({BIG} x {BIG} grey image: a value a face, its mean over the "
         "triangle, and a value a vertex):",
         "",
-        "| rasteriser | time (ms) | target | met |",
-        "|---|---:|---|---|",
-        row("meshflat, one thread", "m1", TARGET_TO_MESH),
-        row("meshflat, two threads", "m2", TARGET_TO_MESH),
-        row(f"{pillow}, then numpy", "pm", None),
+        *table(("m1", "m2", "pm"), TARGET_TO_MESH),
         "",
         f"**Mesh to image** (a value a vertex drawn on a {SMALL} x {SMALL} grid, linear inside "
         "each triangle):",
         "",
-        "| rasteriser | time (ms) | target | met |",
-        "|---|---:|---|---|",
-        row("meshflat, one thread", "i1", TARGET_TO_IMAGE),
-        row("meshflat, two threads", "i2", TARGET_TO_IMAGE),
-        row(f"{pillow}, then numpy", "pi", None),
+        *table(("i1", "i2", "pi"), TARGET_TO_IMAGE),
         "",
         f"Agreement: the two face-id images agree on {agree_ids:.2%} of the {BIG}² pixels; "
         f"{one_only:.2%} are held by one rule only (the region's border: Pillow fills a "
@@ -185,19 +185,13 @@ def measure(runs: int) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--runs", type=int, default=5)
-    parser.add_argument("--write-docs", action="store_true", help="record in docs/benchmarks.md")
-    args = parser.parse_args(argv)
-    keep_large_blocks()
-    report = measure(args.runs) + "\n\n" + footer(f"numpy {np.__version__}")
-    publish(
+    return run_report(
+        argv,
+        __doc__,
         "transfer-bench",
         "Values between the map and the mesh (`make bench-transfer`)",
-        report,
-        args.write_docs,
+        measure,
     )
-    return 0
 
 
 if __name__ == "__main__":

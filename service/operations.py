@@ -144,39 +144,50 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
         Ids out of range or repeated, unknown groups, a zero cone axis, a centroid of no
         area; :class:`~transforms.EmptyRegionError` when nothing is selected.
     """
-    region, n_faces = params.region, len(mesh.faces)
+    region = params.region
+    if params.part("mask") is not None and (region is None or region.texture_mask is None):
+        raise refusal("mask", "a mask part is read for region.texture_mask only; send that")
     if region is not None and region.cone is not None:
-        cone = region.cone
-        center = _center(mesh, None, params.center)
-        if cone.apex is not None:
-            apex = np.asarray(cone.apex, dtype=np.float64)
-        elif params.center in ("bbox_center", "auto"):
-            apex = center  # the same box centre, of the whole mesh: found once
-        else:
-            apex = select.bbox_center(mesh.vertices, mesh.faces)
-        faces = select.cone_faces(mesh.vertices, mesh.faces, apex, cone.axis, cone.half_angle_deg)
-        resolved = {"cone": {**cone.model_dump(), "apex": apex.tolist()}}
-        return Selection(select.nonempty(faces), center, resolved)
+        return _cone_selection(mesh, params)
+    faces = select.nonempty(_region_faces(mesh, params))
+    resolved = None if region is None else region.model_dump(exclude_unset=True)
+    return Selection(faces, _center(mesh, faces, params.center), resolved)
+
+
+def _cone_selection(mesh: Mesh, params: MeshParams) -> Selection:
+    """A cone's faces, its apex resolved (by default the whole mesh's box centre)."""
+    cone = params.region.cone
+    center = _center(mesh, None, params.center)
+    if cone.apex is not None:
+        apex = np.asarray(cone.apex, dtype=np.float64)
+    elif params.center in ("bbox_center", "auto"):
+        apex = center  # the same box centre, of the whole mesh: found once
+    else:
+        apex = select.bbox_center(mesh.vertices, mesh.faces)
+    faces = select.cone_faces(mesh.vertices, mesh.faces, apex, cone.axis, cone.half_angle_deg)
+    resolved = {"cone": {**cone.model_dump(), "apex": apex.tolist()}}
+    return Selection(select.nonempty(faces), center, resolved)
+
+
+def _region_faces(mesh: Mesh, params: MeshParams) -> np.ndarray:
+    """The file face ids of any region but a cone (all of them for none)."""
+    region, n_faces = params.region, len(mesh.faces)
     if region is None:
-        faces = np.arange(n_faces)
-    elif region.scalp is not None:
+        return np.arange(n_faces)
+    if region.scalp is not None:
         scalp = region.scalp
         landmarks = checked_landmarks(mesh, scalp.landmarks, "region.scalp.landmarks")
         offset = scalp.offset_mm / _mm_per_unit(scalp.units, "params.region.scalp.units")
-        faces = landmarks.scalp_faces(mesh.vertices, mesh.faces, offset)
-    elif region.vertex_color is not None or region.feature_id is not None:
-        faces = _painted_faces(mesh, region)
-    elif region.texture_mask is not None:
-        faces = _masked_faces(mesh, region.texture_mask, params.part("mask"))
-    elif region.faces is not None:
-        faces = select.faces_listed(region.faces, n_faces)
-    elif region.vertices is not None:
-        faces = select.faces_of_vertices(mesh.faces, region.vertices, len(mesh.vertices))
-    else:
-        faces = mesh.group_faces(region.groups)
-    faces = select.nonempty(faces)
-    resolved = None if region is None else region.model_dump(exclude_unset=True)
-    return Selection(faces, _center(mesh, faces, params.center), resolved)
+        return landmarks.scalp_faces(mesh.vertices, mesh.faces, offset)
+    if region.vertex_color is not None or region.feature_id is not None:
+        return _painted_faces(mesh, region)
+    if region.texture_mask is not None:
+        return _masked_faces(mesh, region.texture_mask, params.part("mask"))
+    if region.faces is not None:
+        return select.faces_listed(region.faces, n_faces)
+    if region.vertices is not None:
+        return select.faces_of_vertices(mesh.faces, region.vertices, len(mesh.vertices))
+    return mesh.group_faces(region.groups)
 
 
 def _painted_faces(mesh: Mesh, region) -> np.ndarray:

@@ -20,6 +20,7 @@ from transforms.selection import NAMED_CENTERS, Channel, CornerRule
 
 from .meshio import FORMATS
 from .outputs import Output
+from .outputs.colours import ColourBy
 
 
 def choice(vocabulary: type[StrEnum]):
@@ -590,6 +591,23 @@ class PictureParams(_Strict):
     )
     image_height: int = Field(
         800, ge=360, le=4096, description="Height of an SVG or PNG answer, pixels."
+    )
+    grid_lines: int = Field(
+        0,
+        ge=0,
+        le=40,
+        description="A reference grid over the map of an SVG or PNG answer: where this many "
+        "evenly spaced planes square to the frame's local X axis, and as many square to its "
+        "local Z axis (the two directions across the pole), cut the region (docs/math.md "
+        "section 17); 0: none.",
+    )
+    colour_by: choice(ColourBy) = Field(
+        ColourBy.FLAGS,
+        description="What colours the map's triangles in an SVG or PNG answer (and the GLB's "
+        "vertices, as COLOR_0): the validation's flags, or a distortion measure as a factor "
+        "of at least 1 (isometric energy, conformal s1/s2, area exp|log(s1 s2)|; docs/math.md "
+        "section 7) in viridis on a log scale from 1 to its 99th percentile, with a colour bar "
+        "marking its p50 and p95; flagged triangles keep their colours.",
     )
 
 

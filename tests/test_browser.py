@@ -19,6 +19,7 @@ import pytest
 
 from service.samples import SAMPLES
 
+from .conftest import load_sample
 from .test_serve import running
 from .tools import require
 
@@ -126,20 +127,7 @@ def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
         assert page.locator("#vertices").inner_text() == f"{vertex_count:,}"
         assert "seam-free, star-shaped" in page.locator("#summary").inner_text()
         # The canvas shows something besides the background.
-        drawn = page.evaluate(
-            """() => {
-                const canvas = document.getElementById('view');
-                const gl = canvas.getContext('webgl2') || canvas.getContext('webgl');
-                const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
-                const pixels = new Uint8Array(w * h * 4);
-                gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, pixels);
-                let other = 0;
-                for (let i = 0; i < pixels.length; i += 4)
-                    if (Math.abs(pixels[i] - 0xf4) > 8 || Math.abs(pixels[i + 2] - 0xf8) > 8)
-                        other++;
-                return other / (w * h);
-            }"""
-        )
+        drawn = page.evaluate(NOT_BACKGROUND)
         assert drawn > 0.02, drawn
         # The centre field shows the centre used, three numbers.
         assert len(page.locator("#center").input_value().split(",")) == 3
@@ -159,12 +147,21 @@ def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
 
 
 #: Pixels of the 3D view that differ from those kept by the last call with ``true``.
-CHANGED_PIXELS = """(keep) => {
+#: The 3D view's pixels, RGBA a pixel (w by h), as the statements below read them.
+READ_VIEW = """
     const canvas = document.getElementById('view');
     const gl = canvas.getContext('webgl2') || canvas.getContext('webgl');
     const w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
     const pixels = new Uint8Array(w * h * 4);
-    gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, pixels);
+    gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, pixels);"""
+#: The share of the view's pixels other than its background (#f4f6f8).
+NOT_BACKGROUND = f"""() => {{{READ_VIEW}
+    let other = 0;
+    for (let i = 0; i < pixels.length; i += 4)
+        if (Math.abs(pixels[i] - 0xf4) > 8 || Math.abs(pixels[i + 2] - 0xf8) > 8) other++;
+    return other / (w * h);
+}}"""
+CHANGED_PIXELS = f"""(keep) => {{{READ_VIEW}
     const kept = window.keptPixels;
     if (keep) window.keptPixels = pixels;
     let changed = 0;
@@ -172,7 +169,7 @@ CHANGED_PIXELS = """(keep) => {
         if (Math.max(...[0, 1, 2].map((c) => Math.abs(pixels[i + c] - kept[i + c]))) > 40)
             changed++;
     return changed;
-}"""
+}}"""
 
 
 def on_screen(page, flat: dict, ring: list[tuple[float, float]]):
@@ -449,6 +446,64 @@ def test_a_region_painted_in_vertex_colours_is_flattened_from_an_uploaded_ply(se
         page.wait_for_timeout(500)
         ARTIFACTS.mkdir(exist_ok=True)
         page.screenshot(path=str(ARTIFACTS / "demo-painted.png"), full_page=True)
+    assert not problems, problems
+
+
+#: The share of the 3D view's pixels that are clearly coloured (not grey): viridis shows.
+COLOURED_PIXELS = f"""() => {{{READ_VIEW}
+    let coloured = 0;
+    for (let i = 0; i < pixels.length; i += 4) {{
+        const r = pixels[i], g = pixels[i + 1], b = pixels[i + 2];
+        if (Math.max(r, g, b) - Math.min(r, g, b) > 60) coloured++;
+    }}
+    return coloured / (w * h);
+}}"""
+
+
+def test_colour_by_shows_the_distortion_on_the_map_and_the_head(server, tmp_path):
+    """ "Colour by": the map and the 3D view flattened again, the map's triangles in the
+    measure's colours with its bar, the head in the same colours; on the bundled scalp and
+    on a generated 200k-face region (beyond the outline limit: the raster carries them)."""
+    import trimesh
+
+    problems: list[str] = []
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        flatten_sample(page)
+        page.wait_for_timeout(300)
+        before = page.evaluate(COLOURED_PIXELS)  # the grey checker and its two coloured lines
+        with page.expect_response(lambda r: r.url.endswith("/v1/flatten")):
+            page.select_option("#colour-by", "isometric")
+        page.wait_for_selector("#map svg g.colour-bar", timeout=60_000)
+        page.wait_for_selector("body[data-state=shown]", timeout=60_000)
+        page.wait_for_timeout(500)
+        bar = page.locator("#map svg g.colour-bar").text_content()
+        assert "isometric distortion" in bar and "p50" in bar and "p95" in bar
+        assert page.locator("#map svg path.triangles[class*=colour-]").count() > 20
+        after = page.evaluate(COLOURED_PIXELS)  # the head in viridis
+        assert after > before + 0.05, (before, after)
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "demo-colour.png"), full_page=True)
+
+        vertices, faces = load_sample(SAMPLE)
+        for _ in range(3):
+            vertices, faces = trimesh.remesh.subdivide(vertices, faces)
+        big = tmp_path / "fsaverage-260k.ply"
+        big.write_bytes(trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply"))
+        page.set_input_files("#file", str(big))
+        page.fill("#axis", "0, 0, 1")
+        page.fill("#angle", "130")
+        page.click("#go")
+        page.wait_for_selector("body[data-state=shown]", timeout=120_000)
+        page.wait_for_function(
+            "() => document.querySelector('#map svg g.legend')"
+            ".textContent.includes('200,390 triangles')",
+            timeout=120_000,
+        )
+        assert page.locator("#map svg path.fill[class*=colour-]").count() > 20
+        assert "isometric distortion" in page.locator("#map svg g.colour-bar").text_content()
+        page.wait_for_timeout(500)
+        page.screenshot(path=str(ARTIFACTS / "demo-colour-200k.png"), full_page=True)
     assert not problems, problems
 
 

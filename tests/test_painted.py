@@ -302,6 +302,10 @@ async def test_painted_regions_refuse_what_the_file_lacks(client):
     files = {"mask": ("mask.png", b"not a png")}
     body = await refused({"texture_mask": {}}, textured_obj(uv), "x.obj", files, "mask")
     assert "not a readable PNG" in body["detail"]
+    unused = {"mask": ("mask.png", mask_png(np.ones((8, 8))))}
+    cone = {"cone": {"axis": [0, 0, 1], "half_angle_deg": 60}}
+    body = await refused(cone, files=unused, field="mask")
+    assert "region.texture_mask only" in body["detail"]
 
 
 def test_the_command_line_sends_the_mask_part(tmp_path):

@@ -14,7 +14,7 @@ from .errors import TransformInputError
 from .faces import FaceMeasures, measure_checked, measure_faces
 from .frames import Frame
 from .layouts import Layout, layout_xy, measured_second
-from .metrics import Distortion, distortion
+from .metrics import Distortion, FaceDistortion, distortion, face_distortion
 from .validation import RegionValidation, validate
 from .viewpoint import check_center_sees_area
 
@@ -159,6 +159,23 @@ def assess_region(
     measures = measure_faces(vertices_local, faces, theta, phi, cap, threads, layout_theta)
     validation, metrics, _, _ = _judge(measures, winding, threads)
     return validation, metrics
+
+
+def region_face_distortion(
+    vertices, flat: FlatRegion, frame: Frame, chart: Chart, threads: int = 1
+) -> FaceDistortion:
+    """The per-face measures of section 7 over a flattened region (the layout as flattened),
+    measured again from ``vertices`` ((n, 3) float, the same the region was flattened from):
+    what a picture coloured by distortion shows, face by face.
+
+    Returns
+    -------
+    FaceDistortion, positions in ``flat.faces`` (the degenerate faces left out)
+    """
+    local = frame.to_local(np.asarray(vertices, dtype=np.float64)[flat.vertex_ids])
+    second = measured_second(flat.theta, flat.layout)
+    measures = measure_faces(local, flat.faces, flat.theta, flat.phi, chart.cap, threads, second)
+    return face_distortion(measures)
 
 
 def flagged_mask(validation: RegionValidation, n_faces: int) -> np.ndarray:

@@ -69,7 +69,8 @@ function params() {
   // The faces painted in the file's vertex colours (all three vertices at the level), or the cone.
   const painted = { channel: $('channel').value, min: Number($('color-min').value) };
   const region = $('region-kind').value === 'vertex_color' ? { vertex_color: painted } : { cone };
-  const p = { region, layout: $('layout').value };
+  // The map and the 3D view coloured by the flags or by a distortion measure (with its bar).
+  const p = { region, layout: $('layout').value, colour_by: $('colour-by').value };
   if ($('use-landmarks').checked) {
     // The head's frame: centre and rotation from the landmarks, sigma as given (or fitted).
     p.frame = { landmarks: { ...landmarks.points } };
@@ -150,6 +151,11 @@ function show(gltf) {
     vertices += node.geometry.attributes.position.count;
     // Pushed back a little in depth, so that a zone's outline drawn on the surface shows.
     Object.assign(node.material, { polygonOffset: true, polygonOffsetFactor: 1, polygonOffsetUnits: 1 });
+    // Coloured by a measure (COLOR_0): the colours alone, without the checker.
+    if (node.geometry.attributes.color) {
+      node.material.map = null;
+      node.material.needsUpdate = true;
+    }
   });
   return vertices;
 }
@@ -571,6 +577,8 @@ $('clear-landmarks').addEventListener('click', clearLandmarks);
 $('view').addEventListener('click', pickLandmark);
 document.querySelectorAll('button.view').forEach((button) => button.addEventListener('click', () => viewFrom(button.dataset.view)));
 $('units').addEventListener('change', () => zone.closed && measure());
+// Another colouring: the map and the 3D view again, with it.
+$('colour-by').addEventListener('change', () => map && $('form').requestSubmit());
 $('map').addEventListener('click', addPoint);
 $('map').addEventListener('dblclick', closeZone);
 animate();

@@ -9,11 +9,17 @@ from xml.sax.saxutils import escape
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from transforms.raster import paint_segments
+
+from .colours import STEPS, hex_colour, palette
 from .picture import (
     BOUNDARY,
     COLOURS,
     CURVE_KEY,
     FILL,
+    GRID_COLOUR,
+    GRID_KEY,
+    GRID_ON_COLOURS,
     OUTLINE,
     SEAM_COLOUR,
     SINGULAR_COLOUR,
@@ -23,6 +29,8 @@ from .picture import (
     Picture,
 )
 
+#: The colour bar's width, pixels (in the legend's column).
+BAR_WIDTH = 220
 #: Boundary edges drawn as vector lines up to this many (beyond: painted into the fill).
 VECTOR_BOUNDARY = 100_000
 #: Cells of the SVG's decimated fill, in canvas pixels.
@@ -44,17 +52,15 @@ def to_svg(picture: Picture) -> bytes:
     ]
     vector_boundary = len(p.boundary) <= VECTOR_BOUNDARY
     if p.vector:
-        filled = ~p.wrapping
-        for label in np.unique(p.labels[filled]):
-            corners = p.corners[filled & (p.labels == label)].reshape(-1, 6)
-            stroke = COLOURS[OUTLINE] if label == FILL else COLOURS[int(label)]
-            parts.append(
-                f'<path class="triangles label-{label}" fill="{COLOURS[int(label)]}" '
-                f'stroke="{stroke}" stroke-width="0.5" stroke-linejoin="round" '
-                f'd="{_rows(corners, "M%.1f %.1fL%.1f %.1fL%.1f %.1fZ")}"/>'
-            )
+        parts += _svg_triangles(p)
     else:
         parts += _decimated_fill(p, include_boundary=not vector_boundary)
+    if len(p.grid):
+        colour = GRID_ON_COLOURS if p.face_colours is not None else GRID_COLOUR
+        parts.append(
+            f'<path class="grid" fill="none" stroke="{colour}" stroke-width="0.8" '
+            f'd="{_rows(p.grid.reshape(-1, 4), "M%.1f %.1fL%.1f %.1f")}"/>'
+        )
     marks, labels = p.marks()
     for label in np.unique(labels):
         parts.append(
@@ -89,6 +95,49 @@ def to_svg(picture: Picture) -> bytes:
     return "\n".join(parts).encode()
 
 
+def _svg_triangles(p: Picture) -> list[str]:
+    """The triangles one by one, a path for each colour: the flags' labels, or the steps of
+    a measure's colours (each stroked in its own colour, so that no hairline shows between
+    neighbours)."""
+    parts, filled = [], ~p.wrapping
+    keys, colours = _keys(p, p.labels, np.arange(len(p.labels)))
+    for key in np.unique(keys[filled]):
+        corners = p.corners[filled & (keys == key)].reshape(-1, 6)
+        stroke = COLOURS[OUTLINE] if key == FILL else colours[int(key)]
+        parts.append(
+            f'<path class="triangles {_kind(key)}" fill="{colours[int(key)]}" '
+            f'stroke="{stroke}" stroke-width="0.5" stroke-linejoin="round" '
+            f'd="{_rows(corners, "M%.1f %.1fL%.1f %.1fL%.1f %.1fZ")}"/>'
+        )
+    return parts
+
+
+#: Keys above this are colours of a measure (``COLOURED + k`` for the k-th colour).
+COLOURED = 16
+
+
+def _keys(p: Picture, labels: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, dict]:
+    """The key of each pixel (or triangle) of ``labels`` holding triangle ``ids`` (-1:
+    none): its label, or, on a picture coloured by a measure, ``COLOURED`` plus its colour's
+    rank where the label is the plain fill; and each key's colour."""
+    keys = labels.astype(np.int32)
+    colours = dict(COLOURS)
+    if p.face_colours is None:
+        return keys, colours
+    rgb = p.face_colours.astype(np.uint32)
+    packed = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]  # one number a colour: fast
+    values, rank = np.unique(packed, return_inverse=True)
+    distinct = np.stack([values >> 16, (values >> 8) & 255, values & 255], axis=1)
+    coloured = (ids >= 0) & (labels <= FILL)
+    keys[coloured] = COLOURED + rank.ravel()[ids[coloured]]
+    colours.update({COLOURED + k: _hex(rgb) for k, rgb in enumerate(distinct)})
+    return keys, colours
+
+
+def _kind(key: int) -> str:
+    return f"colour-{key - COLOURED}" if key >= COLOURED else f"label-{key}"
+
+
 def _svg_overlays(p: Picture) -> list[str]:
     """The zones (filled, the holes left open) and the curves, each labelled."""
     parts = []
@@ -113,8 +162,12 @@ def _svg_overlays(p: Picture) -> list[str]:
 
 
 def _decimated_fill(p: Picture, include_boundary: bool) -> list[str]:
-    """The fill as horizontal runs of equal label on a grid of ``FILL_CELL`` pixels."""
-    image = p.raster(1.0 / FILL_CELL, include_boundary=include_boundary)
+    """The fill as horizontal runs of equal colour on a grid of ``FILL_CELL`` pixels: the
+    labels', or a measure's colour cell by cell (the triangle holding the cell's centre).
+    At most one run a cell: the SVG's fill is bounded by the canvas, whatever the region."""
+    labels = p.raster(1.0 / FILL_CELL, include_boundary=include_boundary)
+    ids = p.face_ids(1.0 / FILL_CELL) if p.face_colours is not None else None
+    image, colours = _keys(p, labels, ids if ids is not None else np.full(labels.shape, -1))
     left, top = p.plot[0], p.plot[1]
     parts = []
     for label in np.unique(image[image > 0]):
@@ -134,7 +187,8 @@ def _decimated_fill(p: Picture, include_boundary: bool) -> list[str]:
             axis=1,
         )
         parts.append(
-            f'<path class="fill label-{label}" fill="{COLOURS[int(label)]}" '
+            f'<path class="fill {_kind(label)}" fill="{colours[int(label)]}" '
+            'shape-rendering="crispEdges" '
             f'd="{_rows(runs, "M%.1f %.1fh%.1fv%.1fh%.1fZ")}"/>'
         )
     return parts
@@ -170,7 +224,7 @@ def _svg_frame(p: Picture) -> list[str]:
     parts.append('<g class="legend">')
     for i, (label, colour, words) in enumerate(p.legend):
         row = y + 20 * i
-        if label == CURVE_KEY:
+        if label in (CURVE_KEY, GRID_KEY):
             parts.append(
                 f'<line x1="{x}" y1="{row + 6}" x2="{x + 14}" y2="{row + 6}" stroke="{colour}" '
                 'stroke-width="2"/>'
@@ -189,6 +243,8 @@ def _svg_frame(p: Picture) -> list[str]:
             )
         parts.append(f'<text x="{x + 20}" y="{row + 11}" {text}>{escape(words)}</text>')
     parts.append("</g>")
+    if p.colour_bar is not None:
+        parts += _svg_colour_bar(p)
     for i, line in enumerate(p.caption):
         parts.append(
             f'<text class="caption" x="{p.plot[0]}" y="{p.height - 34 + 18 * i}" {text}>'
@@ -210,20 +266,11 @@ def to_png(picture: Picture) -> bytes:
     """The picture as a PNG image of ``width`` x ``height`` pixels."""
     p = picture
     left, top, right, bottom = p.plot
-    palette = np.zeros((256, 3), dtype=np.uint8)
-    for label, colour in COLOURS.items():
-        palette[label] = _rgb(colour)
     canvas = Image.new("RGB", (p.width, p.height), "#ffffff")
-    fill = palette[p.raster(1.0)]
-    canvas.paste(Image.fromarray(fill, "RGB"), (left, top))
+    canvas.paste(Image.fromarray(_png_fill(p), "RGB"), (left, top))
     font = ImageFont.load_default(size=13)
-    if len(p.sites):  # 2 x 2 pixels each, inside the plot, under the zones' names
-        spots = np.floor(p.sites - 0.5).astype(np.int64)
-        inside = np.all((spots >= [left, top]) & (spots < [right - 1, bottom - 1]), axis=1)
-        pixels = np.asarray(canvas).copy()
-        for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
-            pixels[spots[inside, 1] + dy, spots[inside, 0] + dx] = _rgb(SITES_COLOUR)
-        canvas = Image.fromarray(pixels, "RGB")
+    if len(p.sites):
+        canvas = _png_sites(canvas, p)
     if p.overlays:
         canvas = _png_overlays(canvas, p, font)
     draw = ImageDraw.Draw(canvas)
@@ -241,6 +288,8 @@ def to_png(picture: Picture) -> bytes:
     draw.text(((left + right) / 2, bottom + 28), p.x_title, fill="#222222", font=font, anchor="mt")
     draw.text((left, top - 8), p.y_title, fill="#222222", font=font, anchor="ls")
     _png_legend(draw, p, font)
+    if p.colour_bar is not None:
+        _png_colour_bar(canvas, draw, p, font)
     for i, line in enumerate(p.caption):
         draw.text((left, p.height - 34 + 18 * i), line, fill="#222222", font=font, anchor="ls")
     out = io.BytesIO()
@@ -248,11 +297,51 @@ def to_png(picture: Picture) -> bytes:
     return out.getvalue()
 
 
+def _png_fill(p: Picture) -> np.ndarray:
+    """(h, w, 3) uint8: the plotting box's raster in the labels' colours, or, on a picture
+    coloured by a measure, each pixel in its triangle's colour, flags on top."""
+    colours = np.zeros((256, 3), dtype=np.uint8)
+    for label, colour in COLOURS.items():
+        colours[label] = _rgb(colour)
+    labels = p.raster(1.0)
+    fill = colours[labels]
+    if p.face_colours is not None:
+        ids = p.face_ids()
+        coloured = (ids >= 0) & (labels <= FILL)
+        fill[coloured] = p.face_colours[ids[coloured]]
+    if len(p.grid):  # over the fill, under the flags and the boundary
+        lines = np.zeros(labels.shape, dtype=np.uint8)
+        paint_segments(lines, p.grid - np.array(p.plot[:2], dtype=np.float64), 1)
+        colour = GRID_ON_COLOURS if p.face_colours is not None else GRID_COLOUR
+        fill[(lines > 0) & (labels <= OUTLINE)] = _rgb(colour)
+    return fill
+
+
+def _png_sites(canvas: Image.Image, p: Picture) -> Image.Image:
+    """The canvas with the sites: 2 x 2 pixels each, inside the plot (under the zones'
+    names, drawn after)."""
+    left, top, right, bottom = p.plot
+    spots = np.floor(p.sites - 0.5).astype(np.int64)
+    inside = np.all((spots >= [left, top]) & (spots < [right - 1, bottom - 1]), axis=1)
+    pixels = np.asarray(canvas).copy()
+    for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        pixels[spots[inside, 1] + dy, spots[inside, 0] + dx] = _rgb(SITES_COLOUR)
+    return Image.fromarray(pixels, "RGB")
+
+
+def _hex(rgb) -> str:
+    red, green, blue = (int(channel) for channel in rgb)
+    return f"#{red:02x}{green:02x}{blue:02x}"
+
+
 def _png_legend(draw: ImageDraw.ImageDraw, p: Picture, font) -> None:
     x, y = p.plot[2] + 20, p.plot[1]
     for i, (label, colour, words) in enumerate(p.legend):
         row = y + 20 * i
-        if label == CURVE_KEY:
+        if label == GRID_KEY:  # a light line on the legend's white: outlined
+            draw.rectangle((x, row + 3, x + 14, row + 9), fill="#9a9a9a")
+            draw.line((x, row + 6, x + 14, row + 6), fill=colour, width=2)
+        elif label == CURVE_KEY:
             draw.line((x, row + 6, x + 14, row + 6), fill=colour, width=2)
         elif label == SITES_KEY:
             draw.rectangle((x + 5, row + 4, x + 8, row + 7), fill=colour)
@@ -263,6 +352,68 @@ def _png_legend(draw: ImageDraw.ImageDraw, p: Picture, font) -> None:
         # The default font has no superscripts.
         words = words.replace("²", "2")
         draw.text((x + 20, row + 6), words, fill="#222222", font=font, anchor="lm")
+
+
+def _bar_box(p: Picture) -> tuple[int, int, int, int]:
+    """Where the colour bar goes: under the legend, (left, top, right, bottom)."""
+    x, y = p.plot[2] + 20, p.plot[1] + 20 * len(p.legend) + 30
+    return x, y, x + BAR_WIDTH, y + 14
+
+
+def _bar_ticks(p: Picture) -> list[tuple[float, str, bool]]:
+    """(x, text, below) of the bar's labels: its ends, and its p50 and p95 marks."""
+    bar = p.colour_bar
+    left, _, right, _ = _bar_box(p)
+    at = lambda value: left + float(bar.position(np.array([value]))[0]) * (right - left)  # noqa: E731
+    return [
+        (left, f"{bar.low:.3g}", True),
+        (right, f"{bar.high:.3g}", True),
+        (at(bar.p50), f"p50 {bar.p50:.3g}", False),
+        (at(bar.p95), f"p95 {bar.p95:.3g}", False),
+    ]
+
+
+def _png_colour_bar(canvas: Image.Image, draw: ImageDraw.ImageDraw, p: Picture, font) -> None:
+    left, top, right, bottom = _bar_box(p)
+    steps = (np.arange(right - left) * STEPS // (right - left)).astype(np.int64)
+    strip = np.repeat(palette()[steps][None], bottom - top, axis=0)
+    canvas.paste(Image.fromarray(strip, "RGB"), (left, top))
+    draw.rectangle((left, top, right, bottom), outline="#444444")
+    draw.text((left, top - 18), p.colour_bar.measure.title, fill="#222222", font=font, anchor="ls")
+    for x, words, below in _bar_ticks(p):
+        if below:
+            draw.text((x, bottom + 4), words, fill="#222222", font=font, anchor="mt")
+        else:
+            draw.line((x, top - 4, x, bottom), fill="#222222", width=1)
+            draw.text((x, top - 5), words, fill="#222222", font=font, anchor="ms")
+
+
+def _svg_colour_bar(p: Picture) -> list[str]:
+    left, top, right, bottom = _bar_box(p)
+    text = f'{_FONT} font-size="12" fill="#222222"'
+    stops = "".join(
+        f'<stop offset="{k / 16:.4f}" stop-color="{hex_colour(min(k * STEPS // 16, STEPS - 1))}"/>'
+        for k in range(17)
+    )
+    parts = [
+        f'<g class="colour-bar"><defs><linearGradient id="bar">{stops}</linearGradient></defs>',
+        f'<rect x="{left}" y="{top}" width="{right - left}" height="{bottom - top}" '
+        'fill="url(#bar)" stroke="#444444" stroke-width="0.5"/>',
+        f'<text x="{left}" y="{top - 18}" {text}>{escape(p.colour_bar.measure.title)}</text>',
+    ]
+    for x, words, below in _bar_ticks(p):
+        if below:
+            parts.append(
+                f'<text x="{x:.1f}" y="{bottom + 15}" text-anchor="middle" {text}>{words}</text>'
+            )
+        else:
+            parts.append(
+                f'<line x1="{x:.1f}" y1="{top - 4}" x2="{x:.1f}" y2="{bottom}" '
+                f'stroke="#222222"/><text x="{x:.1f}" y="{top - 6}" text-anchor="middle" '
+                f"{text}>{words}</text>"
+            )
+    parts.append("</g>")
+    return parts
 
 
 def _png_overlays(canvas: Image.Image, p: Picture, font) -> Image.Image:

@@ -59,6 +59,7 @@ def region_glb(
     face_ids: np.ndarray,
     extras: dict,
     sites: tuple[np.ndarray, np.ndarray] | None = None,
+    colours: np.ndarray | None = None,
 ) -> bytes:
     """A GLB of one triangle mesh, and of sites on it as a POINTS primitive.
 
@@ -73,6 +74,8 @@ def region_glb(
         ``face_ids_accessor`` added)
     sites : ((n, 3), (n, 3)) float or None: points and their unit normals, a second mesh
         (``sites``: ``POSITION`` and ``NORMAL``, mode POINTS) of a second node
+    colours : (k, 3) float or None, ``COLOR_0`` of the region's vertices (its accessor the
+        last)
 
     Returns
     -------
@@ -89,6 +92,8 @@ def region_glb(
     if sites is not None:
         points, normals = (np.ascontiguousarray(a, dtype=np.float32) for a in sites)
         blobs += [("SITE_POSITION", points, _ARRAY_BUFFER), ("NORMAL", normals, _ARRAY_BUFFER)]
+    if colours is not None:
+        blobs.append(("COLOR_0", np.ascontiguousarray(colours, dtype=np.float32), _ARRAY_BUFFER))
     buffer_views, accessors, chunks, offset = [], [], [], 0
     for name, array, target in blobs:
         data = array.tobytes()
@@ -114,6 +119,8 @@ def region_glb(
             accessor["max"] = np.atleast_1d(high).tolist()
         accessors.append(accessor)
     attributes = {name: i for i, (name, _, _) in enumerate(blobs[:3])}
+    if colours is not None:
+        attributes["COLOR_0"] = len(accessors) - 1
     document = {
         "asset": {
             "version": "2.0",

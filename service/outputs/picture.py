@@ -20,7 +20,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from transforms import FlatRegion, Layout
+from transforms.pixels import face_ids
 from transforms.raster import paint_points, paint_segments, paint_triangles
+
+from .colours import ColourBar
 
 #: Triangles drawn one by one (with outlines) up to this many.
 VECTOR_TRIANGLES = 20_000
@@ -81,8 +84,11 @@ class Overlay:
     anchor: tuple[float, float]
 
 
-#: Legend keys of the zones (a filled swatch), the curves (a line) and the sites (a dot).
-ZONE_KEY, CURVE_KEY, SITES_KEY = 100, -3, -4
+#: Legend keys of the zones (a filled swatch), the curves (a line), the sites (a dot) and
+#: the reference grid (a thin line).
+ZONE_KEY, CURVE_KEY, SITES_KEY, GRID_KEY = 100, -3, -4, -5
+#: The reference grid's colour over the flags' fill, and over a measure's colours.
+GRID_COLOUR, GRID_ON_COLOURS = "#4d4d4d", "#ffffff"
 SITES_COLOUR = "#222222"
 #: Sites an SVG draws at the most (each a little square); a PNG draws them all.
 SVG_SITES = 50_000
@@ -155,6 +161,10 @@ class Picture:
     caption : lines of text
     overlays : zones and curves drawn over the map
     sites : (n, 2) float, sites drawn over the map as dots
+    face_colours : (m, 3) uint8 or None, the triangles' colours by a measure (flagged ones
+        keep the flags' colours)
+    colour_bar : ColourBar or None, that measure's scale, drawn under the legend
+    grid : (s, 2, 2) float, the reference grid's segments
     """
 
     width: int
@@ -175,19 +185,35 @@ class Picture:
     caption: tuple[str, ...]
     overlays: tuple[Overlay, ...] = ()
     sites: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    face_colours: np.ndarray | None = None
+    colour_bar: ColourBar | None = None
+    grid: np.ndarray = field(default_factory=lambda: np.empty((0, 2, 2)))
+
+    def face_ids(self, scale: float = 1.0) -> np.ndarray:
+        """(h, w) int: the triangle holding each pixel's centre in the plotting box at
+        ``scale`` pixels per canvas pixel (exactly, :func:`transforms.pixels.face_ids`;
+        wrapping triangles are not filled), -1 where none does."""
+        left, top, right, bottom = self.plot
+        shape = (max(round((bottom - top) * scale), 1), max(round((right - left) * scale), 1))
+        filled = np.flatnonzero(~self.wrapping)
+        corners = (self.corners[filled] - np.array([left, top], dtype=np.float64)) * scale
+        ids = face_ids(corners, *shape)
+        return np.where(ids >= 0, filled[np.maximum(ids, 0)], -1)
 
     def raster(self, scale: float = 1.0, include_boundary: bool = True) -> np.ndarray:
         """(h, w) uint8 labels of the plotting box at ``scale`` pixels per canvas pixel:
-        the triangles (with outlines when drawn one by one), flagged triangles marked, and
-        the boundary on top (unless it is drawn otherwise)."""
+        the triangles (with outlines when drawn one by one and not coloured by a measure),
+        flagged triangles marked, and the boundary on top (unless it is drawn otherwise)."""
         left, top, right, bottom = self.plot
         shape = (max(round((bottom - top) * scale), 1), max(round((right - left) * scale), 1))
         image = np.zeros(shape, dtype=np.uint8)
         origin = np.array([left, top], dtype=np.float64)
         corners = (self.corners - origin) * scale
         filled = ~self.wrapping
+        if self.face_colours is not None:  # the fill comes from :meth:`face_ids`; flags here
+            filled &= self.labels > FILL
         paint_triangles(image, corners[filled], self.labels[filled])
-        if self.vector:
+        if self.vector and self.face_colours is None:
             edges = corners[filled][:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2, 2)
             paint_segments(image, edges, OUTLINE)
         marks, labels = self.marks(corners)
@@ -223,6 +249,8 @@ def describe(
     height: int,
     drawn: tuple[Drawn, ...] = (),
     sites: np.ndarray | None = None,
+    colouring: tuple[np.ndarray, ColourBar] | None = None,
+    grid: np.ndarray | None = None,
 ) -> Picture:
     """The picture of a flattened region, with zones, curves and sites over it.
 
@@ -234,6 +262,9 @@ def describe(
     width, height : int, the canvas in pixels
     drawn : zones and curves to draw over the map
     sites : (n, 2) float or None, points of the layout to draw as dots
+    colouring : ((m, 3) uint8 colours, their bar) or None: the triangles coloured by a
+        measure
+    grid : (s, 2, 2) float or None, segments of the layout: a reference grid
     """
     framing = Framing.of(flat.x, flat.y, flat.layout, width, height)
     x, s, plot = flat.x, framing.s_sign * flat.y, framing.plot
@@ -271,6 +302,11 @@ def describe(
     )
 
     overlays, dots = _overlays(drawn, sites, framing.pixels, plot, legend)
+    lines = np.empty((0, 2, 2))
+    if grid is not None:
+        lines = framing.pixels(grid.reshape(-1, 2)).reshape(-1, 2, 2)
+        colour = GRID_ON_COLOURS if colouring is not None else GRID_COLOUR
+        legend.append((GRID_KEY, colour, "grid: planes across local X and Z"))
     if seam:
         legend.append((-1, SEAM_COLOUR, "seam (phi +-180 deg)"))
     if singular:
@@ -294,6 +330,9 @@ def describe(
         caption=_caption(flat, params, face_count),
         overlays=tuple(overlays),
         sites=dots,
+        face_colours=None if colouring is None else colouring[0],
+        colour_bar=None if colouring is None else colouring[1],
+        grid=lines,
     )
 
 

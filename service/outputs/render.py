@@ -10,6 +10,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from transforms import Layout
+from transforms.arrays import triangle_areas
+from transforms.region import region_face_distortion
+from transforms.traces import grid_offsets, plane_traces
 
 from ..encoding import plain
 from ..jobs import charge, picture_bytes
@@ -17,6 +20,7 @@ from ..params import FlattenParams, PictureParams, SitesParams, TransferParams
 from ..problems import Problem
 from ..schemas import Metrics, ResolvedParams, Validation
 from . import Output
+from .colours import ColourBy, colouring, vertex_colours
 from .draw import to_png, to_svg
 from .glb import layout_uv, region_glb
 from .lookup import grey_alpha_png16, lookup_bytes
@@ -70,16 +74,59 @@ def glb(region: MeshRegion, params: FlattenParams, sites=None) -> bytes:
             "folded_after": len(u.flipped_after),
         }
     positions = region.mesh.vertices[flat.vertex_ids]
-    return region_glb(positions, uv, flat.vertex_ids, flat.faces, region.faces, extras, sites)
+    colours = None
+    coloured = face_colouring(region, getattr(params, "colour_by", ColourBy.FLAGS))
+    if coloured is not None:
+        areas = triangle_areas(positions, flat.faces)
+        colours = vertex_colours(flat.faces, coloured[0], areas, len(positions))
+        bar = coloured[1]
+        extras["colour_by"] = {
+            "measure": bar.measure.value,
+            "low": bar.low,
+            "high": bar.high,
+            "p50": bar.p50,
+            "p95": bar.p95,
+        }
+    return region_glb(
+        positions, uv, flat.vertex_ids, flat.faces, region.faces, extras, sites, colours
+    )
 
 
 def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...] = (), sites=None):
     resolved = plain(ResolvedParams.of_region(region))
     x, y = region.layout  # repaired when untangled
     flat = replace(region.flat, x=x, y=y)
-    return describe(
-        flat, resolved, len(region.faces), params.image_width, params.image_height, drawn, sites
+    size = (params.image_width, params.image_height)
+    coloured = face_colouring(region, params.colour_by)
+    grid = reference_grid(region, params.grid_lines)
+    return describe(flat, resolved, len(region.faces), *size, drawn, sites, coloured, grid)
+
+
+def reference_grid(region: MeshRegion, count: int) -> np.ndarray | None:
+    """(s, 2, 2) layout segments: where ``count`` planes square to the frame's local X axis
+    and ``count`` square to its local Z axis, evenly spaced, cut the region (None: none)."""
+    if count == 0:
+        return None
+    flat = region.flat
+    points = region.mesh.vertices[flat.vertex_ids]
+    x, y = region.layout
+    on_map = np.column_stack([x, y])
+    rotation = region.frame.rotation  # rows: the local axes in the world
+    return np.concatenate(
+        [
+            plane_traces(points, flat.faces, on_map, axis, grid_offsets(points, axis, count))
+            for axis in (rotation[0], rotation[2])
+        ]
     )
+
+
+def face_colouring(region: MeshRegion, measure: ColourBy):
+    """The region's faces coloured by ``measure`` (their colours and the bar), None for the
+    flags: the measures of section 7, face by face, of the layout as flattened."""
+    if measure is ColourBy.FLAGS:
+        return None
+    found = region_face_distortion(region.mesh.vertices, region.flat, region.frame, region.chart)
+    return colouring(found, measure, len(region.flat.faces))
 
 
 def _drawn(measured: Measured) -> tuple[Drawn, ...]:

@@ -140,18 +140,20 @@ step "stop with SIGTERM while a fit is computing"
 check "GET /v1/samples/nefertiti-lowres.obj" 200 -H "X-API-Key: $KEY" \
   "$url/v1/samples/nefertiti-lowres.obj"
 cp "$work/body" "$work/bust.obj"
+# The container's first process, found before the fit starts: `podman inspect` takes a good
+# part of the fit's time, which then might end before SIGTERM arrives.
+init_pid=$("${podman[@]}" inspect --format '{{.State.Pid}}' "$NAME")
 curl -s -o "$work/fit" -w '%{http_code}' -H "X-API-Key: $KEY" -F "mesh=@$work/bust.obj" \
   -F 'params={"method": "separable"}' "$url/v1/fit" > "$work/fit-status" &
 fitting=$!
 computing=no
 for _ in $(seq 200); do  # until the fit is computing
   if curl -s "$url/metrics" | grep -q '^meshflat_jobs_computing 1.0'; then computing=yes; break; fi
-  sleep 0.02
+  sleep 0.01
 done
 [ "$computing" = yes ] || fail "the fit was not seen computing"
 # SIGTERM goes straight to the container's first process: `podman stop` can take longer to
 # deliver it than the fit takes to finish, and then nothing would be in progress to drain.
-init_pid=$("${podman[@]}" inspect --format '{{.State.Pid}}' "$NAME")
 started=$(date +%s%N)
 kill -TERM "$init_pid"
 timeout 30 "${podman[@]}" wait "$NAME" >/dev/null || fail "no exit within 30 s of SIGTERM"

@@ -146,11 +146,13 @@ def select_region(mesh: Mesh, params: MeshParams) -> Selection:
     """
     region = params.region
     if params.part("mask") is not None and (region is None or region.texture_mask is None):
-        raise refusal("mask", "a mask part is read for region.texture_mask only; send that")
+        raise refusal(
+            "mask", "a mask part is read for a region.texture_mask only, and the region is another"
+        )
     if region is not None and region.cone is not None:
         return _cone_selection(mesh, params)
     faces = select.nonempty(_region_faces(mesh, params))
-    resolved = None if region is None else region.model_dump(exclude_unset=True)
+    resolved = None if region is None else region.model_dump(exclude_none=True)
     return Selection(faces, _center(mesh, faces, params.center), resolved)
 
 
@@ -234,7 +236,11 @@ def _masked_faces(mesh: Mesh, mask: TextureMask, data: bytes | None) -> np.ndarr
         The file has no texture coordinates (naming what it has), or no face is in.
     """
     if data is None:
-        raise refusal("mask", "region.texture_mask needs the mask: a multipart part 'mask', a PNG")
+        raise refusal(
+            "mask",
+            "region.texture_mask needs the mask: a multipart part 'mask', a PNG (--mask on "
+            "the command line)",
+        )
     attributes = mesh.attributes
     if attributes.uv is None:
         raise TransformInputError(
@@ -1098,6 +1104,8 @@ def transfer(mesh: Mesh, params: TransferParams, settings: Settings) -> Transfer
     lookup = params.output in (Output.FACE_IDS, Output.BARYCENTRIC)
     if data is not None and params.values is not None:
         raise refusal("image", "send an image part or params.values, not both")
+    if data is not None and lookup:
+        raise refusal("image", f"output {params.output.value} answers the look-up image alone")
     if params.output is Output.PNG and params.values is None:
         raise TransformInputError(
             "values", "output png draws params.values: send them (an image part answers JSON)"

@@ -13,7 +13,15 @@ import math
 from enum import StrEnum
 from typing import Annotated, ClassVar, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, PrivateAttr, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    field_validator,
+    model_validator,
+)
 
 from transforms import Layout, Method
 from transforms.selection import NAMED_CENTERS, Channel, CornerRule
@@ -262,7 +270,7 @@ class FeatureId(_Strict):
         description="A glTF vertex attribute (_FEATURE_ID_0, as EXT_mesh_features names "
         "them) or a PLY vertex or face property, by name.",
     )
-    values: Annotated[list[Number], Field(min_length=1, max_length=10_000)] = Field(
+    values: Annotated[list[int], Field(min_length=1, max_length=10_000)] = Field(
         description="The ids that are in."
     )
     rule: choice(CornerRule) = Field(
@@ -912,11 +920,12 @@ class TransferParams(MeshParams, PictureParams):
         "little-endian array behind a 16-byte header (the README says how to read it).",
     ) = None
 
-    @model_validator(mode="after")
-    def _one_way(self) -> TransferParams:
-        if self.value_range is not None and not self.value_range[0] < self.value_range[1]:
-            raise ValueError("value_range: [low, high] with low < high")
-        return self
+    @field_validator("value_range")
+    @classmethod
+    def _rising(cls, value_range):
+        if value_range is not None and not value_range[0] < value_range[1]:
+            raise ValueError("[low, high] with low < high")
+        return value_range
 
     model_config = ConfigDict(
         json_schema_extra={

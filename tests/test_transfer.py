@@ -171,7 +171,9 @@ async def test_bad_transfers_name_the_part_or_field(client):
     both = {"image": ("map.png", right.getvalue())}
     problem(await transfer(client, {"values": VALUES.tolist()}, both), 422, "image")
     problem(await transfer(client, {"output": "png"}, both), 422, "params.values")
-    problem(await transfer(client, {"value_range": [1, 1], "values": [0.0]}), 422)
+    problem(
+        await transfer(client, {"value_range": [1, 1], "values": [0.0]}), 422, "params.value_range"
+    )
 
 
 def test_the_command_line_carries_an_image_onto_the_mesh(tmp_path, capsys):

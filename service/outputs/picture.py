@@ -23,7 +23,7 @@ from transforms import FlatRegion, Layout
 from transforms.pixels import face_ids
 from transforms.raster import paint_points, paint_segments, paint_triangles
 
-from .colours import ColourBar
+from .colours import ColourBar, palette
 
 #: Triangles drawn one by one (with outlines) up to this many.
 VECTOR_TRIANGLES = 20_000
@@ -277,7 +277,9 @@ def describe(
     wrapping = np.zeros(len(flat.faces), dtype=bool)
     wrapping[validation.seam_faces] = True
     wrapping[validation.singular_point_faces] = True
-    legend = [(FILL, COLOURS[FILL], f"region: {face_count:,} triangles")]
+    # Coloured by a measure, the region's swatch is in its colours (the bar's middle).
+    swatch = COLOURS[FILL] if colouring is None else _middle_colour()
+    legend = [(FILL, swatch, f"region: {face_count:,} triangles")]
     # A triangle with several flags is drawn in the colour of the last (the most serious);
     # the legend counts it under each and says where the colours hide one.
     both = np.intersect1d(validation.backfacing_faces, validation.folded_faces).size
@@ -334,6 +336,11 @@ def describe(
         colour_bar=None if colouring is None else colouring[1],
         grid=lines,
     )
+
+
+def _middle_colour() -> str:
+    red, green, blue = palette()[len(palette()) // 2]
+    return f"#{red:02x}{green:02x}{blue:02x}"
 
 
 def _overlays(drawn: tuple[Drawn, ...], sites, canvas, plot, legend: list):

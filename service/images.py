@@ -13,8 +13,9 @@ from PIL import Image
 from .jobs import charge
 from .problems import Problem
 
-#: Bytes a pixel costs while read: the decoded pixels and two float64 planes.
-BYTES_PER_PIXEL = 24
+#: Bytes a pixel costs while read and used: the decoded pixels, the float64 planes (values,
+#: alpha, their product) and a plane's running sums (measured: 32 to 41 for RGB and RGBA).
+BYTES_PER_PIXEL = 48
 #: The largest side of a PNG part (a texture mask of 8192 x 8192 is a large one).
 MAX_SIDE = 8192
 #: Grey from red, green and blue (Rec. 709, on the stored values).
@@ -24,13 +25,11 @@ _LUMA = np.array([0.2126, 0.7152, 0.0722])
 @dataclass(frozen=True)
 class Png:
     """A PNG's pixels: ``values`` (h, w) float in [0, 1] (grey, or the luminance of a colour
-    image), ``alpha`` (h, w) float in [0, 1] or None, ``bits`` a channel (8 or 16), ``mode``
-    Pillow's."""
+    image), ``alpha`` (h, w) float in [0, 1] or None. A 16-bit grey PNG keeps its 16 bits;
+    Pillow reads 16-bit grey-and-alpha and colour PNGs as 8-bit ones."""
 
     values: np.ndarray
     alpha: np.ndarray | None
-    bits: int
-    mode: str
 
 
 def refusal(part: str, words: str) -> Problem:
@@ -73,21 +72,17 @@ def read_png(
 
 
 def _pixels(image: Image.Image, part: str) -> Png:
-    mode = image.mode
-    if mode == "P":
+    if image.mode == "P":
         image = image.convert("RGBA" if "transparency" in image.info else "RGB")
     if image.mode in ("L", "LA"):
         values = np.asarray(image.getchannel(0), dtype=np.float64) / 255.0
         alpha = image.getchannel(1) if image.mode == "LA" else None
-        bits = 8
     elif image.mode in ("I;16", "I;16B", "I"):
-        raw = np.asarray(image, dtype=np.float64)
-        values, alpha, bits = raw / 65535.0, None, 16
+        values, alpha = np.asarray(image, dtype=np.float64) / 65535.0, None
     elif image.mode in ("RGB", "RGBA"):
         rgb = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
         values = rgb @ _LUMA
         alpha = image.getchannel(3) if image.mode == "RGBA" else None
-        bits = 8
     else:
         raise refusal(
             part, f"grey, grey and alpha, RGB or RGBA, 8 or 16 bits; not mode {image.mode}"
@@ -95,4 +90,4 @@ def _pixels(image: Image.Image, part: str) -> Png:
     if alpha is not None:
         alpha = np.asarray(alpha, dtype=np.float64) / 255.0
     np.clip(values, 0.0, 1.0, out=values)
-    return Png(values, alpha, bits, mode)
+    return Png(values, alpha)

@@ -896,21 +896,21 @@ class TransferParams(MeshParams, PictureParams):
         **MeshParams.FILE_PARTS,
         "image": "A PNG in the framing of the PNG answer (image_width by image_height pixels, "
         "the map where the PNG answer draws it; 8- or 16-bit grey, grey and alpha, RGB or "
-        "RGBA, a colour read as its luminance, the alpha as the coverage): its values "
-        "carried onto the mesh's vertices and faces.",
+        "RGBA, a colour read as its luminance, the alpha as the coverage; 16 bits kept for "
+        "grey alone): its values carried onto the mesh's vertices and faces.",
     }
 
-    values: Annotated[list[Number], Field(min_length=1)] | str | None = Field(
+    values: Annotated[list[Coordinate], Field(min_length=1, fail_fast=True)] | str | None = Field(
         None,
         description="Values a vertex to draw on the map: one a vertex of the file (in its "
         "order), or the name of a per-vertex property of the file (a PLY property, a glTF "
         "custom attribute such as _FEATURE_ID_0).",
     )
-    value_range: tuple[Number, Number] | None = Field(
+    value_range: tuple[Coordinate, Coordinate] | None = Field(
         None,
         description="With an image part: the values its black and white stand for (default "
         "[0, 1]). With values: the values drawn as 0 and 65535 (default: their least and "
-        "largest over the region).",
+        "largest over the region). Within +-1e15, as values.",
     )
     output: output_choice(
         (Output.JSON, Output.PNG, Output.FACE_IDS, Output.BARYCENTRIC),
@@ -922,7 +922,7 @@ class TransferParams(MeshParams, PictureParams):
 
     @field_validator("value_range")
     @classmethod
-    def _rising(cls, value_range):
+    def _low_below_high(cls, value_range):
         if value_range is not None and not value_range[0] < value_range[1]:
             raise ValueError("[low, high] with low < high")
         return value_range

@@ -180,3 +180,16 @@ async def test_the_reference_grid_is_drawn_and_named(client):
     grid = re.search(r'<path class="grid"[^>]* d="([^"]*)"', svg).group(1)
     assert grid.count("M") > 100 and "grid: planes across local X and Z" in svg
     assert 'class="grid"' not in (await picture(client, {**PARAMS, "output": "svg"})).text
+
+
+async def test_odd_regions_still_get_their_pictures(client):
+    # One face (its picture has nothing but it), and the whole head, whose seam and singular
+    # point triangles wrap round the map: the grid does not cross the map through them.
+    one = {**PARAMS, "region": {"faces": [0]}, "colour_by": "isometric", "output": "png"}
+    await picture(client, one)
+    whole = {**PARAMS, "region": None, "grid_lines": 8, "output": "svg", "colour_by": "area"}
+    svg = (await picture(client, whole)).text
+    grid = re.search(r'<path class="grid"[^>]* d="([^"]*)"', svg).group(1)
+    ends = np.array([float(v) for v in re.findall(r"-?\d+\.\d", grid)]).reshape(-1, 4)
+    lengths = np.hypot(ends[:, 2] - ends[:, 0], ends[:, 3] - ends[:, 1])
+    assert lengths.max() < 60, lengths.max()

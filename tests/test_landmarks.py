@@ -157,6 +157,16 @@ def test_the_scalp_is_one_piece_that_the_landmark_frame_sees_whole():
     assert check.seam_free and check.star_shaped and check.boundary_loops == 1
 
 
+def test_a_triangle_soup_gets_the_same_scalp():
+    """An STL keeps each triangle's own corners: the scalp's piece is found by position."""
+    landmarks = Landmarks.of(on_head())
+    soup = np.asarray(VERTICES)[FACES].reshape(-1, 3)
+    faces = np.arange(len(soup)).reshape(-1, 3)
+    np.testing.assert_array_equal(
+        landmarks.scalp_faces(soup, faces, 10.0), landmarks.scalp_faces(VERTICES, FACES, 10.0)
+    )
+
+
 # -- the API ----------------------------------------------------------------------------------
 
 

@@ -326,3 +326,12 @@ def test_the_command_line_sends_the_mask_part(tmp_path):
     u = uv[FACES][:, :, 0]
     assert set(np.flatnonzero((u < 0.45).all(axis=1))) <= set(faces)
     assert not set(faces) & set(np.flatnonzero((u > 0.55).all(axis=1)))
+
+
+async def test_texture_coordinates_that_are_not_numbers_leave_their_faces_out(client):
+    uv = np.column_stack([VERTICES[:, 0], VERTICES[:, 1]]) / 260 + 0.5
+    uv[:50] = np.nan  # a writer's NaN: those vertices' faces have no texture coordinates
+    files = {"mask": ("mask.png", mask_png(np.ones((16, 16))))}
+    got = await selected(client, textured_obj(uv), "head.obj", {"texture_mask": {}}, files)
+    touched = set(np.flatnonzero((FACES < 50).any(axis=1)))
+    assert got and not touched & set(got)

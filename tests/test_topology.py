@@ -89,3 +89,11 @@ def test_faces_sharing_an_edge_are_one_piece_and_a_shared_vertex_is_not():
     _, faces = sphere_mesh(10, 12)
     assert len(np.unique(face_components(faces))) == 1
     assert len(face_components(np.zeros((0, 3), dtype=np.int64))) == 0
+
+
+def test_a_triangle_soup_is_one_piece_where_its_triangles_meet():
+    # Two triangles sharing an edge, written as an STL writes them: six corners, none shared.
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    soup = np.arange(6).reshape(2, 3)
+    assert len(np.unique(face_components(soup))) == 2
+    assert len(np.unique(face_components(soup, corners))) == 1

@@ -197,3 +197,11 @@ def test_the_command_line_carries_an_image_onto_the_mesh(tmp_path, capsys):
     ids_params = json.dumps({**PARAMS, "output": "face_ids"})
     assert main(["transfer", str(mesh), "--params", ids_params, "--out", str(lookup)]) == 0
     assert read_lookup(lookup.read_bytes())[0].shape == (600, 900)
+
+
+async def test_a_value_range_beyond_the_coordinates_bound_is_refused(client):
+    huge = {"value_range": [-1.7e308, 1.7e308]}
+    right = io.BytesIO()
+    Image.new("L", (900, 600)).save(right, format="PNG")
+    answer = await transfer(client, huge, {"image": ("map.png", right.getvalue())})
+    problem(answer, 422, "params.value_range.0")

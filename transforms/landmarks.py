@@ -157,8 +157,9 @@ class Landmarks:
     def scalp_faces(self, vertices: np.ndarray, faces: np.ndarray, offset: float) -> np.ndarray:
         """(j,) int: the faces whose centroid lies above the scalp's boundary plane (eq. 14.3),
         through the nasion and the inion raised by ``offset`` (mesh units) and level from left
-        to right, and that are joined by shared edges to the one farthest along ``up`` (the
-        top of the head: the eye sockets' and the ears' tops are left out)."""
+        to right, and that are joined by shared edges (vertices at one position count as one)
+        to the one farthest along ``up`` (the top of the head: the eye sockets' and the ears'
+        tops are left out)."""
         right, _, up = self.axes()
         brow, back = self.nasion + offset * up, self.inion + offset * up
         normal = _unit(np.cross(brow - back, right))
@@ -168,7 +169,7 @@ class Landmarks:
         above = np.flatnonzero((centroids - brow) @ normal > 0)
         if len(above) == 0:
             return above
-        pieces = face_components(faces[above])
+        pieces = face_components(faces[above], vertices)
         return above[pieces == pieces[np.argmax(centroids[above] @ up)]]
 
 

@@ -25,6 +25,9 @@ from .parallel import run_all
 CHUNK_PAIRS = 1 << 16
 
 
+_COLUMNS = ("triangle", "start", "length")
+
+
 @dataclass(frozen=True)
 class Runs:
     """The runs of pixel centres the triangles hold: run ``k`` is triangle ``triangle[k]``
@@ -39,9 +42,20 @@ class Runs:
 
     @classmethod
     def of(cls, corners: np.ndarray, height: int, width: int, threads: int = 1) -> Runs:
-        """The runs of ``corners`` ((m, 3, 2) float: ``(x, y)`` = ``(column, row)`` in pixel
-        units), found a chunk of about ``CHUNK_PAIRS`` (triangle, row) pairs at a time, on up
-        to ``threads`` threads."""
+        """All the runs of ``corners`` ((m, 3, 2) float: ``(x, y)`` = ``(column, row)`` in
+        pixel units) at once (:meth:`chunks` bounds the memory instead)."""
+        parts = list(cls.chunks(corners, height, width, threads))
+        if not parts:
+            empty = np.zeros(0, dtype=np.int32)
+            return cls(empty, empty.astype(np.int64), empty, height, width)
+        columns = [np.concatenate([getattr(p, k) for p in parts]) for k in _COLUMNS]
+        return cls(*columns, height, width)
+
+    @classmethod
+    def chunks(cls, corners: np.ndarray, height: int, width: int, threads: int = 1):
+        """The runs of ``corners``, a chunk of about ``CHUNK_PAIRS`` (triangle, row) pairs at
+        a time, in ascending order of triangles, ``threads`` chunks found at once: what is
+        held stays bounded, however large the triangles are on the grid."""
         corners = np.asarray(corners, dtype=np.float64)
         y = [corners[:, k, 1] for k in range(3)]
         low, high = np.minimum(np.minimum(*y[:2]), y[2]), np.maximum(np.maximum(*y[:2]), y[2])
@@ -54,43 +68,45 @@ class Runs:
             stop = max(int(np.searchsorted(ends, budget, side="right")), start + 1)
             cuts.append((start, stop))
             start = stop
-        parts = run_all(
-            [
-                lambda start=start, stop=stop: _spans(corners[start:stop], height, width, start)
-                for start, stop in cuts
-            ],
-            threads,
-        )
-        if not parts:
-            empty = np.zeros(0, dtype=np.int32)
-            return cls(empty, empty.astype(np.int64), empty, height, width)
-        triangle, begin, length = (np.concatenate(column) for column in zip(*parts, strict=True))
-        return cls(triangle, begin, length, height, width)
+        step = max(threads, 1)
+        for group in range(0, len(cuts), step):
+            found = run_all(
+                [
+                    lambda start=start, stop=stop: _spans(corners[start:stop], height, width, start)
+                    for start, stop in cuts[group : group + step]
+                ],
+                threads,
+            )
+            for triangle, begin, length in found:
+                yield cls(triangle, begin, length, height, width)
 
     @property
     def stop(self) -> np.ndarray:
         return self.start + self.length
 
-    def sums(self, image: np.ndarray, count: int) -> np.ndarray:
-        """(count,) float: each triangle's sum of ``image`` ((h, w)) over its pixel centres,
-        by prefix sums over the image (a subtraction a run, however long)."""
-        prefix = np.zeros(self.height * self.width + 1)
-        np.cumsum(image.ravel(), out=prefix[1:])
-        total = prefix[self.stop] - prefix[self.start]
-        return np.bincount(self.triangle, weights=total, minlength=count).astype(np.float64)
+    def summed(self, prefix: np.ndarray, out: np.ndarray) -> None:
+        """Add to ``out`` ((m,) float, by triangle) each triangle's sum of an image over its
+        pixel centres, from the image's running sums ``prefix`` (:func:`_prefix`): a
+        subtraction a run, however long."""
+        self._add(out, prefix[self.stop] - prefix[self.start])
+
+    def counted(self, out: np.ndarray) -> None:
+        """Add to ``out`` ((m,), by triangle) the pixel centres each triangle holds."""
+        self._add(out, self.length)
 
     def centres(self, count: int) -> np.ndarray:
-        """(count,) int: the pixel centres each triangle holds."""
-        return np.bincount(self.triangle, weights=self.length, minlength=count).astype(np.int64)
+        """(count,) int: the pixel centres each of ``count`` triangles holds."""
+        out = np.zeros(count)
+        self.counted(out)
+        return out.astype(np.int64)
 
-    def paint(self) -> np.ndarray:
-        """(height, width) int32: the triangle holding each pixel's centre, -1 where none
-        does; where several do (a folded map), the later one (runs are written in ascending
-        order of triangles, and of several writes to a pixel the last one stays)."""
-        ids = np.full(self.height * self.width, -1, dtype=np.int32)
-        for pixel, triangle in self.pixels():
-            ids[pixel] = triangle
-        return ids.reshape(self.height, self.width)
+    def _add(self, out: np.ndarray, values: np.ndarray) -> None:
+        """``out[t] += `` the sum of ``values`` over the runs of triangle ``t``, over this
+        chunk's own span of triangles (ascending) only."""
+        if len(self.triangle):
+            low, high = int(self.triangle[0]), int(self.triangle[-1]) + 1
+            weights = np.asarray(values, dtype=np.float64)
+            out[low:high] += np.bincount(self.triangle - low, weights, minlength=high - low)
 
     def pixels(self):
         """Chunks of (flat pixels, their triangles), run after run in order."""
@@ -105,6 +121,13 @@ class Runs:
         return self.start[run] + offset, self.triangle[run]
 
 
+def _prefix(image: np.ndarray) -> np.ndarray:
+    """(h * w + 1,) float: the running sums of the image's pixels, row after row, from 0."""
+    prefix = np.zeros(image.size + 1)
+    np.cumsum(image.ravel(), out=prefix[1:])
+    return prefix
+
+
 def face_ids(corners: np.ndarray, height: int, width: int, threads: int = 1) -> np.ndarray:
     """(height, width) int32: the triangle holding each pixel's centre, -1 where none does
     (the later one where several do).
@@ -114,7 +137,11 @@ def face_ids(corners: np.ndarray, height: int, width: int, threads: int = 1) -> 
     corners : (m, 3, 2) float, the triangles' corners ``(x, y)`` = ``(column, row)`` in pixel
         units
     """
-    return Runs.of(corners, height, width, threads).paint()
+    ids = np.full(height * width, -1, dtype=np.int32)
+    for runs in Runs.chunks(corners, height, width, threads):  # later ones paint over
+        for pixel, triangle in runs.pixels():
+            ids[pixel] = triangle
+    return ids.reshape(height, width)
 
 
 def _spans(corners, height: int, width: int, offset: int):
@@ -298,16 +325,21 @@ def face_means(
     """
     height, width = image.shape
     count = len(corners)
-    runs = Runs.of(corners, height, width, threads)
-    centres = runs.centres(count).astype(np.float64)
     image = np.asarray(image, dtype=np.float64)
+    planes = [image] if weight is None else [np.asarray(weight, dtype=np.float64)]
+    if weight is not None:
+        planes.append(planes[0] * image)
+    prefixes = [_prefix(plane) for plane in planes]  # running sums along the image
+    centres = np.zeros(count)
+    totals = [np.zeros(count) for _ in prefixes]
+    for runs in Runs.chunks(corners, height, width, threads):
+        runs.counted(centres)
+        for total, prefix in zip(totals, prefixes, strict=True):
+            runs.summed(prefix, total)
     if weight is None:
-        covered = centres.copy()
-        weighted = runs.sums(image, count)
+        covered, weighted = centres.copy(), totals[0]
     else:
-        weight = np.asarray(weight, dtype=np.float64)
-        covered = runs.sums(weight, count)
-        weighted = runs.sums(weight * image, count)
+        covered, weighted = totals
     small = np.flatnonzero(centres < MIN_CENTRES)
     if len(small):
         points = np.einsum("kc,mcd->mkd", _LATTICE, np.asarray(corners)[small]).reshape(-1, 2)
@@ -399,14 +431,12 @@ def vertex_image(
     image : (height, width) float, 0 where no triangle holds the centre
     ids : (height, width) int32, :func:`face_ids`
     """
-    runs = Runs.of(corners, height, width, threads)
     plane = planes(corners, values)
     image = np.zeros(height * width)
     ids = np.full(height * width, -1, dtype=np.int32)
-    for part in range(0, len(runs.start), CHUNK_PAIRS):
-        chunk = slice(part, part + CHUNK_PAIRS)
-        start, length = runs.start[chunk], runs.length[chunk].astype(np.int64)
-        triangle = runs.triangle[chunk]
+    for runs in Runs.chunks(corners, height, width, threads):
+        start, length = runs.start, runs.length.astype(np.int64)
+        triangle = runs.triangle
         # Along a run the value grows by b a pixel: v + b j at its j-th pixel, j counted
         # here from the chunk's first pixel (g) less the run's first one.
         row, column = np.divmod(start, width)

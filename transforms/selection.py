@@ -301,7 +301,8 @@ def faces_by_mask(
 ) -> np.ndarray:
     """(j,) int: the faces whose mean of ``mask`` ((h, w) in [0, 1]) over their triangle in
     texture space is at least ``minimum`` (:func:`pixels.face_means`; the mask is 0 off the
-    image, and a face with a corner without texture coordinates is out).
+    image, and a face with a corner without texture coordinates, or with non-finite ones, is
+    out).
 
     ``uv`` ((k, 2)) has ``(0, 0)`` at the image's top-left corner and ``(1, 1)`` at its
     bottom-right; ``uv_faces`` ((m, 3) int) its row at each face corner, -1 for none.
@@ -312,7 +313,9 @@ def faces_by_mask(
         No face passes; the message gives the range of the faces' means.
     """
     height, width = mask.shape
-    textured = np.flatnonzero((uv_faces >= 0).all(axis=1))
+    given = (uv_faces >= 0).all(axis=1)
+    given[given] = np.isfinite(uv[uv_faces[given]]).all(axis=(1, 2))  # NaN: none given
+    textured = np.flatnonzero(given)
     corners = uv[uv_faces[textured]] * np.array([width, height], dtype=np.float64)
     means, coverage = face_means(corners, mask)
     means = np.where(np.isnan(means), 0.0, means * coverage)  # 0 off the image

@@ -43,13 +43,19 @@ class RegionEdges:
         return int(connected_components(graph, directed=False)[0])
 
 
-def face_components(faces: np.ndarray) -> np.ndarray:
+def face_components(faces: np.ndarray, positions: np.ndarray | None = None) -> np.ndarray:
     """(m,) int: the label of each face's piece, faces ((m, 3) int) that share an edge being
-    in one piece; labels count from 0."""
+    in one piece; labels count from 0. With ``positions`` ((n, 3) float, the vertices), the
+    vertices at one position count as one (:func:`welded`): a triangle soup (an STL, a scan
+    split at its texture seams) is joined where its triangles meet."""
     if len(faces) == 0:
         return np.zeros(0, dtype=np.int64)
-    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    _, edge_ids = np.unique(edges, axis=0, return_inverse=True)
+    if positions is not None:
+        faces = welded(faces, positions)
+    n = int(faces.max()) + 1
+    ends = faces[:, [0, 1, 2]], faces[:, [1, 2, 0]]
+    keys = np.minimum(*ends).astype(np.int64) * n + np.maximum(*ends)  # an edge, one number
+    _, edge_ids = np.unique(keys.ravel(), return_inverse=True)
     # A graph on faces and edges together: each face joined to its three edges.
     count = len(faces) + int(edge_ids.max()) + 1
     graph = coo_matrix(
@@ -60,6 +66,20 @@ def face_components(faces: np.ndarray) -> np.ndarray:
         shape=(count, count),
     )
     return connected_components(graph, directed=False)[1][: len(faces)]
+
+
+def welded(faces: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """(m, 3) int: ``faces`` with each vertex replaced by the first of the vertices they use
+    at its exact position (sorted by x, y, z: one pass, no tolerance)."""
+    used, inverse = np.unique(faces, return_inverse=True)
+    points = np.asarray(positions)[used]
+    order = np.lexsort((points[:, 2], points[:, 1], points[:, 0]))
+    ordered = points[order]
+    fresh = np.ones(len(order), dtype=bool)
+    fresh[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
+    label = np.empty(len(order), dtype=np.int64)
+    label[order] = np.cumsum(fresh) - 1
+    return label[inverse.reshape(faces.shape)]
 
 
 #: Per half-edge value summed per edge: the count in the low bits, (side + 1)^2 above. Two

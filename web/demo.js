@@ -387,7 +387,7 @@ const raycaster = new THREE.Raycaster();
 // nasion): /v1/flatten's GLB of every face, in the file's coordinates as the region's.
 async function loadHead() {
   if (landmarks.head || !map) return;
-  const p = { ...map.params, region: null, untangle: false };
+  const p = { ...map.params, region: null, untangle: false, colour_by: 'flags' };
   const response = await post('/v1/flatten', map.mesh, p, 'model/gltf-binary');
   const gltf = await new GLTFLoader().parseAsync(await response.arrayBuffer(), '');
   gltf.scene.traverse((node) => {

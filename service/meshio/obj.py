@@ -507,9 +507,9 @@ def _references(
 
 def _texture_references(text, origin: int, tokens: Tokens, corners: np.ndarray) -> np.ndarray:
     """(len(corners),) int64: the texture part of each face reference ``v/vt/vn`` among the
-    ascending tokens ``corners`` of ``text`` (the chunk's bytes from ``origin`` on), 0
-    where a reference has none (``v`` or ``v//vn``)."""
-    found = np.zeros(len(corners), dtype=np.int64)
+    ascending tokens ``corners`` of ``text`` (the chunk's bytes from ``origin`` on),
+    ``_NO_TEXTURE`` where a reference has none (``v`` or ``v//vn``)."""
+    found = np.full(len(corners), _NO_TEXTURE, dtype=np.int64)
     slashes = positions(text == _SLASH)
     if not slashes.size:
         return found
@@ -530,9 +530,13 @@ def _texture_references(text, origin: int, tokens: Tokens, corners: np.ndarray) 
     return found
 
 
+#: A face corner without a texture reference (``v`` or ``v//vn``), before resolving.
+_NO_TEXTURE = np.iinfo(np.int64).min
+
+
 def _resolve_texcoords(refs, corners, defined, n_texcoords: int, lines) -> np.ndarray:
-    """As :func:`_resolve`, for texture references: 0 (none) becomes -1."""
-    none = refs == 0
+    """As :func:`_resolve` (which refuses 0), for texture references: none becomes -1."""
+    none = refs == _NO_TEXTURE
     if n_texcoords == 0 and not none.all():
         raise MeshFormatError("a face refers to a texture coordinate, but the file has no vt lines")
     refs[none] = 1

@@ -34,7 +34,10 @@ bytes a byte of the file except where fewer than 3 bytes make a triangle: lists 
 2-byte items (``list uchar uchar``: a 24-byte triangle from each corner past the second) and
 ASCII polygons and strips written with one-digit ids (12 bytes of triangles a byte). An
 int64 triangle cannot be held in less, so there a read needs the triangles, at most 24 bytes
-times ``MESHFLAT_MAX_FACES`` (120 MB), plus the constant.
+times ``MESHFLAT_MAX_FACES`` (120 MB), plus the constant. Kept properties add 8 bytes a row
+each (a colour 16, texture coordinates 16): a file of byte-sized columns (``uchar x y z`` and
+colours and properties) can take some 10 bytes a byte, which the job's budget, charged by
+the vertex and the face (:func:`service.jobs.job_bytes`), holds.
 """
 
 from __future__ import annotations

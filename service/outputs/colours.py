@@ -75,9 +75,15 @@ def palette() -> np.ndarray:
     return np.rint(table * 255).astype(np.uint8)
 
 
-def hex_colour(step: int) -> str:
-    red, green, blue = palette()[step]
+def hex_of(rgb) -> str:
+    """``#rrggbb`` of three 0-255 channels."""
+    red, green, blue = (int(channel) for channel in rgb)
     return f"#{red:02x}{green:02x}{blue:02x}"
+
+
+def hex_colour(step: int) -> str:
+    """The colour map's colour at ``step``, as ``#rrggbb``."""
+    return hex_of(palette()[step])
 
 
 def factors(found: FaceDistortion, measure: ColourBy) -> np.ndarray:

@@ -11,7 +11,7 @@ from PIL import Image, ImageDraw, ImageFont
 
 from transforms.raster import paint_segments
 
-from .colours import STEPS, hex_colour, palette
+from .colours import STEPS, hex_colour, hex_of, palette
 from .picture import (
     BOUNDARY,
     COLOURS,
@@ -130,7 +130,7 @@ def _keys(p: Picture, labels: np.ndarray, ids: np.ndarray) -> tuple[np.ndarray, 
     distinct = np.stack([values >> 16, (values >> 8) & 255, values & 255], axis=1)
     coloured = (ids >= 0) & (labels <= FILL)
     keys[coloured] = COLOURED + rank.ravel()[ids[coloured]]
-    colours.update({COLOURED + k: _hex(rgb) for k, rgb in enumerate(distinct)})
+    colours.update({COLOURED + k: hex_of(rgb) for k, rgb in enumerate(distinct)})
     return keys, colours
 
 
@@ -327,11 +327,6 @@ def _png_sites(canvas: Image.Image, p: Picture) -> Image.Image:
     for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
         pixels[spots[inside, 1] + dy, spots[inside, 0] + dx] = _rgb(SITES_COLOUR)
     return Image.fromarray(pixels, "RGB")
-
-
-def _hex(rgb) -> str:
-    red, green, blue = (int(channel) for channel in rgb)
-    return f"#{red:02x}{green:02x}{blue:02x}"
 
 
 def _png_legend(draw: ImageDraw.ImageDraw, p: Picture, font) -> None:

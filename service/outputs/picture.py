@@ -23,7 +23,7 @@ from transforms import FlatRegion, Layout
 from transforms.pixels import face_ids
 from transforms.raster import paint_points, paint_segments, paint_triangles
 
-from .colours import ColourBar, palette
+from .colours import STEPS, ColourBar, hex_colour
 
 #: Triangles drawn one by one (with outlines) up to this many.
 VECTOR_TRIANGLES = 20_000
@@ -196,6 +196,8 @@ class Picture:
         left, top, right, bottom = self.plot
         shape = (max(round((bottom - top) * scale), 1), max(round((right - left) * scale), 1))
         filled = np.flatnonzero(~self.wrapping)
+        if not len(filled):
+            return np.full(shape, -1)
         corners = (self.corners[filled] - np.array([left, top], dtype=np.float64)) * scale
         ids = face_ids(corners, *shape)
         return np.where(ids >= 0, filled[np.maximum(ids, 0)], -1)
@@ -278,7 +280,7 @@ def describe(
     wrapping[validation.seam_faces] = True
     wrapping[validation.singular_point_faces] = True
     # Coloured by a measure, the region's swatch is in its colours (the bar's middle).
-    swatch = COLOURS[FILL] if colouring is None else _middle_colour()
+    swatch = COLOURS[FILL] if colouring is None else hex_colour(STEPS // 2)
     legend = [(FILL, swatch, f"region: {face_count:,} triangles")]
     # A triangle with several flags is drawn in the colour of the last (the most serious);
     # the legend counts it under each and says where the colours hide one.
@@ -305,7 +307,7 @@ def describe(
 
     overlays, dots = _overlays(drawn, sites, framing.pixels, plot, legend)
     lines = np.empty((0, 2, 2))
-    if grid is not None:
+    if grid is not None and len(grid):
         lines = framing.pixels(grid.reshape(-1, 2)).reshape(-1, 2, 2)
         colour = GRID_ON_COLOURS if colouring is not None else GRID_COLOUR
         legend.append((GRID_KEY, colour, "grid: planes across local X and Z"))
@@ -336,11 +338,6 @@ def describe(
         colour_bar=None if colouring is None else colouring[1],
         grid=lines,
     )
-
-
-def _middle_colour() -> str:
-    red, green, blue = palette()[len(palette()) // 2]
-    return f"#{red:02x}{green:02x}{blue:02x}"
 
 
 def _overlays(drawn: tuple[Drawn, ...], sites, canvas, plot, legend: list):

@@ -111,10 +111,13 @@ def reference_grid(region: MeshRegion, count: int) -> np.ndarray | None:
     points = region.mesh.vertices[flat.vertex_ids]
     x, y = region.layout
     on_map = np.column_stack([x, y])
+    # Not through triangles that wrap round the map (across the seam, over a singular point).
+    check = flat.validation
+    faces = np.delete(flat.faces, np.union1d(check.seam_faces, check.singular_point_faces), axis=0)
     rotation = region.frame.rotation  # rows: the local axes in the world
     return np.concatenate(
         [
-            plane_traces(points, flat.faces, on_map, axis, grid_offsets(points, axis, count))
+            plane_traces(points, faces, on_map, axis, grid_offsets(points, axis, count))
             for axis in (rotation[0], rotation[2])
         ]
     )

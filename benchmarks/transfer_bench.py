@@ -6,8 +6,9 @@ is framed as the PNG answer frames it (:class:`service.outputs.picture.Framing`)
 4096 x 4096 grid and on a 2048 x 2048 one.
 
 * Image to mesh (4096 x 4096, a smooth grey image): meshflat's per-face means
-  (:func:`transforms.pixels.face_means`: the pixel runs, running sums, the small faces'
-  samples, the coverage) and per-vertex values (:func:`transforms.pixels.bilinear`). Target
+  and per-vertex values, as ``/v1/transfer`` computes them (:func:`transforms.pixels.onto_mesh`:
+  the pixel runs, running sums, the small faces' samples, the coverage, the vertices read
+  from the pixels the map holds). Target
   (the issue): 1 s.
 * Mesh to image (2048 x 2048): a value a vertex drawn linear inside every triangle
   (:func:`transforms.pixels.vertex_image`, with the face-id image). Target: 0.5 s.
@@ -56,9 +57,9 @@ def smooth_image(size: int) -> np.ndarray:
     return 0.5 + 0.25 * np.sin(6 * columns) * np.cos(4 * rows)
 
 
-def ours_to_mesh(corners, at, image, threads: int) -> np.ndarray:
-    means, _ = pixels.face_means(corners, image, threads=threads)
-    pixels.bilinear(image, at)
+def ours_to_mesh(faces, at, image, threads: int) -> np.ndarray:
+    """What ``/v1/transfer`` computes of an image part: :func:`transforms.pixels.onto_mesh`."""
+    _, means, _ = pixels.onto_mesh(at, faces, image, threads=threads)
     return means
 
 
@@ -113,21 +114,21 @@ def measure(runs: int) -> str:
     per_vertex = np.sin(region.x * 3) + np.cos(region.y * 2)
     values = per_vertex[region.faces]
     progress("warm-up")
-    ours_to_mesh(big, at_big, image, 1)
+    ours_to_mesh(region.faces, at_big, image, 1)
     ours_to_image(small, values, 1)
     times: dict[str, list[float]] = {k: [] for k in ("m1", "m2", "i1", "i2", "pm", "pi")}
     peer_means = peer_ids = peer_image = None
     for run in range(runs):
         progress(f"run {run + 1} of {runs}")
-        times["m1"].append(timed(lambda: ours_to_mesh(big, at_big, image, 1))[0])
-        times["m2"].append(timed(lambda: ours_to_mesh(big, at_big, image, 2))[0])
+        times["m1"].append(timed(lambda: ours_to_mesh(region.faces, at_big, image, 1))[0])
+        times["m2"].append(timed(lambda: ours_to_mesh(region.faces, at_big, image, 2))[0])
         seconds, (peer_means, peer_ids) = timed(lambda: peer_to_mesh(big, image))
         times["pm"].append(seconds)
         times["i1"].append(timed(lambda: ours_to_image(small, values, 1))[0])
         times["i2"].append(timed(lambda: ours_to_image(small, values, 2))[0])
         seconds, peer_image = timed(lambda: peer_to_image(small, values))
         times["pi"].append(seconds)
-    ours_means = ours_to_mesh(big, at_big, image, 1)
+    ours_means = ours_to_mesh(region.faces, at_big, image, 1)
     ours_ids = pixels.face_ids(big, BIG, BIG).ravel()
     agree_ids = float(np.mean(ours_ids == peer_ids))
     # Where they differ, whether the two triangles are neighbours (share a corner).

@@ -204,11 +204,7 @@ def _painted_faces(mesh: Mesh, region) -> np.ndarray:
     if region.vertex_color is not None:
         paint = region.vertex_color
         if attributes.colors is None:
-            raise TransformInputError(
-                "region.vertex_color",
-                f"the {mesh.format.upper()} file has no vertex colours; it has "
-                f"{attributes.described()}",
-            )
+            raise _lacking(mesh, "region.vertex_color", "vertex colours")
         return select.faces_by_color(
             mesh.faces, attributes.colors, paint.channel, paint.min, paint.rule
         )
@@ -218,11 +214,7 @@ def _painted_faces(mesh: Mesh, region) -> np.ndarray:
             return select.faces_by_ids(
                 mesh.faces, values[wanted.attribute], wanted.values, per_face, wanted.rule
             )
-    raise TransformInputError(
-        "region.feature_id.attribute",
-        f"the {mesh.format.upper()} file has no attribute {wanted.attribute!r}; it has "
-        f"{attributes.described()}",
-    )
+    raise _lacking(mesh, "region.feature_id.attribute", f"attribute {wanted.attribute!r}")
 
 
 def _masked_faces(mesh: Mesh, mask: TextureMask, data: bytes | None) -> np.ndarray:
@@ -243,14 +235,20 @@ def _masked_faces(mesh: Mesh, mask: TextureMask, data: bytes | None) -> np.ndarr
         )
     attributes = mesh.attributes
     if attributes.uv is None:
-        raise TransformInputError(
-            "region.texture_mask",
-            f"the {mesh.format.upper()} file has no texture coordinates (glTF TEXCOORD_0, OBJ "
-            f"vt, PLY u v); it has {attributes.described()}",
+        raise _lacking(
+            mesh, "region.texture_mask", "texture coordinates (glTF TEXCOORD_0, OBJ vt, PLY u v)"
         )
     image = read_png(data, "mask")
     shade = image.values if image.alpha is None else image.values * image.alpha
     return select.faces_by_mask(attributes.uv, attributes.uv_faces, shade, mask.min)
+
+
+def _lacking(mesh: Mesh, field: str, what: str) -> TransformInputError:
+    """The refusal of a request for ``what`` the file lacks, naming what it has."""
+    return TransformInputError(
+        field,
+        f"the {mesh.format.upper()} file has no {what}; it has {mesh.attributes.described()}",
+    )
 
 
 def region_faces(mesh: Mesh, selection: Selection) -> np.ndarray:
@@ -1126,7 +1124,7 @@ def transfer(mesh: Mesh, params: TransferParams, settings: Settings) -> Transfer
     corners = at[region.flat.faces]
     found = Transferred(region, width, height)
     if image is not None:
-        found = _image_to_mesh(region, image, at, corners, params)
+        found = _image_to_mesh(region, image, at, params, settings)
     elif values is not None:
         found = _values_to_image(region, values[region.flat.vertex_ids], corners, params, settings)
     if lookup:
@@ -1150,25 +1148,15 @@ def _values_to_image(region: MeshRegion, values, corners, params: TransferParams
     )
 
 
-def _image_to_mesh(region: MeshRegion, image, at, corners, params: TransferParams) -> Transferred:
-    """The image's values at the region's vertices and over its faces (eq. 16.2): a vertex
-    reads the pixels the map covers only (a border vertex's neighbours off the map are no
-    part of it), weighed by the alpha."""
+def _image_to_mesh(region: MeshRegion, image, at, params: TransferParams, settings):
+    """The image's values at the region's vertices and over its faces
+    (:func:`transforms.pixels.onto_mesh`), mapped to ``value_range``."""
     low, high = params.value_range or (0.0, 1.0)
     height, width = image.values.shape
-    means, coverage = pixels.face_means(corners, image.values, image.alpha)
-    on_map = pixels.face_ids(corners, height, width) >= 0
-    weight = on_map if image.alpha is None else on_map * image.alpha
-    sampled, on = pixels.bilinear(image.values, at, weight)
-    # A vertex whose four nearest centres are all off the map (the tip of a sliver on the
-    # border): the mean of its faces' values.
-    faces = region.flat.faces
-    known = np.isfinite(means)
-    count = np.bincount(faces[known].ravel(), minlength=len(at))
-    total = np.bincount(faces[known].ravel(), np.repeat(means[known], 3), minlength=len(at))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sampled = np.where(on, sampled, total / count)
-    vertex_values = low + (high - low) * sampled  # NaN where nothing reaches the vertex
+    vertex, means, coverage = pixels.onto_mesh(
+        at, region.flat.faces, image.values, image.alpha, settings.threads
+    )
+    vertex_values = low + (high - low) * vertex  # NaN where nothing reaches the vertex
     face_values = low + (high - low) * means  # NaN stays NaN: no coverage
     return Transferred(region, width, height, (low, high), vertex_values, face_values, coverage)
 
@@ -1190,11 +1178,7 @@ def _vertex_values(mesh: Mesh, values) -> np.ndarray:
     if isinstance(values, str):
         found = mesh.attributes.vertex.get(values)
         if found is None:
-            raise TransformInputError(
-                "values",
-                f"the {mesh.format.upper()} file has no per-vertex property {values!r}; it has "
-                f"{mesh.attributes.described()}",
-            )
+            raise _lacking(mesh, "values", f"per-vertex property {values!r}")
         array = np.asarray(found, dtype=np.float64)
     else:
         array = np.asarray(values, dtype=np.float64)

@@ -302,7 +302,11 @@ MIN_CENTRES = 4
 
 
 def face_means(
-    corners: np.ndarray, image: np.ndarray, weight: np.ndarray | None = None, threads: int = 1
+    corners: np.ndarray,
+    image: np.ndarray,
+    weight: np.ndarray | None = None,
+    threads: int = 1,
+    held: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each triangle's mean of ``image`` over its area, and the share of it covered.
 
@@ -317,6 +321,8 @@ def face_means(
     ----------
     corners : (m, 3, 2) float, pixel units
     image : (h, w) float
+    held : (h * w,) bool or None, set where a triangle holds the pixel's centre, from the
+        same runs (what :func:`face_ids` would find, without finding the runs again)
 
     Returns
     -------
@@ -336,6 +342,8 @@ def face_means(
         runs.counted(centres)
         for total, prefix in zip(totals, prefixes, strict=True):
             runs.summed(prefix, total)
+        for pixel, _ in runs.pixels() if held is not None else ():
+            held[pixel] = True
     if weight is None:
         covered, weighted = centres.copy(), totals[0]
     else:
@@ -354,6 +362,45 @@ def face_means(
         alpha = np.where(centres > 0, covered / centres, 0.0)
     coverage = np.clip(on_image(corners, height, width) * alpha, 0.0, 1.0)
     return means, coverage
+
+
+def onto_mesh(
+    points: np.ndarray,
+    faces: np.ndarray,
+    image: np.ndarray,
+    weight: np.ndarray | None = None,
+    threads: int = 1,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An image painted over a map carried onto the mesh (docs/math.md, section 16).
+
+    A face takes its mean and coverage (:func:`face_means`). A vertex reads the image
+    bilinearly at its map position from the pixels the map holds only (a border vertex's
+    neighbours off the map are no part of it), weighed by ``weight``; a vertex whose four
+    nearest centres are all off the map (the tip of a sliver on the border) takes the mean
+    of its faces' values.
+
+    Parameters
+    ----------
+    points : (k, 2) float, the vertices on the map, pixel units
+    faces : (m, 3) int, indices into ``points``
+    image : (h, w) float; ``weight`` (h, w) in [0, 1] or None, an alpha
+
+    Returns
+    -------
+    vertex_values : (k,) float, NaN where the image reaches neither the vertex nor its faces
+    means, coverage : (m,) float, as :func:`face_means`
+    """
+    height, width = image.shape
+    held = np.zeros(height * width, dtype=bool)
+    means, coverage = face_means(points[faces], image, weight, threads, held)
+    on_map = held.reshape(height, width)
+    sampled, on = bilinear(image, points, on_map if weight is None else on_map * weight)
+    known = np.isfinite(means)
+    corners = faces[known].ravel()
+    count = np.bincount(corners, minlength=len(points))
+    total = np.bincount(corners, np.repeat(means[known], 3), minlength=len(points))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(on, sampled, total / count), means, coverage
 
 
 def on_image(corners: np.ndarray, height: int, width: int) -> np.ndarray:

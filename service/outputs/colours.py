@@ -92,16 +92,9 @@ def factors(found: FaceDistortion, measure: ColourBy) -> np.ndarray:
     return np.exp(values) if measure is ColourBy.AREA else values
 
 
-def face_values(found: FaceDistortion, measure: ColourBy, count: int) -> np.ndarray:
-    """(count,) float: the factor of each region face (NaN on degenerate ones)."""
-    values = np.full(count, np.nan)
-    values[found.faces] = factors(found, measure)
-    return values
-
-
-def colour_bar(found: FaceDistortion, measure: ColourBy) -> ColourBar:
-    """The bar of ``measure`` over the measured faces (see the module docstring)."""
-    values, weights = factors(found, measure), found.weights
+def colour_bar(values: np.ndarray, weights: np.ndarray, measure: ColourBy) -> ColourBar:
+    """The bar of ``measure`` from the measured faces' factors (:func:`factors`) and 3D areas
+    (see the module docstring)."""
     p50 = weighted_quantile(values, weights, 0.5)
     p95 = weighted_quantile(values, weights, 0.95)
     top = weighted_quantile(values, weights, 0.99)
@@ -130,8 +123,8 @@ def vertex_colours(faces: np.ndarray, face_rgb: np.ndarray, areas: np.ndarray, c
 def colouring(found: FaceDistortion, measure: ColourBy, count: int):
     """((count, 3) uint8 colours, the bar) of the region's faces by ``measure``; a
     degenerate face (no measure) in light grey."""
-    values = face_values(found, measure, count)
-    bar = colour_bar(found, measure)
-    colours = palette()[bar.steps(values)]
-    colours[np.isnan(values)] = (220, 220, 220)
+    measured = factors(found, measure)
+    bar = colour_bar(measured, found.weights, measure)
+    colours = np.full((count, 3), 220, dtype=np.uint8)
+    colours[found.faces] = palette()[bar.steps(measured)]
     return colours, bar

@@ -17,9 +17,7 @@ from .picture import (
     COLOURS,
     CURVE_KEY,
     FILL,
-    GRID_COLOUR,
     GRID_KEY,
-    GRID_ON_COLOURS,
     OUTLINE,
     SEAM_COLOUR,
     SINGULAR_COLOUR,
@@ -56,9 +54,8 @@ def to_svg(picture: Picture) -> bytes:
     else:
         parts += _decimated_fill(p, include_boundary=not vector_boundary)
     if len(p.grid):
-        colour = GRID_ON_COLOURS if p.face_colours is not None else GRID_COLOUR
         parts.append(
-            f'<path class="grid" fill="none" stroke="{colour}" stroke-width="0.8" '
+            f'<path class="grid" fill="none" stroke="{p.grid_colour}" stroke-width="0.8" '
             f'd="{_rows(p.grid.reshape(-1, 4), "M%.1f %.1fL%.1f %.1f")}"/>'
         )
     marks, labels = p.marks()
@@ -312,8 +309,7 @@ def _png_fill(p: Picture) -> np.ndarray:
     if len(p.grid):  # over the fill, under the flags and the boundary
         lines = np.zeros(labels.shape, dtype=np.uint8)
         paint_segments(lines, p.grid - np.array(p.plot[:2], dtype=np.float64), 1)
-        colour = GRID_ON_COLOURS if p.face_colours is not None else GRID_COLOUR
-        fill[(lines > 0) & (labels <= OUTLINE)] = _rgb(colour)
+        fill[(lines > 0) & (labels <= OUTLINE)] = _rgb(p.grid_colour)
     return fill
 
 

@@ -89,6 +89,13 @@ class Overlay:
 ZONE_KEY, CURVE_KEY, SITES_KEY, GRID_KEY = 100, -3, -4, -5
 #: The reference grid's colour over the flags' fill, and over a measure's colours.
 GRID_COLOUR, GRID_ON_COLOURS = "#4d4d4d", "#ffffff"
+
+
+def grid_colour(coloured: bool) -> str:
+    """The reference grid's colour: light over a measure's colours, dark over the flags'."""
+    return GRID_ON_COLOURS if coloured else GRID_COLOUR
+
+
 SITES_COLOUR = "#222222"
 #: Sites an SVG draws at the most (each a little square); a PNG draws them all.
 SVG_SITES = 50_000
@@ -188,6 +195,10 @@ class Picture:
     face_colours: np.ndarray | None = None
     colour_bar: ColourBar | None = None
     grid: np.ndarray = field(default_factory=lambda: np.empty((0, 2, 2)))
+
+    @property
+    def grid_colour(self) -> str:
+        return grid_colour(self.face_colours is not None)
 
     def face_ids(self, scale: float = 1.0) -> np.ndarray:
         """(h, w) int: the triangle holding each pixel's centre in the plotting box at
@@ -309,8 +320,9 @@ def describe(
     lines = np.empty((0, 2, 2))
     if grid is not None and len(grid):
         lines = framing.pixels(grid.reshape(-1, 2)).reshape(-1, 2, 2)
-        colour = GRID_ON_COLOURS if colouring is not None else GRID_COLOUR
-        legend.append((GRID_KEY, colour, "grid: planes across local X and Z"))
+        legend.append(
+            (GRID_KEY, grid_colour(colouring is not None), "grid: planes across local X and Z")
+        )
     if seam:
         legend.append((-1, SEAM_COLOUR, "seam (phi +-180 deg)"))
     if singular:

@@ -255,13 +255,7 @@ REGISTER_RENDERERS = map_renderers(lambda registered: registered.region, _overla
 
 
 def _drawn_png(transferred: Transferred, params: TransferParams) -> bytes:
-    if transferred.image is None:
-        raise Problem(
-            406,
-            "output png draws params.values: send them (an image part answers JSON)",
-            "not-acceptable",
-            "params.output",
-        )
+    """The values drawn (the operation refuses output png without them), coverage as alpha."""
     return grey_alpha_png16(transferred.image, transferred.ids >= 0)
 
 

@@ -382,6 +382,13 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+#: Seconds a worker may leave the supervisor's ping unanswered before it is taken for hung and
+#: replaced: a worker busy in a long computation answers late. It also bounds how long a
+#: worker killed while a ping was on its way goes unnoticed (the supervisor waits for the
+#: answer before it looks again).
+WORKER_SILENCE_S = 30
+
+
 def serve(args: argparse.Namespace) -> None:
     """uvicorn with the settings' host, port and workers, JSON logs, and a graceful stop on
     SIGTERM: no new connections, and requests in progress finish (up to their time limit).
@@ -408,9 +415,7 @@ def serve(args: argparse.Namespace) -> None:
             http="service.protocol:Protocol",  # a time limit on headers (service.protocol)
             timeout_keep_alive=settings.keep_alive_timeout,
             timeout_graceful_shutdown=math.ceil(settings.request_timeout) + 5,
-            # A worker busy in a long computation answers the supervisor's ping late; only
-            # one that stays silent this long is taken for hung and replaced.
-            timeout_worker_healthcheck=30,
+            timeout_worker_healthcheck=WORKER_SILENCE_S,
         )
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import httpx
 import pytest
 
+from service.cli import WORKER_SILENCE_S
 from service.samples import SAMPLES
 
 from .test_operations import families, sample
@@ -137,9 +138,10 @@ def test_a_worker_killed_mid_request(server):
         # The request on the killed worker is lost (the connection drops, no answer), ...
         assert "error" in outcome, outcome
         # ... the other worker keeps serving, the supervisor replaces the dead one, and the
-        # dead worker's jobs in flight are no longer counted.
+        # dead worker's jobs in flight are no longer counted. A ping on its way to the killed
+        # worker keeps the supervisor waiting up to WORKER_SILENCE_S before it looks again.
         until(lambda: busy not in worker_pids(server.process.pid))
-        until(lambda: len(worker_pids(server.process.pid)) >= 2)
+        until(lambda: len(worker_pids(server.process.pid)) >= 2, WORKER_SILENCE_S + 10)
         healthy(client)
         for _ in range(6):
             assert client.get("/v1/samples").status_code == 200

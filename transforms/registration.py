@@ -3,29 +3,35 @@
 moments from several starts, refined by point-to-plane ICP over area-weighted samples with
 the pairs beyond a trimming distance left out, so that a cropped follow-up still aligns.
 
-Point-to-plane ICP is a few lines of linear algebra over scipy's k-d tree; the libraries of
-the field that ship it (Open3D, probreg on top of it) weigh about 900 MB installed, and
-trimesh's ICP is point-to-point, which slides along a smooth head and converges slowly.
+The ICP is small_gicp's (``PLANE_ICP``: about 1 MB installed, numpy only); Open3D ships the
+same at about 900 MB, and trimesh's ICP is point-to-point, which slides along a smooth head
+and converges slowly. small_gicp is rigid; the scale of ``similarity`` mode is fitted between
+its stages in closed form.
 """
 
 from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
+import small_gicp
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 from trimesh.registration import procrustes
 
-from .arrays import combine, cross_rows, face_cross, triangle_areas, unit_rows
+from .arrays import combine, face_cross, triangle_areas, unit_rows
 from .sampling import systematic_picks
 
 #: Samples drawn on each surface (area-weighted, the same for any pose of it).
 SAMPLES = 20_000
-#: ICP rounds at the most (and for comparing starts), and the step (radians, and in units
-#: of the pairs' RMS distance from their centroid) that ends them.
-MAX_ROUNDS, COARSE_ROUNDS, SETTLED = 60, 15, 1e-4
+#: ICP rounds at the most (and for comparing starts), taken in stages of ``STAGE_ROUNDS``
+#: (each with its own trimming distance), and the step (radians, and in units of the
+#: follow-up samples' RMS distance from their centroid) that ends them.
+MAX_ROUNDS, COARSE_ROUNDS, STAGE_ROUNDS, SETTLED = 60, 15, 5, 1e-4
+#: Neighbours whose plane gives a target sample its normal for small_gicp (its default).
+NORMAL_NEIGHBOURS = 20
 #: The starts are compared on every ``COARSE_EVERY``-th sample; the ``REFINED_STARTS`` that
 #: put the most of them on the baseline are refined there.
 COARSE_EVERY, REFINED_STARTS = 20, 24
@@ -58,6 +64,15 @@ class Surface:
         weights = np.column_stack([1.0 - root, 0.5 * root, 0.5 * root])
         normals, _ = unit_rows(face_cross(vertices, faces[face]))
         return cls(combine(vertices, faces, face, weights), normals)
+
+    @cached_property
+    def cloud(self) -> tuple[small_gicp.PointCloud, small_gicp.KdTree]:
+        """The samples as small_gicp's target: a point cloud with normals from the planes
+        of their ``NORMAL_NEIGHBOURS`` nearest samples, and its k-d tree."""
+        cloud = small_gicp.PointCloud(self.points)
+        tree = small_gicp.KdTree(self.points)
+        small_gicp.estimate_normals(cloud, tree, num_neighbors=NORMAL_NEIGHBOURS)
+        return cloud, tree
 
     def every(self, step: int) -> Surface:
         """Every ``step``-th sample: a coarser surface for comparing starts."""
@@ -133,38 +148,62 @@ def icp(
     scale: bool = False,
     rounds: int = MAX_ROUNDS,
 ) -> Registration:
-    """Point-to-plane ICP from ``start``: each round pairs every source sample with its
-    nearest target sample, leaves out the pairs farther than the trimming distance, and
-    solves the linearised least squares of the distances along the target normals for a
-    small rotation and a translation (and, with ``scale``, a scale) about the pairs'
-    centroid (eq. 15.1)."""
+    """Point-to-plane ICP from ``start`` (eq. 15.1), by small_gicp's ``PLANE_ICP``, in stages
+    of ``STAGE_ROUNDS`` rounds: each stage leaves out the pairs farther apart than the
+    trimming distance of the pose it starts from, so the distance shrinks as the surfaces
+    settle; with ``scale``, each stage then takes the scale about the follow-up's centroid
+    that best fits the pairs along the target normals (eq. 15.2). It stops when a stage
+    moves the samples by less than ``SETTLED`` of their spread (in radians, and in units of
+    the spread)."""
     tree = cKDTree(target.points)
-    matrix = start.copy()
-    for _ in range(rounds):
-        moved = apply(matrix, source.points)
-        distance, nearest = tree.query(moved)
-        keep = distance <= _trim(distance)
-        p, q, n = moved[keep], target.points[nearest[keep]], target.normals[nearest[keep]]
-        # About the pairs' centroid: p' = (1 + ds) R(omega) (p - c) + c + t, linearised.
-        centre = p.mean(axis=0)
-        arm = p - centre
-        columns = [cross_rows(arm, n), n]  # d/d(omega, t) of (p' - q) . n
+    cloud, cloud_tree = target.cloud
+    centre = source.points.mean(axis=0)
+    spread = float(np.sqrt(np.mean(np.sum((source.points - centre) ** 2, axis=1)))) + 1e-300
+    grow = float(np.cbrt(np.linalg.det(start[:3, :3])))
+    rigid = start.copy()
+    rigid[:3, :3] /= grow
+    rigid[:3, 3] += (grow - 1.0) * rigid[:3, :3] @ centre  # start = rigid @ (scale about c)
+    for _ in range(max(rounds // STAGE_ROUNDS, 1)):
+        points = centre + grow * (source.points - centre)
+        distance, _ = tree.query(apply(rigid, points))
+        found = small_gicp.align(
+            cloud,
+            small_gicp.PointCloud(points),
+            cloud_tree,
+            init_T_target_source=rigid,
+            registration_type="PLANE_ICP",
+            max_correspondence_distance=_trim(distance),
+            max_iterations=STAGE_ROUNDS,
+            rotation_epsilon=SETTLED,
+            translation_epsilon=SETTLED * grow * spread,
+        )
+        step = found.T_target_source @ np.linalg.inv(rigid)
+        rigid = found.T_target_source
+        turn = float(Rotation.from_matrix(step[:3, :3]).magnitude())
+        moved = np.linalg.norm(step[:3, 3]) + turn * spread
         if scale:
-            columns.append(np.einsum("pd,pd->p", arm, n)[:, None])  # d/d(ds)
-        step, *_ = np.linalg.lstsq(np.column_stack(columns), np.einsum("pd,pd->p", q - p, n))
-        grow = 1.0 + (step[6] if scale else 0.0)
-        turn = grow * Rotation.from_rotvec(step[:3]).as_matrix()
-        update = np.eye(4)
-        update[:3, :3] = turn
-        update[:3, 3] = centre + step[3:6] - turn @ centre
-        matrix = update @ matrix
-        # The pairs' spread: a step of SETTLED moves the points by about as much as a turn
-        # of SETTLED radians does.
-        size = float(np.sqrt(np.mean(np.einsum("pd,pd->p", arm, arm)))) + 1e-300
-        moving = np.linalg.norm(step[3:6]) + abs(grow - 1.0) * float(np.abs(arm).max())
-        if np.linalg.norm(step[:3]) < SETTLED and moving < SETTLED * size:
+            before, grow = grow, _scale_fit(source, target, tree, rigid, centre, grow)
+            moved += abs(grow - before) * spread
+        if moved < SETTLED * grow * spread:
             break
+    matrix = rigid.copy()
+    matrix[:3, :3] *= grow
+    matrix[:3, 3] += (1.0 - grow) * rigid[:3, :3] @ centre
     return measured(source, target, matrix, tree)
+
+
+def _scale_fit(source, target, tree, rigid, centre, grow) -> float:
+    """The scale ``s`` about ``centre`` that, under ``rigid``, best fits the follow-up's
+    pairs (those within the trimming distance) along the target normals (eq. 15.2)."""
+    turn = rigid[:3, :3]
+    fixed = apply(rigid, centre[None, :])[0]  # where the centre lands, whatever the scale
+    arms = (source.points - centre) @ turn.T
+    distance, nearest = tree.query(fixed + grow * arms)
+    keep = distance <= _trim(distance)
+    normals = target.normals[nearest[keep]]
+    along = np.einsum("pd,pd->p", arms[keep], normals)
+    gap = np.einsum("pd,pd->p", target.points[nearest[keep]] - fixed, normals)
+    return float(np.dot(along, gap) / (np.dot(along, along) + 1e-300)) if keep.any() else grow
 
 
 def _trim(distance: np.ndarray) -> float:

@@ -8,6 +8,7 @@ import io
 from dataclasses import dataclass
 
 import numpy as np
+import pyspng
 from PIL import Image
 
 from .jobs import charge
@@ -18,6 +19,9 @@ from .problems import Problem
 BYTES_PER_PIXEL = 48
 #: The largest side of a PNG part (a texture mask of 8192 x 8192 is a large one).
 MAX_SIDE = 8192
+#: Where a PNG's header gives its bit depth (after the signature, the IHDR chunk's length,
+#: type, width and height).
+_IHDR_DEPTH = 24
 #: Grey from red, green and blue (Rec. 709, on the stored values).
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 
@@ -25,8 +29,9 @@ _LUMA = np.array([0.2126, 0.7152, 0.0722])
 @dataclass(frozen=True)
 class Png:
     """A PNG's pixels: ``values`` (h, w) float in [0, 1] (grey, or the luminance of a colour
-    image), ``alpha`` (h, w) float in [0, 1] or None. A 16-bit grey PNG keeps its 16 bits;
-    Pillow reads 16-bit grey-and-alpha and colour PNGs as 8-bit ones."""
+    image), ``alpha`` (h, w) float in [0, 1] or None. 16-bit grey and colour PNGs keep their
+    16 bits; a 16-bit grey-and-alpha one is read at 8 bits (neither Pillow nor libspng
+    decodes it at 16)."""
 
     values: np.ndarray
     alpha: np.ndarray | None
@@ -66,8 +71,12 @@ def read_png(
                 part, f"8-bit grey (mode L, or LA: the alpha is left out), not mode {image.mode}"
             )
         charge(BYTES_PER_PIXEL * width * height)
+        if image.mode in ("RGB", "RGBA") and data[_IHDR_DEPTH] == 16:
+            # Pillow would read 8 bits of them; libspng gives RGB an alpha of its own.
+            channels = 4 if image.mode == "RGBA" else 3
+            return _colour(pyspng.load(data)[..., :channels], 65535.0)
         return _pixels(image, part)
-    except (OSError, ValueError, SyntaxError, Image.DecompressionBombError) as error:
+    except (OSError, ValueError, SyntaxError, RuntimeError, Image.DecompressionBombError) as error:
         raise refusal(part, f"not a readable PNG ({type(error).__name__})") from None
 
 
@@ -80,9 +89,7 @@ def _pixels(image: Image.Image, part: str) -> Png:
     elif image.mode in ("I;16", "I;16B", "I"):
         values, alpha = np.asarray(image, dtype=np.float64) / 65535.0, None
     elif image.mode in ("RGB", "RGBA"):
-        rgb = np.asarray(image.convert("RGB"), dtype=np.float64) / 255.0
-        values = rgb @ _LUMA
-        alpha = image.getchannel(3) if image.mode == "RGBA" else None
+        return _colour(np.asarray(image), 255.0)
     else:
         raise refusal(
             part, f"grey, grey and alpha, RGB or RGBA, 8 or 16 bits; not mode {image.mode}"
@@ -90,4 +97,12 @@ def _pixels(image: Image.Image, part: str) -> Png:
     if alpha is not None:
         alpha = np.asarray(alpha, dtype=np.float64) / 255.0
     np.clip(values, 0.0, 1.0, out=values)
+    return Png(values, alpha)
+
+
+def _colour(pixels: np.ndarray, full: float) -> Png:
+    """``pixels`` (h, w, 3 or 4), RGB or RGBA of which ``full`` is the top value: the
+    luminance and the alpha, if any."""
+    values = np.clip((pixels[..., :3] @ _LUMA) / full, 0.0, 1.0)
+    alpha = pixels[..., 3] / full if pixels.shape[-1] == 4 else None
     return Png(values, alpha)

@@ -260,6 +260,10 @@ class VertexColor(_Strict):
     )
 
 
+#: An id a feature_id region asks for: exact as a double (the ids are read as doubles).
+FeatureIdValue = Annotated[int, Field(ge=-(2**53), le=2**53)]
+
+
 class FeatureId(_Strict):
     """The faces of some ids of a per-vertex or per-face attribute of the file."""
 
@@ -270,8 +274,9 @@ class FeatureId(_Strict):
         description="A glTF vertex attribute (_FEATURE_ID_0, as EXT_mesh_features names "
         "them) or a PLY vertex or face property, by name.",
     )
-    values: Annotated[list[int], Field(min_length=1, max_length=10_000)] = Field(
-        description="The ids that are in."
+    values: Annotated[list[FeatureIdValue], Field(min_length=1, max_length=10_000)] = Field(
+        description="The ids that are in (whole numbers of at most 2^53 in size: a file's ids "
+        "are compared as doubles, exact up to there)."
     )
     rule: choice(CornerRule) = Field(
         CornerRule.ALL,

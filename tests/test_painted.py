@@ -290,6 +290,10 @@ async def test_painted_regions_refuse_what_the_file_lacks(client):
     assert "no attribute 'part'" in body["detail"] and "'label'" in body["detail"]
     body = await refused({"feature_id": {"attribute": "label", "values": [7]}}, data, "x.ply")
     assert "holds 0, 1" in body["detail"]
+    for huge in (10**400, -(2**53) - 1):  # beyond what a double holds exactly
+        region = {"feature_id": {"attribute": "label", "values": [0, huge]}}
+        body = await refused(region, data, "x.ply", field="params.region.feature_id.values.1")
+        assert "9007199254740992" in body["detail"]
     red = ply_with({"red": ("uchar", np.zeros(len(VERTICES), np.uint8))})
     body = await refused({"vertex_color": {"channel": "r", "min": 0.2}}, red, "x.ply")
     assert "runs from 0 to 0" in body["detail"]

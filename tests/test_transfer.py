@@ -137,6 +137,48 @@ def decode_grey_alpha_16(data: bytes) -> np.ndarray:
     return rows[:, 1:].copy().view(">u2").reshape(height, width, 2)
 
 
+def colour_png16(channels: np.ndarray) -> bytes:
+    """A 16-bit RGB or RGBA PNG ((h, w, 3 or 4) uint16) with filter 0 rows."""
+    height, width, count = channels.shape
+    rows = np.zeros((height, 1 + 2 * count * width), dtype=np.uint8)
+    rows[:, 1:] = channels.astype(">u2").view(np.uint8).reshape(height, -1)
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
+
+    header = struct.pack(">IIBBBBB", width, height, 16, {3: 2, 4: 6}[count], 0, 0, 0)
+    idat = zlib.compress(rows.tobytes())
+    return (
+        b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
+    )
+
+
+@pytest.mark.parametrize("channels", [3, 4])
+async def test_a_16_bit_colour_image_keeps_its_16_bits(client, channels):
+    drawn = (await transfer(client, {"values": VALUES.tolist()})).json()
+    grey = png_of(drawn["image"])
+    colour = np.repeat(grey[..., None], channels, axis=2)
+    if channels == 4:
+        colour[..., 3] = 65535
+    range_ = {"value_range": drawn["value_range"]}
+    by_grey = (
+        await transfer(
+            client, range_, {"image": ("g.png", base64.b64decode(drawn["image"].split(",", 1)[1]))}
+        )
+    ).json()
+    by_colour = await transfer(client, range_, {"image": ("c.png", colour_png16(colour))})
+    assert by_colour.status_code == 200, by_colour.text
+    # Grey in every channel is its own luminance: to the rounding of a 16-bit level, not 8.
+    for part in ("vertices", "faces"):
+        np.testing.assert_allclose(
+            nullable(by_colour.json()[part]["values"]),
+            nullable(by_grey[part]["values"]),
+            atol=1e-6 * np.ptp(drawn["value_range"]),
+        )
+
+
 async def test_the_png_answer_is_the_drawing_with_its_coverage_as_alpha(client):
     answer = await transfer(client, {"values": VALUES.tolist(), "output": "png"})
     assert answer.headers["content-type"] == "image/png"

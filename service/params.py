@@ -902,7 +902,8 @@ class TransferParams(MeshParams, PictureParams):
         "image": "A PNG in the framing of the PNG answer (image_width by image_height pixels, "
         "the map where the PNG answer draws it; 8- or 16-bit grey, grey and alpha, RGB or "
         "RGBA, a colour read as its luminance, the alpha as the coverage; 16 bits kept for "
-        "grey alone): its values carried onto the mesh's vertices and faces.",
+        "grey and for colour, grey and alpha read at 8): its values carried onto the mesh's "
+        "vertices and faces.",
     }
 
     values: Annotated[list[Coordinate], Field(min_length=1, fail_fast=True)] | str | None = Field(

@@ -192,13 +192,42 @@ def core_errors_as_problems(places: ErrorPlaces) -> Iterator[None]:
 
 
 #: How pydantic labels a union's member in an error's location.
-_UNION_MEMBER = re.compile(r"[\w-]+\[.*\]")
+_UNION_MEMBER = re.compile(r"[\w-]+\[.*\]|str|int|float|bool|constrained-[\w-]+")
+
+
+def _member_label(location: tuple) -> int | None:
+    """Where in an error's location pydantic names the union member it tried, if it does."""
+    for at, part in enumerate(location):
+        if isinstance(part, str) and _UNION_MEMBER.fullmatch(part):
+            return at
+    return None
+
+
+def _without_members_not_taken(errors: list[dict]) -> list[dict]:
+    """pydantic reports every member of a union that failed. When one of them took the
+    input (the error lies inside it, or is not a wrong type), the others' "should be a valid
+    string" and the like only say which type the input is not: leave them out."""
+    taken = set()
+    for item in errors:
+        location = tuple(item.get("loc", ()))
+        at = _member_label(location)
+        if at is not None and (len(location) > at + 1 or not item["type"].endswith("_type")):
+            taken.add(location[:at])
+    kept = []
+    for item in errors:
+        location = tuple(item.get("loc", ()))
+        at = _member_label(location)
+        wrong_type = at is not None and len(location) == at + 1 and item["type"].endswith("_type")
+        if not (wrong_type and location[:at] in taken):
+            kept.append(item)
+    return kept
 
 
 def validation_problem(errors: list[dict], prefix: str = "") -> Problem:
     """A 422 naming up to five invalid fields (pydantic's errors); ``prefix`` places them
     (``params.`` for the multipart JSON field)."""
     messages, first_field = [], None
+    errors = _without_members_not_taken(errors)
     for item in errors[:5]:
         # pydantic names the member of a union it tried ("function-after[...]"): not a field.
         parts = [str(part) for part in item.get("loc", ()) if part != "body"]

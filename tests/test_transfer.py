@@ -206,6 +206,9 @@ async def test_bad_transfers_name_the_part_or_field(client):
     assert f"{len(VERTICES):,} vertices" in body["detail"]
     body = problem(await transfer(client, {"values": "thickness"}), 422, "params.values")
     assert "no per-vertex property 'thickness'" in body["detail"]
+    # A list with a bad item: what is wrong with the item, not that it is no property name.
+    body = problem(await transfer(client, {"values": [0.5, None]}), 422, "params.values.1")
+    assert body["detail"] == "params.values.1: Input should be a valid number"
     body = problem(await transfer(client, {}), 422, "image")
     assert "nothing to carry" in body["detail"]
     right = io.BytesIO()

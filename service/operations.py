@@ -1136,9 +1136,12 @@ def transfer(mesh: Mesh, params: TransferParams, settings: Settings) -> Transfer
 
 def _values_to_image(region: MeshRegion, values, corners, params: TransferParams, settings):
     """The region vertices' ``values`` drawn linear inside each triangle, 0 to 1 of the
-    range (``value_range``, or the values' least and largest)."""
+    range (``value_range``, or the values' least and largest; for values all equal to ``v``,
+    a range of 1 from ``v`` towards 0, which the values' bound admits when sent back)."""
     low, high = params.value_range or (float(values.min()), float(values.max()))
-    scaled = (values - low) / (high - low) if high > low else np.zeros_like(values)
+    if high <= low:
+        low, high = (low, low + 1.0) if low < 0 else (low - 1.0, low)
+    scaled = (values - low) / (high - low)
     width, height = params.image_width, params.image_height
     image, ids = pixels.vertex_image(
         corners, scaled[region.flat.faces], height, width, settings.threads

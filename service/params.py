@@ -916,7 +916,8 @@ class TransferParams(MeshParams, PictureParams):
         None,
         description="With an image part: the values its black and white stand for (default "
         "[0, 1]). With values: the values drawn as 0 and 65535 (default: their least and "
-        "largest over the region). Within +-1e15, as values.",
+        "largest over the region; when all are v, a range of 1 from v towards 0). Within "
+        "+-1e15, as values.",
     )
     output: output_choice(
         (Output.JSON, Output.PNG, Output.FACE_IDS, Output.BARYCENTRIC),

@@ -155,6 +155,15 @@ def colour_png16(channels: np.ndarray) -> bytes:
     )
 
 
+@pytest.mark.parametrize("value", [3.0, -1e15, 0.0])
+async def test_values_all_equal_come_back_through_the_range_answered(client, value):
+    drawn = (await transfer(client, {"values": [value] * len(VERTICES)})).json()
+    png = base64.b64decode(drawn["image"].split(",", 1)[1])
+    back = await transfer(client, {"value_range": drawn["value_range"]}, {"image": ("m.png", png)})
+    assert back.status_code == 200, back.text
+    assert set(back.json()["vertices"]["values"]) == {value}
+
+
 @pytest.mark.parametrize("channels", [3, 4])
 async def test_a_16_bit_colour_image_keeps_its_16_bits(client, channels):
     drawn = (await transfer(client, {"values": VALUES.tolist()})).json()

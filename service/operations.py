@@ -15,7 +15,6 @@ from dataclasses import dataclass, replace
 from functools import cache
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from transforms import (
     LAYOUT_ORIENTATION,
@@ -964,8 +963,7 @@ def _follow_boundary(follow: Mesh, found, focus: Surface, frame: Frame, region) 
     samples), flattened with the baseline's frame expressed for the follow-up."""
     centroids = follow.vertices[follow.faces].mean(axis=1)
     moved = apply(found.matrix, centroids)
-    tree = cKDTree(focus.points)
-    near = tree.query(moved)[0] <= on_surface_distance(focus, tree)
+    near = focus.tree.query(moved)[0] <= on_surface_distance(focus)
     if not near.any():
         return np.empty((0, 2, 2))
     flat = flatten_region(follow.vertices, follow.faces[near], frame, region.chart,

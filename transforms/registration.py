@@ -66,6 +66,12 @@ class Surface:
         return cls(combine(vertices, faces, face, weights), normals)
 
     @cached_property
+    def tree(self) -> cKDTree:
+        """A k-d tree of the samples (built once: every ICP and measure on this surface
+        pairs with it)."""
+        return cKDTree(self.points)
+
+    @cached_property
     def cloud(self) -> tuple[small_gicp.PointCloud, small_gicp.KdTree]:
         """The samples as small_gicp's target: a point cloud with normals from the planes
         of their ``NORMAL_NEIGHBOURS`` nearest samples, and its k-d tree."""
@@ -155,7 +161,6 @@ def icp(
     that best fits the pairs along the target normals (eq. 15.2). It stops when a stage
     moves the samples by less than ``SETTLED`` of their spread (in radians, and in units of
     the spread)."""
-    tree = cKDTree(target.points)
     cloud, cloud_tree = target.cloud
     centre = source.points.mean(axis=0)
     spread = float(np.sqrt(np.mean(np.sum((source.points - centre) ** 2, axis=1)))) + 1e-300
@@ -165,7 +170,7 @@ def icp(
     rigid[:3, 3] += (grow - 1.0) * rigid[:3, :3] @ centre  # start = rigid @ (scale about c)
     for _ in range(max(rounds // STAGE_ROUNDS, 1)):
         points = centre + grow * (source.points - centre)
-        distance, _ = tree.query(apply(rigid, points))
+        distance, _ = target.tree.query(apply(rigid, points))
         found = small_gicp.align(
             cloud,
             small_gicp.PointCloud(points),
@@ -182,23 +187,23 @@ def icp(
         turn = float(Rotation.from_matrix(step[:3, :3]).magnitude())
         moved = np.linalg.norm(step[:3, 3]) + turn * spread
         if scale:
-            before, grow = grow, _scale_fit(source, target, tree, rigid, centre, grow)
+            before, grow = grow, _scale_fit(source, target, rigid, centre, grow)
             moved += abs(grow - before) * spread
         if moved < SETTLED * grow * spread:
             break
     matrix = rigid.copy()
     matrix[:3, :3] *= grow
     matrix[:3, 3] += (1.0 - grow) * rigid[:3, :3] @ centre
-    return measured(source, target, matrix, tree)
+    return measured(source, target, matrix)
 
 
-def _scale_fit(source, target, tree, rigid, centre, grow) -> float:
+def _scale_fit(source, target, rigid, centre, grow) -> float:
     """The scale ``s`` about ``centre`` that, under ``rigid``, best fits the follow-up's
     pairs (those within the trimming distance) along the target normals (eq. 15.2)."""
     turn = rigid[:3, :3]
     fixed = apply(rigid, centre[None, :])[0]  # where the centre lands, whatever the scale
     arms = (source.points - centre) @ turn.T
-    distance, nearest = tree.query(fixed + grow * arms)
+    distance, nearest = target.tree.query(fixed + grow * arms)
     keep = distance <= _trim(distance)
     normals = target.normals[nearest[keep]]
     along = np.einsum("pd,pd->p", arms[keep], normals)
@@ -210,12 +215,11 @@ def _trim(distance: np.ndarray) -> float:
     return TRIM * float(np.percentile(distance, TRIM_QUANTILE)) + 1e-12
 
 
-def measured(source: Surface, target: Surface, matrix: np.ndarray, tree=None) -> Registration:
+def measured(source: Surface, target: Surface, matrix: np.ndarray) -> Registration:
     """``matrix`` with the residuals of ``source``'s samples against ``target``: their
     point-to-plane distances to the nearest target samples, and those samples' distances."""
-    tree = cKDTree(target.points) if tree is None else tree
     moved = apply(matrix, source.points)
-    distance, nearest = tree.query(moved)
+    distance, nearest = target.tree.query(moved)
     gap = moved - target.points[nearest]
     residuals = np.abs(np.einsum("pd,pd->p", gap, target.normals[nearest]))
     factor = float(np.cbrt(np.linalg.det(matrix[:3, :3])))
@@ -266,24 +270,22 @@ def register(
 
 def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registration:
     coarse_source, coarse_target = source.every(COARSE_EVERY), target.every(COARSE_EVERY)
-    coarse_tree = cKDTree(coarse_target.points)
-    coarse_tolerance = on_surface_distance(coarse_target, coarse_tree)
+    coarse_tolerance = on_surface_distance(coarse_target)
     starts = moment_starts(source, target)
-    landed = [
-        float(np.mean(coarse_tree.query(apply(start, coarse_source.points))[0] <= coarse_tolerance))
-        for start in starts
-    ]
+
+    def landed(start: np.ndarray) -> float:  # the share of samples the start puts on it
+        distance, _ = coarse_target.tree.query(apply(start, coarse_source.points))
+        return float(np.mean(distance <= coarse_tolerance))
+
+    ranked = np.argsort([landed(start) for start in starts], kind="stable")[::-1]
     trials = [
         icp(coarse_source, coarse_target, starts[i], scale, rounds=COARSE_ROUNDS)
-        for i in np.argsort(landed, kind="stable")[::-1][:REFINED_STARTS]
+        for i in ranked[:REFINED_STARTS]
     ]
     # Ranked on the whole baseline: the coarse samples lie too far apart to tell a head
     # turned half round from the right one.
-    tree = cKDTree(target.points)
-    tolerance = on_surface_distance(target, tree)
-    trials.sort(
-        key=lambda trial: -_share(measured(coarse_source, target, trial.matrix, tree), tolerance)
-    )
+    tolerance = on_surface_distance(target)
+    trials.sort(key=lambda trial: -_share(measured(coarse_source, target, trial.matrix), tolerance))
     best = [trials[0]]
     best += [t for t in trials[1:] if _angle(t.matrix, trials[0].matrix) > DISTINCT_DEG][:1]
     refined = sorted(
@@ -297,11 +299,10 @@ def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registrat
     return refined[0]
 
 
-def on_surface_distance(surface: Surface, tree: cKDTree | None = None) -> float:
+def on_surface_distance(surface: Surface) -> float:
     """How close a point must be to a surface's samples to lie on it: twice their median
-    spacing (``tree``: a k-d tree of them, when at hand)."""
-    tree = cKDTree(surface.points) if tree is None else tree
-    distance, _ = tree.query(surface.points, k=2)
+    spacing."""
+    distance, _ = surface.tree.query(surface.points, k=2)
     return 2.0 * float(np.median(distance[:, 1]))
 
 

@@ -596,8 +596,8 @@ def output_choice(outputs: tuple[Output, ...], description: str):
     ]
 
 
-class PictureParams(_Strict):
-    """The size of a picture answer."""
+class FramingParams(_Strict):
+    """The size of a picture answer, and so the pixel grid of every image on the map."""
 
     image_width: int = Field(
         1200, ge=480, le=4096, description="Width of an SVG or PNG answer, pixels."
@@ -605,6 +605,11 @@ class PictureParams(_Strict):
     image_height: int = Field(
         800, ge=360, le=4096, description="Height of an SVG or PNG answer, pixels."
     )
+
+
+class PictureParams(FramingParams):
+    """The size of a picture answer and what it draws."""
+
     grid_lines: int = Field(
         0,
         ge=0,
@@ -893,7 +898,7 @@ class ScanLandmarks(_Strict):
     follow_up: Landmarks | None = None
 
 
-class TransferParams(MeshParams, PictureParams):
+class TransferParams(MeshParams, FramingParams):
     """The JSON of the ``params`` field of /v1/transfer: as for /v1/flatten, and what crosses
     between the map and the mesh (docs/math.md, section 16)."""
 

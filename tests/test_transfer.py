@@ -228,6 +228,13 @@ async def test_bad_transfers_name_the_part_or_field(client):
     problem(
         await transfer(client, {"value_range": [1, 1], "values": [0.0]}), 422, "params.value_range"
     )
+    # Transfer draws no picture: what colours or grids one is refused, not ignored.
+    for drawing in ({"colour_by": "isometric"}, {"grid_lines": 4}):
+        problem(
+            await transfer(client, {**drawing, "output": "face_ids"}),
+            422,
+            "params." + next(iter(drawing)),
+        )
 
 
 def test_the_command_line_carries_an_image_onto_the_mesh(tmp_path, capsys):

@@ -1119,20 +1119,23 @@ def transfer(mesh: Mesh, params: TransferParams, settings: Settings) -> Transfer
     charge(TRANSFER_BYTES_PER_PIXEL * width * height)
     x, y = region.layout
     at = Framing.of(x, y, region.flat.layout, width, height).pixels(np.column_stack([x, y]))
-    corners = at[region.flat.faces]
+    # A face that wraps round the map has no triangle of its own there: no pixel is its.
+    drawn = np.setdiff1d(np.arange(len(region.flat.faces)), region.flat.validation.wrapping_faces)
+    corners = at[region.flat.faces[drawn]]
     found = Transferred(region, width, height)
     if image is not None:
-        found = _image_to_mesh(region, image, at, params, settings)
+        found = _image_to_mesh(region, image, at, drawn, params, settings)
     elif values is not None:
-        found = _values_to_image(region, values[region.flat.vertex_ids], corners, params, settings)
+        vertex_values = values[region.flat.vertex_ids]
+        found = _values_to_image(region, vertex_values, drawn, corners, params, settings)
     if lookup:
         ids = pixels.face_ids(corners, height, width, settings.threads)
         weights = pixels.barycentric(corners, ids) if params.output is Output.BARYCENTRIC else None
-        found = replace(found, ids=_file_ids(region, ids), weights=weights)
+        found = replace(found, ids=_file_ids(region, drawn, ids), weights=weights)
     return found
 
 
-def _values_to_image(region: MeshRegion, values, corners, params: TransferParams, settings):
+def _values_to_image(region: MeshRegion, values, drawn, corners, params: TransferParams, settings):
     """The region vertices' ``values`` drawn linear inside each triangle, 0 to 1 of the
     range (``value_range``, or the values' least and largest; for values all equal to ``v``,
     a range of 1 from ``v`` towards 0, which the values' bound admits when sent back)."""
@@ -1142,29 +1145,30 @@ def _values_to_image(region: MeshRegion, values, corners, params: TransferParams
     scaled = (values - low) / (high - low)
     width, height = params.image_width, params.image_height
     image, ids = pixels.vertex_image(
-        corners, scaled[region.flat.faces], height, width, settings.threads
+        corners, scaled[region.flat.faces[drawn]], height, width, settings.threads
     )
-    return Transferred(
-        region, width, height, (low, high), image=np.clip(image, 0, 1), ids=_file_ids(region, ids)
-    )
+    ids = _file_ids(region, drawn, ids)
+    return Transferred(region, width, height, (low, high), image=np.clip(image, 0, 1), ids=ids)
 
 
-def _image_to_mesh(region: MeshRegion, image, at, params: TransferParams, settings):
-    """The image's values at the region's vertices and over its faces
-    (:func:`transforms.pixels.onto_mesh`), mapped to ``value_range``."""
+def _image_to_mesh(region: MeshRegion, image, at, drawn, params: TransferParams, settings):
+    """The image's values at the region's vertices and over its ``drawn`` faces (the others
+    uncovered; :func:`transforms.pixels.onto_mesh`), mapped to ``value_range``."""
     low, high = params.value_range or (0.0, 1.0)
     height, width = image.values.shape
-    vertex, means, coverage = pixels.onto_mesh(
-        at, region.flat.faces, image.values, image.alpha, settings.threads
+    vertex, found_means, found_coverage = pixels.onto_mesh(
+        at, region.flat.faces[drawn], image.values, image.alpha, settings.threads
     )
+    means, coverage = np.full(len(region.flat.faces), np.nan), np.zeros(len(region.flat.faces))
+    means[drawn], coverage[drawn] = found_means, found_coverage
     vertex_values = low + (high - low) * vertex  # NaN where nothing reaches the vertex
     face_values = low + (high - low) * means  # NaN stays NaN: no coverage
     return Transferred(region, width, height, (low, high), vertex_values, face_values, coverage)
 
 
-def _file_ids(region: MeshRegion, ids: np.ndarray) -> np.ndarray:
-    """The grid of region face positions as the file's face ids (-1 stays)."""
-    return np.where(ids >= 0, region.faces[np.maximum(ids, 0)], -1).astype(np.int32)
+def _file_ids(region: MeshRegion, drawn: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """The grid of positions in the ``drawn`` faces as the file's face ids (-1 stays)."""
+    return np.where(ids >= 0, region.faces[drawn[np.maximum(ids, 0)]], -1).astype(np.int32)
 
 
 def _vertex_values(mesh: Mesh, values) -> np.ndarray:

@@ -106,6 +106,21 @@ async def test_flagged_triangles_keep_their_colours_over_the_distortion(client):
     svg = (await picture(client, params)).text
     flagged = re.findall(r'class="triangles label-(\d+)"', svg)
     assert {"4", "5"} & set(flagged), flagged  # back-facing, folded
+    # In the PNG, the pixels of folded triangles are the folded colour, not the measure's
+    # (but for the outlines and boundary drawn over them).
+    png = (await picture(client, {**params, "output": "png"})).content
+    image = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+    unpainted = {k: v for k, v in params.items() if k != "colour_by"}
+    lookup = await client.post(
+        "/v1/transfer",
+        files={"mesh": (NAME, SAMPLES[NAME].path.read_bytes())},
+        data={"params": json.dumps({**unpainted, "output": "face_ids"})},
+    )
+    ids, _ = read_lookup(lookup.content)
+    folded = (await picture(client, {**params, "output": "json"})).json()["validation"]
+    under = np.isin(ids, folded["folded_faces"])
+    assert under.sum() > 500
+    assert (image[under] == (0xD5, 0x5E, 0x00)).all(axis=1).mean() > 0.9
 
 
 async def test_the_glb_carries_the_colours_on_its_vertices(client):
@@ -126,6 +141,51 @@ async def test_the_glb_carries_the_colours_on_its_vertices(client):
         "COLOR_0"
         not in json.loads(plain[20 : 20 + length])["meshes"][0]["primitives"][0]["attributes"]
     )
+
+
+def glb_floats(glb: bytes, attribute: str) -> np.ndarray:
+    """(n, k) float32: a float attribute of the GLB's first primitive, from its BIN chunk."""
+    length = struct.unpack_from("<I", glb, 12)[0]
+    document = json.loads(glb[20 : 20 + length])
+    accessor = document["accessors"][
+        document["meshes"][0]["primitives"][0]["attributes"][attribute]
+    ]
+    view = document["bufferViews"][accessor["bufferView"]]
+    assert accessor["componentType"] == 5126 and view.get("byteStride") in (None, 0)
+    width = {"VEC3": 3, "VEC4": 4}[accessor["type"]]
+    start = 20 + length + 8 + view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
+    return np.frombuffer(glb, "<f4", accessor["count"] * width, start).reshape(-1, width)
+
+
+async def test_the_glb_vertex_colours_are_their_faces_colours_weighed_by_area(client):
+    glb = (await picture(client, {**PARAMS, "colour_by": "isometric", "output": "glb"})).content
+    flat = (await picture(client, PARAMS)).json()
+    assert flat["validation"]["folded_faces"] == flat["validation"]["backfacing_faces"] == []
+    values, _ = distortion_of_scalp("isometric")  # no flagged face: all in the measure's colour
+    top = max(weighted_quantile(values, distortion_of_scalp("isometric")[1], 0.99), 1.01)
+    steps = np.minimum((np.log(values) / np.log(top) * STEPS).astype(int).clip(0), STEPS - 1)
+    face_rgb = palette()[steps] / 255.0
+    vertices, _ = load_sample(NAME)
+    ids = np.array(flat["vertices"]["ids"])
+    points = vertices[ids]
+    local = np.full(len(vertices), -1)
+    local[ids] = np.arange(len(ids))
+    corners = local[np.array(flat["faces"]["vertices"])]  # the file's vertex ids, as rows
+    areas = np.linalg.norm(
+        np.cross(
+            points[corners[:, 1]] - points[corners[:, 0]],
+            points[corners[:, 2]] - points[corners[:, 0]],
+        ),
+        axis=1,
+    )
+    weighed = np.zeros((len(points), 3))
+    total = np.zeros(len(points))
+    np.add.at(weighed, corners.ravel(), np.repeat(face_rgb * areas[:, None], 3, axis=0))
+    np.add.at(total, corners.ravel(), np.repeat(areas, 3))
+    srgb = weighed / total[:, None]
+    linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    np.testing.assert_allclose(glb_floats(glb, "POSITION"), points, atol=1e-4)
+    np.testing.assert_allclose(glb_floats(glb, "COLOR_0"), linear, atol=1e-6)
 
 
 def subdivided_scalp(times: int) -> bytes:

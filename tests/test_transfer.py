@@ -137,6 +137,31 @@ def decode_grey_alpha_16(data: bytes) -> np.ndarray:
     return rows[:, 1:].copy().view(">u2").reshape(height, width, 2)
 
 
+#: Seen from near the forehead, the scalp's map crosses the seam and holds a singular point.
+TURNED = {
+    **PARAMS,
+    "center": [0, 80, 40],
+    "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70, "apex": [1.3, -12.5, -32.3]}},
+}
+
+
+async def test_faces_that_wrap_round_the_map_hold_no_pixel(client):
+    form = {"mesh": (NAME, SAMPLES[NAME].path.read_bytes())}
+    flat = await client.post("/v1/flatten", files=form, data={"params": json.dumps(TURNED)})
+    validation = flat.json()["validation"]
+    wrapping = set(validation["seam_faces"]) | set(validation["singular_point_faces"])
+    assert len(wrapping) > 5
+    ids, _ = read_lookup((await transfer(client, {**TURNED, "output": "face_ids"})).content)
+    assert (ids >= 0).mean() > 0.02 and not wrapping & set(np.unique(ids).tolist())
+    white = io.BytesIO()
+    Image.new("L", (900, 600), 255).save(white, format="PNG")
+    answer = (await transfer(client, TURNED, {"image": ("white.png", white.getvalue())})).json()
+    faces = answer["faces"]
+    for face, value, coverage in zip(faces["ids"], faces["values"], faces["coverage"], strict=True):
+        if face in wrapping:
+            assert value is None and coverage == 0.0
+
+
 def colour_png16(channels: np.ndarray) -> bytes:
     """A 16-bit RGB or RGBA PNG ((h, w, 3 or 4) uint16) with filter 0 rows."""
     height, width, count = channels.shape

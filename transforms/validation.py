@@ -88,6 +88,13 @@ class RegionValidation:
         return len(self.singular_point_faces) == 0 and len(self.seam_faces) == 0
 
     @property
+    def wrapping_faces(self) -> np.ndarray:
+        """(j,) int: the faces that wrap round the map (they cross the seam or hold a
+        singular point): their corners lie on both sides of the cut, and the triangle
+        between them on the map is not where the face lies on the surface."""
+        return np.union1d(self.singular_point_faces, self.seam_faces)
+
+    @property
     def star_shaped(self) -> bool:
         """No face is folded or back-facing."""
         return len(self.folded_faces) == 0 and len(self.backfacing_faces) == 0

@@ -288,8 +288,7 @@ def describe(
     labels = np.full(len(flat.faces), FILL, dtype=np.uint8)
     validation = flat.validation
     wrapping = np.zeros(len(flat.faces), dtype=bool)
-    wrapping[validation.seam_faces] = True
-    wrapping[validation.singular_point_faces] = True
+    wrapping[validation.wrapping_faces] = True
     # Coloured by a measure, the region's swatch is in its colours (the bar's middle).
     swatch = COLOURS[FILL] if colouring is None else hex_colour(STEPS // 2)
     legend = [(FILL, swatch, f"region: {face_count:,} triangles")]

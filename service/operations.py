@@ -920,26 +920,28 @@ def register_scans(mesh: Mesh, params: RegisterParams, settings: Settings) -> Re
     moving = Surface.of(follow.vertices, follow.faces)
     pairs = _landmark_pairs(mesh, follow, params)
     similar = params.mode is RegisterMode.SIMILARITY
+    ratio = moving.size / base.size
+    if not similar and not 1 / OTHER_UNITS < ratio < OTHER_UNITS:
+        raise _unregistered("a rigid motion keeps sizes", ratio, similar)
     try:
         found = register(moving, base, pairs, scale=similar, focus=focus)
     except RegistrationAmbiguous as error:
-        raise Problem(
-            422,
-            f"follow_up: could not register it: {error}; give the landmarks of both scans (or "
-            "mode similarity, if the scans differ in scale)",
-            "invalid-request",
-            "follow_up",
-        ) from None
+        if max(error.shares) < MIN_OVERLAP:  # neither fits: too little overlap, not two fits
+            raise _unregistered(
+                f"after the best alignments found at most {max(error.shares):.0%} of it lies "
+                f"on the baseline (at least {MIN_OVERLAP:.0%})",
+                ratio,
+                similar,
+            ) from None
+        raise _unregistered(str(error), ratio, similar) from None
     on_base = found.residuals * mm_per_unit <= OVERLAP_MM
     overlap = float(on_base.mean())
     if overlap < MIN_OVERLAP:
-        raise Problem(
-            422,
-            f"follow_up: could not register it: after the best alignment found only "
-            f"{overlap:.0%} of its area lies within {OVERLAP_MM:g} mm of the baseline "
-            f"(at least {MIN_OVERLAP:.0%}); give landmarks of both scans, or a region both show",
-            "invalid-request",
-            "follow_up",
+        raise _unregistered(
+            f"after the best alignment found only {overlap:.0%} of its area lies within "
+            f"{OVERLAP_MM:g} mm of the baseline (at least {MIN_OVERLAP:.0%})",
+            ratio,
+            similar,
         )
     residuals = found.residuals[on_base] * mm_per_unit
     rms, p95 = float(np.sqrt(np.mean(residuals**2))), float(np.percentile(residuals, 95))
@@ -955,6 +957,34 @@ def register_scans(mesh: Mesh, params: RegisterParams, settings: Settings) -> Re
         region, found, seeded, overlap, OVERLAP_MM, rms, p95, frame, mm_per_unit, boundary,
         zones,
     )  # fmt: skip
+
+
+#: Follow-ups whose samples spread this many times as far as the baseline's, or as few, are
+#: told that their units or scales may differ; in rigid mode, those beyond ``OTHER_UNITS``
+#: times are refused before any alignment is tried (a part of a head spreads at least a
+#: third as far as the whole: 0.39 for the top tenth of the sample scans).
+SIZE_MISMATCH, OTHER_UNITS = 1.5, 4.0
+
+
+def _unregistered(why: str, size_ratio: float, similar: bool) -> Problem:
+    """The 422 of a follow-up that could not be registered: ``why``, and what may help
+    (``size_ratio``: how far its samples spread from their centroid, over the baseline's)."""
+    hints = ["give the landmarks of both scans, or a region both show"]
+    if not similar and not 1 / SIZE_MISMATCH <= size_ratio <= SIZE_MISMATCH:
+        hints.insert(
+            0,
+            f"it is {size_ratio:.3g} times the baseline's size (its spread about its "
+            "centroid): if the scans' units or scales differ, send mode similarity (or the "
+            "follow-up in the baseline's units)",
+        )
+    elif not similar:
+        hints.append("or mode similarity, if the scans differ in scale")
+    return Problem(
+        422,
+        f"follow_up: could not register it: {why}; {'; '.join(hints)}",
+        "invalid-request",
+        "follow_up",
+    )
 
 
 def _follow_boundary(follow: Mesh, found, focus: Surface, frame: Frame, region) -> np.ndarray:

@@ -5,6 +5,7 @@ sample (moved, noisy, cropped) lands back on it, and its map on the baseline's."
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -118,12 +119,40 @@ async def test_a_scaled_follow_up_needs_similarity(client):
     assert distance < 0.5
 
 
+@pytest.mark.parametrize("scale", [0.5, 1.3, 10.0, 25.4])
+def test_similarity_registers_follow_ups_of_other_scales(scale):
+    """The moment starts match the scans' sizes, so that ICP starts near the scale."""
+    vertices, faces = load_sample(NAME)
+    _, kept, truth, moved = follow_up(scale=scale)
+    found = registration.register(
+        registration.Surface.of(moved, kept), registration.Surface.of(vertices, faces), scale=True
+    )
+    assert found.scale == pytest.approx(1 / scale, rel=0.003)
+    assert errors(found.matrix, truth, moved)[0] < 0.5
+
+
+async def test_a_follow_up_in_other_units_is_told_so_in_rigid_mode(client):
+    data, _, truth, moved = follow_up(scale=10.0)  # the baseline in cm, the follow-up in mm
+    body = problem(await register(client, {}, data), 422, "follow_up")
+    # 9.3: the cropped follow-up spreads less than the whole scan would.
+    size = re.search(r"it is ([\d.]+) times the baseline's size", body["detail"])
+    assert size and 8 < float(size.group(1)) < 10, body["detail"]
+    assert "send mode similarity" in body["detail"]
+    answer = (await register(client, {"mode": "similarity"}, data)).json()
+    assert answer["scale"] == pytest.approx(0.1, rel=0.003)
+    assert errors(answer["transform"], truth, moved)[0] < 0.5
+
+
 async def test_a_scan_of_something_else_is_refused(client):
-    """A box of the head's size: no alignment puts 30 % of it within 2 mm of the head."""
+    """A box of the head's size: no alignment puts half of it within 2 mm of the head."""
     box = trimesh.creation.box(extents=[150, 180, 200]).subdivide().subdivide().subdivide()
     data = obj_of(np.asarray(box.vertices), np.asarray(box.faces))
-    body = problem(await register(client, {}, data), 422, "follow_up")
-    assert "could not register it" in body["detail"]
+    for mode in ("rigid", "similarity"):
+        body = problem(await register(client, {"mode": mode}, data), 422, "follow_up")
+        assert "could not register it" in body["detail"]
+        assert "of it lies" in body["detail"] and "(at least 50%)" in body["detail"], body
+        # Already in similarity mode, it is not told to use it.
+        assert ("mode similarity" in body["detail"]) == (mode == "rigid")
 
 
 async def test_bad_register_requests_name_the_part_or_field(client):

@@ -66,6 +66,11 @@ class Surface:
         return cls(combine(vertices, faces, face, weights), normals)
 
     @cached_property
+    def size(self) -> float:
+        """The samples' RMS distance from their centroid."""
+        return float(np.sqrt(np.mean(np.sum((self.points - self.points.mean(axis=0)) ** 2, 1))))
+
+    @cached_property
     def tree(self) -> cKDTree:
         """A k-d tree of the samples (built once: every ICP and measure on this surface
         pairs with it)."""
@@ -109,19 +114,21 @@ def from_pairs(source: np.ndarray, target: np.ndarray, scale: bool) -> np.ndarra
     return matrix
 
 
-def moment_starts(source: Surface, target: Surface) -> list[np.ndarray]:
+def moment_starts(source: Surface, target: Surface, scale: bool = False) -> list[np.ndarray]:
     """4x4 starts that take ``source``'s principal axes onto ``target``'s in each of the 24
     proper ways (the axes' order and signs: a cropped scan's axes may come in another order
     than the whole one's), each with the translation that matches the centroids and, along
     every axis of ``target`` on which the turned ``source`` is shorter by more than
     ``CROPPED`` of its extent, the two that match its one end or the other: a cropped scan's
-    centroid is not the whole one's."""
+    centroid is not the whole one's. With ``scale``, each start also matches the samples'
+    RMS distances from their centroids (the scale ICP then refines)."""
     frames = []
     for surface in (source, target):
         centre = surface.points.mean(axis=0)
         _, _, axes = np.linalg.svd(surface.points - centre, full_matrices=False)
         frames.append((centre, axes))
     (c_s, a_s), (c_t, a_t) = frames
+    grow = target.size / source.size if scale and source.size > 0 else 1.0
     target_low, target_high = _extent(target.points @ a_t.T)
     starts = []
     for order in itertools.permutations(range(3)):
@@ -130,8 +137,8 @@ def moment_starts(source: Surface, target: Surface) -> list[np.ndarray]:
             if np.linalg.det(rotation) < 0:
                 continue
             matrix = np.eye(4)
-            matrix[:3, :3] = rotation
-            matrix[:3, 3] = c_t - rotation @ c_s
+            matrix[:3, :3] = grow * rotation
+            matrix[:3, 3] = c_t - grow * rotation @ c_s
             starts.append(matrix)
             low, high = _extent(apply(matrix, source.points) @ a_t.T)
             shorter = (high - low) < (1.0 - CROPPED) * (target_high - target_low)
@@ -163,7 +170,7 @@ def icp(
     the spread)."""
     cloud, cloud_tree = target.cloud
     centre = source.points.mean(axis=0)
-    spread = float(np.sqrt(np.mean(np.sum((source.points - centre) ** 2, axis=1)))) + 1e-300
+    spread = source.size + 1e-300
     grow = float(np.cbrt(np.linalg.det(start[:3, :3])))
     rigid = start.copy()
     rigid[:3, :3] /= grow
@@ -208,7 +215,8 @@ def _scale_fit(source, target, rigid, centre, grow) -> float:
     normals = target.normals[nearest[keep]]
     along = np.einsum("pd,pd->p", arms[keep], normals)
     gap = np.einsum("pd,pd->p", target.points[nearest[keep]] - fixed, normals)
-    return float(np.dot(along, gap) / (np.dot(along, along) + 1e-300)) if keep.any() else grow
+    fit = float(np.dot(along, gap) / (np.dot(along, along) + 1e-300)) if keep.any() else grow
+    return fit if np.isfinite(fit) and fit > 0 else grow  # pairs that give no scale: keep it
 
 
 def _trim(distance: np.ndarray) -> float:
@@ -271,7 +279,7 @@ def register(
 def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registration:
     coarse_source, coarse_target = source.every(COARSE_EVERY), target.every(COARSE_EVERY)
     coarse_tolerance = on_surface_distance(coarse_target)
-    starts = moment_starts(source, target)
+    starts = moment_starts(source, target, scale)
 
     def landed(start: np.ndarray) -> float:  # the share of samples the start puts on it
         distance, _ = coarse_target.tree.query(apply(start, coarse_source.points))

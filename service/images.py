@@ -20,8 +20,11 @@ BYTES_PER_PIXEL = 48
 #: The largest side of a PNG part (a texture mask of 8192 x 8192 is a large one).
 MAX_SIDE = 8192
 #: Where a PNG's header gives its bit depth (after the signature, the IHDR chunk's length,
-#: type, width and height).
+#: type, width and height); its colour type follows.
 _IHDR_DEPTH = 24
+#: The PNG colour types read by libspng at 16 bits, and their channels: RGB and RGBA (not
+#: grey and alpha, 4, which Pillow reads, at 8 bits, as RGBA).
+_COLOUR_TYPES = {2: 3, 6: 4}
 #: Grey from red, green and blue (Rec. 709, on the stored values).
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 
@@ -71,10 +74,10 @@ def read_png(
                 part, f"8-bit grey (mode L, or LA: the alpha is left out), not mode {image.mode}"
             )
         charge(BYTES_PER_PIXEL * width * height)
-        if image.mode in ("RGB", "RGBA") and data[_IHDR_DEPTH] == 16:
+        colour_type = _COLOUR_TYPES.get(data[_IHDR_DEPTH + 1])
+        if colour_type is not None and data[_IHDR_DEPTH] == 16:
             # Pillow would read 8 bits of them; libspng gives RGB an alpha of its own.
-            channels = 4 if image.mode == "RGBA" else 3
-            return _colour(pyspng.load(data)[..., :channels], 65535.0)
+            return _colour(pyspng.load(data)[..., :colour_type], 65535.0)
         return _pixels(image, part)
     except (OSError, ValueError, SyntaxError, RuntimeError, Image.DecompressionBombError) as error:
         raise refusal(part, f"not a readable PNG ({type(error).__name__})") from None

@@ -213,6 +213,17 @@ async def test_a_16_bit_colour_image_keeps_its_16_bits(client, channels):
         )
 
 
+async def test_the_png_answer_comes_back_as_an_image_part(client):
+    drawn = await transfer(client, {"values": VALUES.tolist(), "output": "png"})
+    low, high = (await transfer(client, {"values": VALUES.tolist()})).json()["value_range"]
+    back = await transfer(client, {"value_range": [low, high]}, {"image": ("p.png", drawn.content)})
+    assert back.status_code == 200, back.text
+    values = nullable(back.json()["vertices"]["values"])
+    ids = np.array(back.json()["vertices"]["ids"])
+    # A 16-bit grey-and-alpha PNG is read at 8 bits: within a level of 255 and the drawing.
+    assert np.nanmedian(np.abs(values - VALUES[ids])) < 0.01 * (high - low)
+
+
 async def test_the_png_answer_is_the_drawing_with_its_coverage_as_alpha(client):
     answer = await transfer(client, {"values": VALUES.tolist(), "output": "png"})
     assert answer.headers["content-type"] == "image/png"

@@ -126,6 +126,15 @@ def mesh_form(
     name = model.MESH_PART
     if name not in form:
         raise Problem(422, f"{name}: the form has no '{name}' file field", "invalid-request", name)
+    taken = ("params", name, *model.FILE_PARTS)
+    for key in form:
+        if key not in taken:  # a misspelt part would be left out unseen
+            raise Problem(
+                422,
+                f"{key}: this route reads no part of that name; it reads {', '.join(taken)}",
+                "invalid-request",
+                key,
+            )
     params.with_parts({key: (part.filename, bytes(part.data)) for key, part in form.items()})
     part = form[name]
     return params, load_mesh(part.data, part.filename, params, settings)

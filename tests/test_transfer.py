@@ -256,6 +256,10 @@ async def test_bad_transfers_name_the_part_or_field(client):
     assert body["detail"] == "params.values.1: Input should be a valid number"
     body = problem(await transfer(client, {}), 422, "image")
     assert "nothing to carry" in body["detail"]
+    body = problem(await transfer(client, {}, {"imgae": ("m.png", b"")}), 422, "imgae")
+    assert body["detail"] == (
+        "imgae: this route reads no part of that name; it reads params, mesh, mask, image"
+    )
     right = io.BytesIO()
     Image.new("L", (900, 600)).save(right, format="PNG")
     both = {"image": ("map.png", right.getvalue())}

@@ -63,6 +63,7 @@ def multipart_body(model: type[BaseModel]) -> dict:
             "type": "object",
             "required": [model.MESH_PART],
             "properties": {model.MESH_PART: mesh, "params": params, **parts},
+            "additionalProperties": False,  # a part the route does not read is refused
         },
         "encoding": {"params": {"contentType": "application/json"}},
     }

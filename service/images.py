@@ -74,10 +74,10 @@ def read_png(
                 part, f"8-bit grey (mode L, or LA: the alpha is left out), not mode {image.mode}"
             )
         charge(BYTES_PER_PIXEL * width * height)
-        colour_type = _COLOUR_TYPES.get(data[_IHDR_DEPTH + 1])
-        if colour_type is not None and data[_IHDR_DEPTH] == 16:
+        channels = _COLOUR_TYPES.get(data[_IHDR_DEPTH + 1])
+        if channels is not None and data[_IHDR_DEPTH] == 16:
             # Pillow would read 8 bits of them; libspng gives RGB an alpha of its own.
-            return _colour(pyspng.load(data)[..., :colour_type], 65535.0)
+            return _colour(pyspng.load(data)[..., :channels], 65535.0)
         return _pixels(image, part)
     except (OSError, ValueError, SyntaxError, RuntimeError, Image.DecompressionBombError) as error:
         raise refusal(part, f"not a readable PNG ({type(error).__name__})") from None

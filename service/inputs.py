@@ -135,7 +135,8 @@ def mesh_form(
                 "invalid-request",
                 key,
             )
-    params.with_parts({key: (part.filename, bytes(part.data)) for key, part in form.items()})
+    files = {key: part for key, part in form.items() if key in model.FILE_PARTS}  # not the mesh
+    params.with_parts({key: (part.filename, bytes(part.data)) for key, part in files.items()})
     part = form[name]
     return params, load_mesh(part.data, part.filename, params, settings)
 

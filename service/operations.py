@@ -922,17 +922,10 @@ def register_scans(mesh: Mesh, params: RegisterParams, settings: Settings) -> Re
     similar = params.mode is RegisterMode.SIMILARITY
     ratio = moving.size / base.size
     if not similar and not 1 / OTHER_UNITS < ratio < OTHER_UNITS:
-        raise _unregistered("a rigid motion keeps sizes", ratio, similar)
+        raise _unregistered("a rigid motion keeps sizes", ratio, similar, landmarks_help=False)
     try:
         found = register(moving, base, pairs, scale=similar, focus=focus)
     except RegistrationAmbiguous as error:
-        if max(error.shares) < MIN_OVERLAP:  # neither fits: too little overlap, not two fits
-            raise _unregistered(
-                f"after the best alignments found at most {max(error.shares):.0%} of it lies "
-                f"on the baseline (at least {MIN_OVERLAP:.0%})",
-                ratio,
-                similar,
-            ) from None
         raise _unregistered(str(error), ratio, similar) from None
     on_base = found.residuals * mm_per_unit <= OVERLAP_MM
     overlap = float(on_base.mean())
@@ -960,16 +953,18 @@ def register_scans(mesh: Mesh, params: RegisterParams, settings: Settings) -> Re
 
 
 #: Follow-ups whose samples spread this many times as far as the baseline's, or as few, are
-#: told that their units or scales may differ; in rigid mode, those beyond ``OTHER_UNITS``
-#: times are refused before any alignment is tried (a part of a head spreads at least a
-#: third as far as the whole: 0.39 for the top tenth of the sample scans).
-SIZE_MISMATCH, OTHER_UNITS = 1.5, 4.0
+#: told that their units or scales may differ (a part of a head spreads at least 0.39 as far
+#: as the whole: the top tenth of each sample scan); in rigid mode, those beyond
+#: ``OTHER_UNITS`` times are refused before any alignment is tried.
+SIZE_MISMATCH, OTHER_UNITS = 2.5, 4.0
 
 
-def _unregistered(why: str, size_ratio: float, similar: bool) -> Problem:
+def _unregistered(
+    why: str, size_ratio: float, similar: bool, landmarks_help: bool = True
+) -> Problem:
     """The 422 of a follow-up that could not be registered: ``why``, and what may help
     (``size_ratio``: how far its samples spread from their centroid, over the baseline's)."""
-    hints = ["give the landmarks of both scans, or a region both show"]
+    hints = ["give the landmarks of both scans, or a region both show"] if landmarks_help else []
     if not similar and not 1 / SIZE_MISMATCH <= size_ratio <= SIZE_MISMATCH:
         hints.insert(
             0,
@@ -1150,44 +1145,45 @@ def transfer(mesh: Mesh, params: TransferParams, settings: Settings) -> Transfer
     x, y = region.layout
     at = Framing.of(x, y, region.flat.layout, width, height).pixels(np.column_stack([x, y]))
     # A face that wraps round the map has no triangle of its own there: no pixel is its.
-    drawn = np.setdiff1d(np.arange(len(region.flat.faces)), region.flat.validation.wrapping_faces)
-    corners = at[region.flat.faces[drawn]]
+    drawn = region.flat.validation.drawn_faces(len(region.flat.faces))
+    faces = region.flat.faces[drawn]
     found = Transferred(region, width, height)
     if image is not None:
-        found = _image_to_mesh(region, image, at, drawn, params, settings)
+        found = _image_to_mesh(region, image, at, drawn, faces, params, settings)
     elif values is not None:
         vertex_values = values[region.flat.vertex_ids]
-        found = _values_to_image(region, vertex_values, drawn, corners, params, settings)
+        found = _values_to_image(region, vertex_values, drawn, faces, at, params, settings)
     if lookup:
+        corners = at[faces]
         ids = pixels.face_ids(corners, height, width, settings.threads)
         weights = pixels.barycentric(corners, ids) if params.output is Output.BARYCENTRIC else None
         found = replace(found, ids=_file_ids(region, drawn, ids), weights=weights)
     return found
 
 
-def _values_to_image(region: MeshRegion, values, drawn, corners, params: TransferParams, settings):
-    """The region vertices' ``values`` drawn linear inside each triangle, 0 to 1 of the
-    range (``value_range``, or the values' least and largest; for values all equal to ``v``,
-    a range of 1 from ``v`` towards 0, which the values' bound admits when sent back)."""
+def _values_to_image(region: MeshRegion, values, drawn, faces, at, params, settings):
+    """The region vertices' ``values`` drawn linear inside each of the ``drawn`` faces
+    (``faces``, their corners; ``at``, the vertices' pixels), 0 to 1 of the range
+    (``value_range``, or the values' least and largest; for values all equal to ``v``, a
+    range of 1 from ``v`` towards 0, which the values' bound admits when sent back)."""
     low, high = params.value_range or (float(values.min()), float(values.max()))
     if high <= low:
         low, high = (low, low + 1.0) if low < 0 else (low - 1.0, low)
     scaled = (values - low) / (high - low)
     width, height = params.image_width, params.image_height
-    image, ids = pixels.vertex_image(
-        corners, scaled[region.flat.faces[drawn]], height, width, settings.threads
-    )
+    image, ids = pixels.vertex_image(at[faces], scaled[faces], height, width, settings.threads)
     ids = _file_ids(region, drawn, ids)
     return Transferred(region, width, height, (low, high), image=np.clip(image, 0, 1), ids=ids)
 
 
-def _image_to_mesh(region: MeshRegion, image, at, drawn, params: TransferParams, settings):
-    """The image's values at the region's vertices and over its ``drawn`` faces (the others
-    uncovered; :func:`transforms.pixels.onto_mesh`), mapped to ``value_range``."""
+def _image_to_mesh(region: MeshRegion, image, at, drawn, faces, params, settings):
+    """The image's values at the region's vertices and over its ``drawn`` faces (``faces``,
+    their corners; the others uncovered; :func:`transforms.pixels.onto_mesh`), mapped to
+    ``value_range``."""
     low, high = params.value_range or (0.0, 1.0)
     height, width = image.values.shape
     vertex, found_means, found_coverage = pixels.onto_mesh(
-        at, region.flat.faces[drawn], image.values, image.alpha, settings.threads
+        at, faces, image.values, image.alpha, settings.threads
     )
     means, coverage = np.full(len(region.flat.faces), np.nan), np.zeros(len(region.flat.faces))
     means[drawn], coverage[drawn] = found_means, found_coverage
@@ -1198,7 +1194,8 @@ def _image_to_mesh(region: MeshRegion, image, at, drawn, params: TransferParams,
 
 def _file_ids(region: MeshRegion, drawn: np.ndarray, ids: np.ndarray) -> np.ndarray:
     """The grid of positions in the ``drawn`` faces as the file's face ids (-1 stays)."""
-    return np.where(ids >= 0, region.faces[drawn[np.maximum(ids, 0)]], -1).astype(np.int32)
+    file_ids = region.faces[drawn].astype(np.int32)
+    return np.where(ids >= 0, file_ids[np.maximum(ids, 0)], -1).astype(np.int32, copy=False)
 
 
 def _vertex_values(mesh: Mesh, values) -> np.ndarray:

@@ -131,6 +131,26 @@ def test_similarity_registers_follow_ups_of_other_scales(scale):
     assert errors(found.matrix, truth, moved)[0] < 0.5
 
 
+@pytest.mark.parametrize(("crop", "scale"), [(0.5, 1.0), (0.4, 1.2), (0.5, 10.0)])
+async def test_a_half_scan_of_another_scale_registers_or_says_it_could_not(client, crop, scale):
+    """Without landmarks, half a head at an unknown scale may fit in more than one place;
+    what is answered is right, or a refusal, never a silent misalignment."""
+    vertices, faces = load_sample(NAME)
+    moved = scale * TURN.apply(np.array(vertices)) + SHIFT
+    moved += np.random.default_rng(1).normal(scale=0.3, size=moved.shape)
+    height = np.asarray(vertices)[faces].mean(axis=1)[:, 2]
+    kept = faces[height > np.quantile(height, crop)]
+    truth = np.eye(4)
+    truth[:3, :3] = TURN.as_matrix().T / scale
+    truth[:3, 3] = -truth[:3, :3] @ SHIFT
+    response = await register(client, {"mode": "similarity"}, obj_of(moved, kept))
+    if response.status_code == 200:
+        assert errors(response.json()["transform"], truth, moved[np.unique(kept)])[0] < 0.5
+    else:
+        body = problem(response, 422, "follow_up")
+        assert "could not register it" in body["detail"]
+
+
 async def test_a_follow_up_in_other_units_is_told_so_in_rigid_mode(client):
     data, _, truth, moved = follow_up(scale=10.0)  # the baseline in cm, the follow-up in mm
     body = problem(await register(client, {}, data), 422, "follow_up")
@@ -150,7 +170,7 @@ async def test_a_scan_of_something_else_is_refused(client):
     for mode in ("rigid", "similarity"):
         body = problem(await register(client, {"mode": mode}, data), 422, "follow_up")
         assert "could not register it" in body["detail"]
-        assert "of it lies" in body["detail"] and "(at least 50%)" in body["detail"], body
+        assert "lies within 2 mm of the baseline (at least 50%)" in body["detail"], body
         # Already in similarity mode, it is not told to use it.
         assert ("mode similarity" in body["detail"]) == (mode == "rigid")
 

@@ -39,8 +39,10 @@ COARSE_EVERY, REFINED_STARTS = 20, 24
 #: baseline's extent is taken as cropped there (:func:`moment_starts`).
 CROPPED = 0.1
 #: Alignments farther apart than this (degrees) are distinct; two distinct ones whose shares
-#: of samples on the baseline differ by less than ``AMBIGUOUS`` are refused.
-DISTINCT_DEG, AMBIGUOUS = 10.0, 0.1
+#: of samples on the baseline differ by less than ``AMBIGUOUS`` are refused, when the better
+#: puts at least ``PLAUSIBLE`` of them on it (below, neither fits: the better is answered,
+#: for its caller's overlap to judge).
+DISTINCT_DEG, AMBIGUOUS, PLAUSIBLE = 10.0, 0.1, 0.5
 #: Pairs farther apart than this many times the ``TRIM_QUANTILE`` of their distances are
 #: left out of a round: up to about two thirds of either surface may have no counterpart.
 TRIM, TRIM_QUANTILE = 2.5, 30.0
@@ -128,10 +130,12 @@ def moment_starts(source: Surface, target: Surface, scale: bool = False) -> list
         _, _, axes = np.linalg.svd(surface.points - centre, full_matrices=False)
         frames.append((centre, axes))
     (c_s, a_s), (c_t, a_t) = frames
-    grow = target.size / source.size if scale and source.size > 0 else 1.0
+    # With a scale, both the scans' own sizes and their spreads matched: a cropped scan
+    # spreads less than the whole, so the second alone would enlarge it past its place.
+    grows = (1.0, target.size / source.size) if scale and source.size > 0 else (1.0,)
     target_low, target_high = _extent(target.points @ a_t.T)
     starts = []
-    for order in itertools.permutations(range(3)):
+    for grow, order in itertools.product(grows, itertools.permutations(range(3))):
         for signs in itertools.product((1, -1), repeat=3):
             rotation = a_t.T @ (np.diag(signs) @ a_s[list(order)])
             if np.linalg.det(rotation) < 0:
@@ -175,12 +179,16 @@ def icp(
     rigid = start.copy()
     rigid[:3, :3] /= grow
     rigid[:3, 3] += (grow - 1.0) * rigid[:3, :3] @ centre  # start = rigid @ (scale about c)
+    points = moving = None
     for _ in range(max(rounds // STAGE_ROUNDS, 1)):
-        points = centre + grow * (source.points - centre)
+        if moving is None or scale:  # the samples as scaled now (rigid: once)
+            points = centre + grow * (source.points - centre)
+            moving = small_gicp.PointCloud(points)
+        landed = apply(rigid, centre[None, :])[0]
         distance, _ = target.tree.query(apply(rigid, points))
         found = small_gicp.align(
             cloud,
-            small_gicp.PointCloud(points),
+            moving,
             cloud_tree,
             init_T_target_source=rigid,
             registration_type="PLANE_ICP",
@@ -191,8 +199,10 @@ def icp(
         )
         step = found.T_target_source @ np.linalg.inv(rigid)
         rigid = found.T_target_source
+        # How far the stage moved the samples: their centroid's shift, plus the turn at
+        # their spread (as scaled), plus the change of scale at it.
         turn = float(Rotation.from_matrix(step[:3, :3]).magnitude())
-        moved = np.linalg.norm(step[:3, 3]) + turn * spread
+        moved = np.linalg.norm(apply(rigid, centre[None, :])[0] - landed) + turn * grow * spread
         if scale:
             before, grow = grow, _scale_fit(source, target, rigid, centre, grow)
             moved += abs(grow - before) * spread
@@ -257,7 +267,8 @@ def register(
     from the landmarks' ``pairs`` ((k, 3) each, follow-up then baseline) when given; else
     each of :func:`moment_starts` is refined on every ``COARSE_EVERY``-th sample, the two
     best distinct ones (by the share of samples on the target) on all of them, and the better
-    kept, unless the other fits about as well (``AMBIGUOUS``). Then refined on ``focus`` (the
+    kept, unless the other fits about as well (``AMBIGUOUS``) and either fits (``PLAUSIBLE``).
+    Then refined on ``focus`` (the
     part of the baseline to align on) when given; the residuals are against the whole
     baseline.
 
@@ -265,7 +276,7 @@ def register(
     ------
     RegistrationAmbiguous
         Without landmarks, two alignments more than ``DISTINCT_DEG`` apart leave shares on
-        the baseline within ``AMBIGUOUS`` of each other.
+        the baseline within ``AMBIGUOUS`` of each other, the better at least ``PLAUSIBLE``.
     """
     if pairs is not None:
         found = icp(source, target, from_pairs(*pairs, scale=scale), scale)
@@ -302,7 +313,7 @@ def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registrat
     )
     if len(refined) > 1 and _angle(refined[0].matrix, refined[1].matrix) > DISTINCT_DEG:
         shares = (_share(refined[0], tolerance), _share(refined[1], tolerance))
-        if shares[0] - shares[1] < AMBIGUOUS:
+        if shares[0] >= PLAUSIBLE and shares[0] - shares[1] < AMBIGUOUS:
             raise RegistrationAmbiguous(_angle(refined[0].matrix, refined[1].matrix), shares)
     return refined[0]
 

@@ -94,6 +94,14 @@ class RegionValidation:
         between them on the map is not where the face lies on the surface."""
         return np.union1d(self.singular_point_faces, self.seam_faces)
 
+    def drawn_faces(self, count: int) -> np.ndarray:
+        """(k,) int: the positions, among the region's ``count`` faces, of those that do not
+        wrap round the map (:attr:`wrapping_faces`), ascending: the triangles a map has."""
+        keep = np.ones(count, dtype=bool)
+        keep[self.singular_point_faces] = False
+        keep[self.seam_faces] = False
+        return np.flatnonzero(keep)
+
     @property
     def star_shaped(self) -> bool:
         """No face is folded or back-facing."""

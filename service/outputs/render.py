@@ -112,8 +112,7 @@ def reference_grid(region: MeshRegion, count: int) -> np.ndarray | None:
     x, y = region.layout
     on_map = np.column_stack([x, y])
     # Not through triangles that wrap round the map (across the seam, over a singular point).
-    check = flat.validation
-    faces = np.delete(flat.faces, np.union1d(check.seam_faces, check.singular_point_faces), axis=0)
+    faces = flat.faces[flat.validation.drawn_faces(len(flat.faces))]
     rotation = region.frame.rotation  # rows: the local axes in the world
     return np.concatenate(
         [

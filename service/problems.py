@@ -207,20 +207,15 @@ def _without_members_not_taken(errors: list[dict]) -> list[dict]:
     """pydantic reports every member of a union that failed. When one of them took the
     input (the error lies inside it, or is not a wrong type), the others' "should be a valid
     string" and the like only say which type the input is not: leave them out."""
-    taken = set()
-    for item in errors:
-        location = tuple(item.get("loc", ()))
-        at = _member_label(location)
-        if at is not None and (len(location) > at + 1 or not item["type"].endswith("_type")):
-            taken.add(location[:at])
-    kept = []
+    wrong_types, taken = [], set()  # per error: its union's field if a wrong-type one
     for item in errors:
         location = tuple(item.get("loc", ()))
         at = _member_label(location)
         wrong_type = at is not None and len(location) == at + 1 and item["type"].endswith("_type")
-        if not (wrong_type and location[:at] in taken):
-            kept.append(item)
-    return kept
+        wrong_types.append(location[:at] if wrong_type else None)
+        if at is not None and not wrong_type:
+            taken.add(location[:at])
+    return [item for item, field in zip(errors, wrong_types, strict=True) if field not in taken]
 
 
 def validation_problem(errors: list[dict], prefix: str = "") -> Problem:

@@ -122,8 +122,9 @@ def moment_starts(source: Surface, target: Surface, scale: bool = False) -> list
     than the whole one's), each with the translation that matches the centroids and, along
     every axis of ``target`` on which the turned ``source`` is shorter by more than
     ``CROPPED`` of its extent, the two that match its one end or the other: a cropped scan's
-    centroid is not the whole one's. With ``scale``, each start also matches the samples'
-    RMS distances from their centroids (the scale ICP then refines)."""
+    centroid is not the whole one's. With ``scale``, every start comes twice: unscaled, and
+    scaled by the ratio of the samples' RMS distances from their centroids (the scale ICP
+    then refines)."""
     frames = []
     for surface in (source, target):
         centre = surface.points.mean(axis=0)

@@ -98,8 +98,7 @@ class RegionValidation:
         """(k,) int: the positions, among the region's ``count`` faces, of those that do not
         wrap round the map (:attr:`wrapping_faces`), ascending: the triangles a map has."""
         keep = np.ones(count, dtype=bool)
-        keep[self.singular_point_faces] = False
-        keep[self.seam_faces] = False
+        keep[self.wrapping_faces] = False
         return np.flatnonzero(keep)
 
     @property

@@ -16,13 +16,14 @@ True
 
 from .arrays import MAX_ABS_COORDINATE
 from .cap import RHO_MAX, RHO_MIN, SIGMA_MAX, SIGMA_MIN, PoleCap, check_rho, check_sigma
-from .chart import LAYOUT_ORIENTATION, Chart, Method, angles_to_world, world_to_angles
+from .chart import Chart, Method, angles_to_world, world_to_angles
 from .errors import TransformInputError
 from .faces import DEGENERATE_RTOL, FaceMeasures, measure_faces
+from .framing import Framing
 from .fit import Fit, FitBounds, FitExplanation, FitFixed, default_choice, fit_region
 from .frames import Frame, check_rotation
 from .landmarks import LANDMARK_NAMES, Landmarks
-from .layouts import Layout, layout_xy
+from .layouts import LAYOUT_ORIENTATION, Layout, layout_xy
 from .locate import Hits, LocateIndex, locate
 from .mapping import MapTriangles
 from .margins import arcs_to_point, arcs_to_seam
@@ -64,6 +65,7 @@ __all__ = [
     "FitExplanation",
     "FitFixed",
     "FlatRegion",
+    "Framing",
     "Frame",
     "Hits",
     "Landmarks",

@@ -8,7 +8,7 @@ sections 1, 3 and 5).
 All three put the singular points and the seam on the same cap (:mod:`.cap`) and keep
 orientation the same way: a triangle that is counter-clockwise seen from outside (its normal
 pointing away from the centre) is clockwise in the ``(phi, theta)`` plane, with ``phi`` across
-and ``theta`` up (``LAYOUT_ORIENTATION = -1``).
+and ``theta`` up (:data:`transforms.layouts.LAYOUT_ORIENTATION`, -1).
 """
 
 from __future__ import annotations
@@ -25,9 +25,6 @@ from .frames import Frame
 from .separable import separable_angles, separable_inverse
 from .spherical import AngleKernel, eq1_angles, points_to_angles, spherical_to_cartesian
 from .warp import distorted_inverse, warped_angles
-
-#: Sign of a front-facing triangle's signed area in the (phi, theta) layout, every method.
-LAYOUT_ORIENTATION = -1
 
 
 class Method(StrEnum):

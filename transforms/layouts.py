@@ -18,6 +18,10 @@ from enum import StrEnum
 
 import numpy as np
 
+#: Sign of a front-facing triangle's signed area in the (phi, theta) layout, every method (the
+#: charts keep orientation alike: docs/math.md, section 6).
+LAYOUT_ORIENTATION = -1
+
 #: Mercator's y is infinite at theta = 0 and pi (the singular points); theta is kept this far
 #: inside, so such a vertex gets a large finite y (its triangles are flagged by validation).
 MERCATOR_THETA_MARGIN = 1e-12
@@ -28,6 +32,18 @@ class Layout(StrEnum):
 
     THETA_PHI = "theta_phi"
     MERCATOR = "mercator"
+
+    @property
+    def s_sign(self) -> int:
+        """+1 or -1: ``s = s_sign * y`` grows with theta, as the pictures' rows, the GLB's
+        ``v`` and the pixel grid run (Mercator's ``y`` runs against theta)."""
+        return 1 if self is Layout.THETA_PHI else -1
+
+    def front_orientation(self, winding: int) -> int:
+        """The sign of a front-facing triangle's signed area in the ``(x, y)`` plane of this
+        layout, for a region whose file winding is ``winding`` (+1 outward, -1 inward):
+        ``LAYOUT_ORIENTATION`` in the ``(phi, theta)`` plane, turned over by ``s_sign``."""
+        return LAYOUT_ORIENTATION * winding * self.s_sign
 
 
 def layout_xy(theta: np.ndarray, phi: np.ndarray, layout: Layout) -> tuple[np.ndarray, np.ndarray]:

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arrays import blocks, unit_rows
-from .chart import LAYOUT_ORIENTATION
+from .layouts import LAYOUT_ORIENTATION
 from .errors import TransformInputError
 from .faces import FaceMeasures
 from .margins import arcs_to_point, arcs_to_seam

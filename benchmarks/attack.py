@@ -6,7 +6,7 @@ Runs a real server (``--workers`` processes, API keys on) and, one case after an
   honest scans, one at a time: the reader's peak allocation per byte of the file (read here,
   under tracemalloc), and the peak resident memory a worker gained while it handled the
   request (from /proc, sampled every 5 ms) against what the job was charged to the memory
-  budget (service.jobs); and two /v1/points bodies of that size, one of empty objects;
+  budget (service.server.jobs); and two /v1/points bodies of that size, one of empty objects;
 * **slow clients**: ``--slow`` connections at once that send their body at 1 KB/s, that
   declare a Content-Length and stop sending, that send nothing, or that send a header line a
   second; meanwhile a probe posts ``/v1/points`` and a small ``/v1/flatten`` in turn, and
@@ -45,7 +45,7 @@ import httpx
 from benchmarks.docs import publish
 from benchmarks.hostile import HOSTILE, HOSTILE_JSON
 from benchmarks.server import children_of, rss_bytes, serving
-from service.jobs import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE, job_bytes
+from service.capabilities.context import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE, job_bytes
 from service.meshio import Mesh, MeshFormatError, format_of, read_mesh
 from service.samples import SAMPLES
 from service.settings import Settings
@@ -172,7 +172,7 @@ def healthy(client: httpx.Client) -> bool:
 
 
 def settle() -> None:
-    """Time for an idle worker to give its free heap back (service.allocator), so that the
+    """Time for an idle worker to give its free heap back (service.server.allocator), so that the
     next case's growth is its own."""
     time.sleep(1.6)
 
@@ -192,7 +192,7 @@ def reader_peak(name: str, data: bytes) -> tuple[int, Mesh | None]:
 
 
 def charge_of(body: int, mesh: Mesh | None) -> int:
-    """What the service charges the job (service.jobs): the body, the reader's allowance and,
+    """What the service charges the job (service.server.jobs): the body, the reader's allowance and,
     for a mesh that reads, the computation's estimate."""
     charged = (1 + READER_BYTES_PER_BYTE) * body
     return charged + (job_bytes(len(mesh.vertices), len(mesh.faces)) if mesh else 0)

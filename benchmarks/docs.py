@@ -39,7 +39,7 @@ def run_report(
     import numpy as np
 
     from benchmarks.transforms_bench import footer
-    from service.allocator import keep_large_blocks
+    from service.server.allocator import keep_large_blocks
 
     parser = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=runs)

@@ -45,7 +45,7 @@ from scipy.sparse.csgraph import connected_components
 from benchmarks.docs import publish
 from benchmarks.server import status_bytes
 from benchmarks.transforms_bench import footer, subdivided
-from service.allocator import keep_large_blocks
+from service.server.allocator import keep_large_blocks
 from transforms import Chart, Frame, PoleCap, fit_region, flatten_region
 from transforms.faces import measure_faces
 from transforms.metrics import distortion

@@ -36,8 +36,8 @@ from benchmarks.docs import publish
 from benchmarks.fit_bench import ladder_rung
 from benchmarks.server import serving, status_bytes
 from benchmarks.transforms_bench import footer
-from service.allocator import keep_large_blocks
 from service.examples import MULTIPART, multipart_body
+from service.server.allocator import keep_large_blocks
 from transforms import Chart, Frame, LocateIndex, PoleCap, locate
 from transforms.arrays import as_faces, as_points, unit_rows
 from transforms.locate import DIRECT_QUERIES

@@ -53,7 +53,7 @@ import shapely
 from benchmarks.docs import publish
 from benchmarks.fit_bench import compact
 from benchmarks.transforms_bench import footer, subdivided
-from service.allocator import keep_large_blocks
+from service.server.allocator import keep_large_blocks
 from transforms import (
     LAYOUT_ORIENTATION,
     Chart,

@@ -10,7 +10,7 @@ built as in :mod:`benchmarks.fit_bench`) it runs, one child process per (route, 
   (``MeshCapability.answer``) for /v1/flatten, /v1/validate, /v1/fit and /v1/locate (one
   click on the map).
 
-Each child applies the service's allocator settings (:mod:`service.allocator`) and runs BLAS
+Each child applies the service's allocator settings (:mod:`service.server.allocator`) and runs BLAS
 on one thread, as the service does, warms up on the bundled scalp (imports, caches), then
 resets its peak (``/proc/self/clear_refs``) and reads ``VmRSS`` before the call and ``VmHWM``
 after it. A call's temporaries are that peak less what the call had to hold anyway: the mesh
@@ -108,10 +108,12 @@ def core_call(route: str, vertices: np.ndarray, faces: np.ndarray) -> Callable[[
 def route_call(route: str, glb: bytes, vertices: np.ndarray) -> Callable[[], tuple]:
     """The route in-process: (mesh read, JSON bytes) from the GLB's bytes."""
     from service.capabilities import MESH_CAPABILITIES
-    from service.encoding import Timings
+    from service.capabilities.context import Context
+    from service.capabilities.region.resolve import MeshInput
     from service.meshio import read_mesh
     from service.outputs import Output
     from service.settings import Settings
+    from service.timings import Timings
 
     capability = next(c for c in MESH_CAPABILITIES if c.path == route)
     params = {} if route == "/v1/fit" else fixed_params(vertices)
@@ -122,14 +124,15 @@ def route_call(route: str, glb: bytes, vertices: np.ndarray) -> Callable[[], tup
 
     def call() -> tuple:
         mesh = read_mesh(glb, "glb", settings.limits)
-        return mesh, capability.answer(mesh, params, settings, Output.JSON, Timings())
+        given = MeshInput(mesh, params)
+        return mesh, capability.answer(given, Context(settings), Output.JSON, Timings())
 
     return call
 
 
 def child(route: str, data: Path) -> dict:
     """Measure one call of ``route`` on the region saved at ``data`` (.npz and .glb)."""
-    from service.allocator import keep_large_blocks
+    from service.server.allocator import keep_large_blocks
 
     keep_large_blocks()
     arrays = np.load(data.with_suffix(".npz"))

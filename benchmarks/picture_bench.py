@@ -2,12 +2,13 @@
 
 The region: ``make bench-measure``'s million-face scalp (``fsaverage-head.ply`` subdivided 5
 times, narrowed to 52 degrees: 1,000,968 faces), flattened with fixed parameters, as the
-service holds it (:class:`service.operations.MeshRegion`). Its map coloured by isometric
-distortion (``colour_by: "isometric"``), 1200 x 800 pixels, on one thread (BLAS too), the
-service's allocator settings, median of several runs after a warm-up:
+service holds it (:class:`service.capabilities.region.resolve.MeshRegion`). Its map coloured
+by isometric distortion (``colour_by: "isometric"``), 1200 x 800 pixels, on one thread (BLAS
+too), the service's allocator settings, median of several runs after a warm-up:
 
-* meshflat: the renderers of ``/v1/flatten`` (:data:`service.outputs.render.RENDERERS`), from
-  the flattened region to the answer's bytes: the faces' distortion measured, the colours
+* meshflat: the renderers of ``/v1/flatten``
+  (:data:`service.capabilities.region.pictures.RENDERERS`), from the flattened region to the
+  answer's bytes: the faces' distortion measured, the colours
   and bar, the picture described, the raster (each pixel its triangle's colour, exactly),
   the encoding. Targets (the issue): PNG 1 s, SVG 1.5 s; the SVG's size is reported (its
   fill is at most one run a 2 x 2 cell of the plot).
@@ -31,17 +32,19 @@ from PIL import Image, ImageDraw
 from benchmarks.docs import run_report
 from benchmarks.measure_bench import HALF_ANGLE_DEG, SIGMA, SUBDIVISIONS, progress
 from benchmarks.transforms_bench import subdivided
+from service.capabilities.context import Context
+from service.capabilities.flatten import FlattenParams
+from service.capabilities.region.pictures import RENDERERS, face_colouring
+from service.capabilities.region.resolve import MeshRegion, Selection
 from service.meshio import Mesh
-from service.operations import MeshRegion, Selection
 from service.outputs import Output
 from service.outputs.colours import ColourBy
-from service.outputs.picture import Framing
-from service.outputs.render import RENDERERS, face_colouring
-from service.params import FlattenParams
-from transforms import Chart, Frame, Layout, PoleCap, flatten_region
+from transforms import Chart, Frame, Framing, Layout, PoleCap, flatten_region
 
 TARGETS = {Output.PNG: 1.0, Output.SVG: 1.5}
 WIDTH, HEIGHT = 1200, 800
+#: No memory budget: the renderers charge nothing here.
+CONTEXT = Context()
 
 
 def region() -> MeshRegion:
@@ -79,13 +82,13 @@ def measure(runs: int) -> str:
     corners = framing.pixels(np.column_stack([flat.x, flat.y]))[flat.faces] - 0.5
     colours = face_colouring(flattened, ColourBy.ISOMETRIC)[0]
     progress("warm-up")
-    sizes = {output: len(RENDERERS[output](flattened, params)) for output in TARGETS}
+    sizes = {output: len(RENDERERS[output](flattened, params, CONTEXT)) for output in TARGETS}
     times: dict[str, list[float]] = {"png": [], "svg": [], "peer": []}
     for run in range(runs):
         progress(f"run {run + 1} of {runs}")
         for output in TARGETS:
             start = time.perf_counter()
-            RENDERERS[output](flattened, params)
+            RENDERERS[output](flattened, params, CONTEXT)
             times[output.value].append(time.perf_counter() - start)
         start = time.perf_counter()
         peer_png(corners, colours)

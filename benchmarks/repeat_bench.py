@@ -41,7 +41,7 @@ from benchmarks.docs import publish
 from benchmarks.measure_bench import progress
 from benchmarks.transforms_bench import footer
 from benchmarks.zoo import available, scan_bytes
-from service.allocator import keep_large_blocks
+from service.server.allocator import keep_large_blocks
 from tests.test_landmarks import NEAR, NEAR_LEE_PERRY_SMITH
 from transforms import (
     LAYOUT_ORIENTATION,

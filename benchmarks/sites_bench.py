@@ -42,7 +42,7 @@ from benchmarks.docs import publish
 from benchmarks.fit_bench import compact
 from benchmarks.measure_bench import progress, quiet
 from benchmarks.transforms_bench import footer, subdivided
-from service.allocator import keep_large_blocks
+from service.server.allocator import keep_large_blocks
 from transforms.arrays import triangle_areas
 from transforms.sites import SitePart, default_spacing, minimum_distance, place_sites, site_normals
 

@@ -2,7 +2,7 @@
 
 The region: ``make bench-measure``'s, ``fsaverage-head.ply`` subdivided 5 times and its scalp
 narrowed to 52 degrees (1,000,968 faces, one disk), flattened with fixed parameters. Its map
-is framed as the PNG answer frames it (:class:`service.outputs.picture.Framing`) on a
+is framed as the PNG answer frames it (:class:`transforms.Framing`) on a
 4096 x 4096 grid and on a 2048 x 2048 one.
 
 * Image to mesh (4096 x 4096, a smooth grey image): meshflat's per-face means
@@ -36,8 +36,7 @@ from PIL import Image, ImageDraw
 
 from benchmarks.docs import run_report
 from benchmarks.measure_bench import Region, progress
-from service.outputs.picture import Framing
-from transforms import Layout, pixels
+from transforms import Framing, Layout, pixels
 
 #: The issue's targets, seconds.
 TARGET_TO_MESH, TARGET_TO_IMAGE = 1.0, 0.5

@@ -9,7 +9,7 @@ median of several runs after a warm-up:
 
 and, in the same run on the same points, VTK's ``vtkTextureMapToSphere`` (the peer). It runs
 twice, in child processes: once with glibc's default allocator settings and once with the
-settings the service starts with (:func:`service.allocator.keep_large_blocks`: large blocks
+settings the service starts with (:func:`service.server.allocator.keep_large_blocks`: large blocks
 stay in the process instead of going back to the kernel, so numpy's temporaries do not fault
 in fresh zeroed pages on every call). Prints Markdown tables; ``--write-docs`` also records them in
 ``docs/benchmarks.md``.
@@ -37,8 +37,8 @@ import numpy as np
 import trimesh
 
 from benchmarks.docs import publish
-from service.allocator import keep_large_blocks
 from service.samples import SAMPLES
+from service.server.allocator import keep_large_blocks
 from transforms import Chart, Frame, PoleCap, assess_region, world_to_angles
 
 #: Targets from the issue, as multiples of VTK's time.

@@ -34,8 +34,10 @@ from scipy.spatial.transform import Rotation
 from benchmarks.docs import publish
 from benchmarks.transforms_bench import machine
 from service.capabilities import MESH_COMMANDS
+from service.capabilities.context import Context
+from service.capabilities.inputs import parse_params
+from service.capabilities.region.resolve import MeshInput
 from service.encoding import encode
-from service.inputs import mesh_params
 from service.meshio import Mesh, format_of, read_mesh
 from service.samples import SAMPLES
 from service.settings import Settings
@@ -159,8 +161,8 @@ def case_mesh(case: Case) -> tuple[Mesh, dict]:
 
 def answer(mesh: Mesh, params: dict, command: str = "validate"):
     capability = MESH_COMMANDS[command]
-    parsed = mesh_params(capability.params, json.dumps(params).encode())
-    return capability.response.of(capability.operation(mesh, parsed, SETTINGS))
+    parsed = parse_params(capability.params, json.dumps(params).encode())
+    return capability.response.of(capability.operation(MeshInput(mesh, parsed), Context(SETTINGS)))
 
 
 def plain(model) -> dict:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import sys
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from importlib.metadata import version
@@ -13,20 +12,11 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi_offline import FastAPIOffline
 from starlette.concurrency import run_in_threadpool
 
-from . import demo, document, problems
-from .allocator import keep_large_blocks
-from .auth import KeyCheck, RequireApiKey
-from .bodylimit import BodySizeLimit
+from . import demo, document, problems, server
 from .observability import JsonFormatter, RequestContext, capture_warnings
 from .routes import router
 from .selfcheck import run_self_check
 from .settings import Settings, container_memory
-
-#: Seconds a thread holds the interpreter before one waiting for it takes over (5 ms by
-#: default). A job's numpy calls let go of it and take it back many times, and each time
-#: may wait out the other compute slot's turn; `make soak` runs on 2 CPUs served 8.6 to 8.8
-#: jobs/s at capacity at 5 ms, and 8.7 to 11.9 (most above 10) at 1 ms.
-SWITCH_INTERVAL = 0.001
 
 logger = logging.getLogger("meshflat")
 if not logger.handlers:  # imported without `meshflat serve`'s logging set-up
@@ -46,8 +36,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         """Tune the interpreter and the allocator, then flatten a bundled scan once, off the
         event loop, and log the outcome; /readyz answers 200 after it passes."""
         capture_warnings()
-        sys.setswitchinterval(SWITCH_INTERVAL)
-        if not keep_large_blocks():
+        if not server.tune_process():
             logger.info("allocator: not glibc, default settings kept")
         if not settings.api_keys:
             logger.warning(
@@ -85,8 +74,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.mount("/static", demo.static_files(), name="static")
     # Outermost last: every answer, refusals and 500s included, gets a request id, a log line,
     # metrics and the CORS headers (so that a browser can read it).
-    app.add_middleware(BodySizeLimit, limit=settings.max_upload_bytes)
-    app.add_middleware(RequireApiKey, check=KeyCheck(settings.api_keys))
+    server.install(app, settings)
     app.add_middleware(problems.UnexpectedErrors)
     app.add_middleware(
         CORSMiddleware,

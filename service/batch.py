@@ -55,15 +55,16 @@ from pathlib import Path
 import orjson
 
 from .capabilities import MESH_COMMANDS, MESH_FORM, MeshCapability
-from .cli import Progress, output_of_file
-from .encoding import Timings
-from .inputs import load_mesh, mesh_params
+from .capabilities.context import Context
+from .capabilities.inputs import Upload, parse_params
 from .jsonkeys import repeated_key
 from .meshio import format_of
 from .observability import JsonFormatter
 from .outputs import Output
 from .problems import Problem, core_errors_as_problems, problem_body
+from .progress import Progress
 from .settings import Settings
+from .timings import Timings
 
 #: Written last into a scan's folder: the inputs' digest and each output's size and SHA-256.
 DIGEST_FILE = "digest.json"
@@ -220,7 +221,7 @@ def _check_params(params, capability: MeshCapability, mesh_name: str) -> None:
             field="params.output",
         )
     with core_errors_as_problems(MESH_FORM):
-        parsed = mesh_params(capability.params, orjson.dumps(params))
+        parsed = parse_params(capability.params, orjson.dumps(params))
         format_of(mesh_name, parsed.format)
 
 
@@ -240,7 +241,8 @@ def _outputs(entry: dict, capability: MeshCapability) -> tuple[tuple[str, Output
             )
     if len(set(names)) != len(names):
         raise Problem(422, "outputs: a file name is given twice", field="outputs")
-    return tuple((name, output_of_file(capability, name, "outputs")) for name in names)
+    with core_errors_as_problems(MESH_FORM):
+        return tuple((name, capability.output_of_file(name, "outputs")) for name in names)
 
 
 def shard_of(scans: list[Scan], index: int | None, count: int | None) -> list[Scan]:
@@ -319,13 +321,16 @@ def _compute(scan: Scan, data: bytes, settings: Settings, folder: Path) -> dict[
     capability = MESH_COMMANDS[scan.command]
     timings = Timings()
     written = {}
+    ctx = Context(settings)
     with core_errors_as_problems(MESH_FORM):
-        params = mesh_params(capability.params, orjson.dumps(scan.params))
-        mesh = load_mesh(data, scan.mesh.name, params, settings)
+        params = parse_params(capability.params, orjson.dumps(scan.params))
+        given = capability.input_of(
+            params, {capability.mesh.name: Upload(scan.mesh.name, data)}, ctx
+        )
         with timings.measure("compute"):
-            result = capability.operation(mesh, params, settings)
+            result = capability.operation(given, ctx)
         for name, output in scan.outputs:
-            answer = capability.render(result, params, output, timings)
+            answer = capability.render(result, params, output, ctx, timings)
             _partial(folder / name).write_bytes(answer)
             written[name] = {"bytes": len(answer), "sha256": hashlib.sha256(answer).hexdigest()}
     for name in written:

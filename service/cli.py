@@ -43,60 +43,18 @@ import orjson
 
 from transforms import Layout
 
-from .capabilities import MESH_COMMANDS, MESH_FORM
+from .capabilities import MESH_COMMANDS, MESH_FORM, MeshCapability
+from .capabilities.context import Context
+from .capabilities.inputs import MeshPart, PngPart, Upload, parse_params
+from .capabilities.region.params import CENTERS
+from .capabilities.units import LengthUnit
 from .meshio import READERS
 from .outputs import Output
-from .params import CENTERS, LengthUnit
 from .problems import Problem, core_errors_as_problems
+from .progress import Progress
+from .server import PROTOCOL
 from .settings import Settings
-
-
-class Progress:
-    """A one-line progress bar on stderr (only on a terminal, or when asked)."""
-
-    def __init__(self, steps: list[str], enabled: bool) -> None:
-        self.steps, self.enabled, self.done = steps, enabled, 0
-        self._shown = ""  # the bar as last drawn (without its carriage return)
-
-    def begin(self, name: str) -> None:
-        """The bar before the first step is done."""
-        self._draw(name)
-
-    @contextmanager
-    def step(self, name: str) -> Iterator[None]:
-        self._draw(name)
-        yield
-        self.advance(name)
-
-    def advance(self, name: str) -> None:
-        """One more step done (steps may finish in any order, as a batch's scans do)."""
-        self.done += 1
-        self._draw(name if self.done < len(self.steps) else "done")
-        if self.enabled and self.done == len(self.steps):
-            sys.stderr.write("\n")
-            self._shown = ""
-
-    @contextmanager
-    def above(self) -> Iterator[None]:
-        """Lines written to stderr inside go above the bar: it is wiped, then drawn again."""
-        if self._shown:
-            sys.stderr.write("\r" + " " * len(self._shown) + "\r")
-        yield
-        if self._shown:
-            sys.stderr.write("\r" + self._shown)
-            sys.stderr.flush()
-
-    def _draw(self, name: str) -> None:
-        if not self.enabled:
-            return
-        width = 24
-        filled = width * self.done // len(self.steps)
-        bar = "#" * filled + "-" * (width - filled)
-        # Padded to the last one's length, so that a shorter name leaves nothing behind.
-        shown = f"[{bar}] {self.done}/{len(self.steps)} {name:<12}".ljust(len(self._shown))
-        sys.stderr.write("\r" + shown)
-        sys.stderr.flush()
-        self._shown = shown
+from .timings import Timings
 
 
 def _vector(text: str, option: str) -> list[float]:
@@ -135,22 +93,29 @@ def params_of(args: argparse.Namespace) -> dict:
     return params
 
 
-def _file_parts(args: argparse.Namespace, model) -> dict[str, tuple[str, bytes]]:
-    """The form's file parts besides the mesh, from their arguments (``--density-map``,
-    ``FOLLOW_UP``)."""
-    parts = {}
-    for name in model.FILE_PARTS:
-        path = getattr(args, name, None)
+def _files(args: argparse.Namespace, capability: MeshCapability) -> dict[str, Upload]:
+    """The route's files from their arguments: ``MESH``, then the other meshes' positional
+    arguments (``FOLLOW_UP``) and the images' options (``--density-map``)."""
+    files = {}
+    for part in capability.parts:
+        path = args.mesh if part is capability.mesh else getattr(args, part.name, None)
         if path is None:
             continue
-        positional = name in model.POSITIONAL_PARTS
-        option = name.upper() if positional else "--" + name.replace("_", "-")
+        option = _argument(part, capability)
         try:
-            parts[name] = (Path(path).name, Path(path).read_bytes())
+            files[part.name] = Upload(Path(path).name, Path(path).read_bytes())
         except OSError as error:
             message = f"{option}: cannot read {path!r}: {error.strerror}"
-            raise Problem(422, message, field=option) from None
-    return parts
+            raise Problem(422, message, field=None if part is capability.mesh else option) from None
+    return files
+
+
+def _argument(part: MeshPart | PngPart, capability: MeshCapability) -> str:
+    """The command line's name of a part: ``MESH``, a positional ``NAME`` for another mesh,
+    an option ``--name`` for an image."""
+    if part is capability.mesh:
+        return "MESH"
+    return part.name.upper() if isinstance(part, MeshPart) else "--" + part.name.replace("_", "-")
 
 
 def _json_params(text: str | None) -> dict:
@@ -199,54 +164,29 @@ def _cone(text: str) -> dict:
     return {"axis": _vector(axis, "--region-cone"), "half_angle_deg": half_angle}
 
 
-def _output(capability, out: str | None) -> Output:
+def _output(capability: MeshCapability, out: str | None) -> Output:
     """The form ``--out``'s extension asks for, when the command answers several (JSON
     otherwise, whatever the file is called)."""
     if not out or len(capability.outputs) == 1:
         return Output.JSON
-    return output_of_file(capability, out, "--out")
-
-
-def output_of_file(capability, name: str, field: str) -> Output:
-    """The form a file name's extension asks for, among the capability's forms.
-
-    Raises
-    ------
-    Problem
-        The extension is not one of theirs (422 naming ``field`` and the extensions).
-    """
-    by_suffix = {f".{output.value}": output for output in capability.outputs}
-    suffix = Path(name).suffix.lower()
-    if suffix not in by_suffix:
-        *most, last = by_suffix
-        choices = f"{', '.join(most)} or {last}" if most else last
-        raise Problem(422, f"{field}: {name!r}: use {choices}", field=field)
-    return by_suffix[suffix]
+    return capability.output_of_file(out, "--out")
 
 
 def run(args: argparse.Namespace) -> bytes:
     """The answer's bytes for a mesh command (the route's capability and operation)."""
-    from .encoding import Timings
-    from .inputs import load_mesh, mesh_params
-
     capability = MESH_COMMANDS[args.command]
     settings = Settings.from_env()
     work = "fitting" if args.command == "fit" or args.auto else "flattening"
     progress = Progress(["reading", work, "writing"], args.progress or sys.stderr.isatty())
     with core_errors_as_problems(MESH_FORM):
         with progress.step("reading"):
-            params = mesh_params(capability.params, orjson.dumps(params_of(args)))
-            params.with_parts(_file_parts(args, capability.params))
+            params = parse_params(capability.params, orjson.dumps(params_of(args)))
             # params.output, when given, names the form; else --out's extension does.
             output = getattr(params, "output", None) or _output(capability, args.out)
-            path = Path(args.mesh)
-            try:
-                data = path.read_bytes()
-            except OSError as error:
-                raise Problem(422, f"MESH: cannot read {args.mesh!r}: {error.strerror}") from None
-            mesh = load_mesh(data, path.name, params, settings)
+            ctx = Context(settings)
+            given = capability.input_of(params, _files(args, capability), ctx)
         with progress.step(work):
-            answer = capability.answer(mesh, params, settings, output, Timings())
+            answer = capability.answer(given, ctx, output, Timings())
     with progress.step("writing"):
         if args.out:
             Path(args.out).write_bytes(answer)
@@ -303,12 +243,13 @@ def parser() -> argparse.ArgumentParser:
         if "units" in fields:
             units = [unit.value for unit in LengthUnit]
             command.add_argument("--units", choices=units, help="the mesh's length unit")
-        for name, what in capability.params.FILE_PARTS.items():
-            if name in capability.params.POSITIONAL_PARTS:
-                command.add_argument(name, metavar=name.upper(), help=what.split(":")[0])
-                continue
-            option = "--" + name.replace("_", "-")
-            command.add_argument(option, dest=name, metavar="FILE", help=what.split(":")[0])
+        for part in capability.parts[1:]:
+            what = part.documented.split(":")[0]
+            argument = _argument(part, capability)
+            if isinstance(part, MeshPart):
+                command.add_argument(part.name, metavar=argument, help=what)
+            else:
+                command.add_argument(argument, dest=part.name, metavar="FILE", help=what)
         if "density_per_cm2" in fields:
             command.add_argument(
                 "--density",
@@ -412,7 +353,7 @@ def serve(args: argparse.Namespace) -> None:
             workers=workers,
             log_config=log_config(),
             access_log=False,  # the service logs each request itself, with its id
-            http="service.protocol:Protocol",  # a time limit on headers (service.protocol)
+            http=PROTOCOL,  # a time limit on headers, a lingering close (service.server)
             timeout_keep_alive=settings.keep_alive_timeout,
             timeout_graceful_shutdown=math.ceil(settings.request_timeout) + 5,
             timeout_worker_healthcheck=WORKER_SILENCE_S,

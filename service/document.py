@@ -9,10 +9,10 @@ from fastapi.openapi.utils import get_openapi
 from pydantic import BaseModel
 from pydantic.json_schema import models_json_schema
 
-from .auth import PROTECTED_PREFIX
 from .capabilities import JSON_CAPABILITIES, MESH_CAPABILITIES, MeshCapability
-from .meshio import READERS, reading_rules
+from .meshio import reading_rules
 from .problems import PROBLEMS, ProblemDetails
+from .server.auth import PROTECTED_PREFIX
 
 DESCRIPTION = """
 meshflat flattens a region of a 3D mesh into distorted-pole spherical coordinates: the poles
@@ -36,17 +36,11 @@ def json_body(model: type[BaseModel]) -> dict:
     return {"requestBody": {"required": True, "content": {"application/json": {"schema": schema}}}}
 
 
-def multipart_body(model: type[BaseModel]) -> dict:
-    """The OpenAPI request body of a mesh route whose ``params`` field is ``model``."""
+def multipart_body(capability: MeshCapability) -> dict:
+    """The OpenAPI request body of a mesh route: its ``params`` field and its parts."""
+    model = capability.params
     name = model.__name__
     example = model.model_config["json_schema_extra"]["examples"][0]
-    *most, last = (reader.title for reader in READERS.values())
-    mesh = {
-        "type": "string",
-        "format": "binary",
-        "description": f"The mesh file: {', '.join(most)} or {last}; the format comes from the "
-        "file name's extension or params.format.",
-    }
     # An object part sent as JSON (the encoding below): clients and generators that read the
     # document build it from the schema itself.
     params = {
@@ -55,14 +49,18 @@ def multipart_body(model: type[BaseModel]) -> dict:
         "example": example,
     }
     parts = {
-        name: {"type": "string", "format": "binary", "description": what}
-        for name, what in model.FILE_PARTS.items()
+        part.name: {
+            "type": "string",
+            "format": "binary",
+            "description": part.documented,
+        }
+        for part in capability.parts
     }
     form = {
         "schema": {
             "type": "object",
-            "required": [model.MESH_PART],
-            "properties": {model.MESH_PART: mesh, "params": params, **parts},
+            "required": [capability.mesh.name],
+            "properties": {"params": params, **parts},
             "additionalProperties": False,  # a part the route does not read is refused
         },
         "encoding": {"params": {"contentType": "application/json"}},
@@ -130,7 +128,7 @@ def build(app: FastAPI) -> dict:
 
 def _declare_keys(document: dict) -> dict:
     """The two ways to send an API key, required by every ``/v1`` operation (they are
-    checked only when the service has keys: service.auth)."""
+    checked only when the service has keys: service.server.auth)."""
     document["components"]["securitySchemes"] = {
         "bearer": {"type": "http", "scheme": "bearer", "description": "An API key."},
         "apiKey": {"type": "apiKey", "in": "header", "name": "X-API-Key"},

@@ -1,23 +1,24 @@
-"""JSON answers encoded straight from numpy arrays (orjson: no per-float Python work), and
-the Server-Timing header."""
+"""Answers: response models built from a use-case's arrays without validation
+(:class:`Answer`), and encoded straight from them to JSON (orjson: no per-float Python work).
+
+Each answer is built through its model from a use-case's result (``Model.of(result)``, the
+presenters of :mod:`service.capabilities`) and encoded by :func:`encode`. Building skips
+pydantic's validation, so that a million-vertex answer keeps its numpy arrays (encoded in C,
+with no Python loop over floats); :meth:`Answer.build` still refuses a field the model does
+not have or a missing one, and a test validates every route's answer against the document.
+"""
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
-from contextlib import contextmanager
-
 import numpy as np
 import orjson
-from pydantic import BaseModel
-
-from .jobs import current_deadline
+from pydantic import BaseModel, PrivateAttr
 
 JSON = "application/json"
 
 
 def encode(answer: BaseModel) -> bytes:
-    """An answer (a response model of :mod:`service.schemas`) as JSON bytes: the fields it
+    """An answer (an :class:`Answer`) as JSON bytes: the fields it
     was built with, in the model's order; numpy arrays become lists.
 
     Raises
@@ -58,32 +59,45 @@ def _check_finite(value) -> None:
         raise ValueError("an answer would carry a NaN or Inf")
 
 
-class Timings:
-    """Named durations for a ``Server-Timing`` header (RFC-style ``name;dur=ms``).
+class Answer(BaseModel):
+    """A response model whose instances are built from arrays without validation."""
 
-    Each stage starts only before the job's deadline (:mod:`service.jobs`): a job past its
-    time limit stops at its next stage instead of running on unseen.
-    """
+    #: The fields given to :meth:`build`, in that order: the order they are encoded in.
+    _order: tuple[str, ...] = PrivateAttr(default=())
 
-    def __init__(self) -> None:
-        self.durations: dict[str, float] = {}
+    @classmethod
+    def build(cls, **values):
+        """An instance holding ``values`` as they are (numpy arrays included); only the
+        fields given are encoded.
 
-    @contextmanager
-    def measure(self, name: str):
-        deadline = current_deadline.get()
-        if deadline is not None:
-            deadline.check()
-        start = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.durations[name] = self.durations.get(name, 0.0) + time.perf_counter() - start
+        Raises
+        ------
+        TypeError
+            A name that is not a field, or a required field missing: a bug, never the
+            client's fault.
+        """
+        cls._check_names(values.keys())
+        answer = cls.model_construct(**values)
+        answer._order = tuple(values)
+        return answer
 
-    def timed(self, name: str, call: Callable):
-        with self.measure(name):
-            return call()
+    @classmethod
+    def rows(cls, present, **columns) -> list:
+        """Many answers of this model at once, from equally long columns of field values:
+        one dict a row (None where ``present`` is false). For long lists (a million hits),
+        where an instance a row would cost ten times more; the names are checked once.
+        """
+        cls._check_names(columns.keys())
+        names = list(columns)
+        return [
+            dict(zip(names, values, strict=True)) if keep else None
+            for keep, *values in zip(present, *columns.values(), strict=True)
+        ]
 
-    def header(self) -> str:
-        return ", ".join(
-            f"{name};dur={seconds * 1e3:.1f}" for name, seconds in self.durations.items()
-        )
+    @classmethod
+    def _check_names(cls, names) -> None:
+        fields = cls.model_fields
+        unknown = names - fields.keys()
+        missing = {name for name, f in fields.items() if f.is_required()} - names
+        if unknown or missing:
+            raise TypeError(f"{cls.__name__}: unknown {sorted(unknown)}, missing {sorted(missing)}")

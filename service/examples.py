@@ -13,21 +13,19 @@ import orjson
 import trimesh
 
 from .capabilities import JSON_CAPABILITIES, MESH_CAPABILITIES, MESH_FORM
-from .encoding import JSON, Timings
-from .inputs import load_mesh, mesh_params, parse_json
+from .capabilities.context import Context
+from .capabilities.inputs import MeshPart, Upload, parse_params
+from .capabilities.region.params import MESH_PARAMS_EXAMPLE
+from .encoding import JSON
+from .errors import JSON_BODY
+from .forms import parse_json
 from .meshio import read_mesh
-from .operations import sample_infos
 from .outputs import Output
-from .params import MESH_PARAMS_EXAMPLE
-from .problems import (
-    JSON_BODY,
-    PROBLEM_JSON,
-    Problem,
-    core_errors_as_problems,
-    problem_response,
-)
-from .schemas import Health
+from .problems import PROBLEM_JSON, Problem, core_errors_as_problems, problem_response
+from .samples import sample_infos
+from .selfcheck import Health
 from .settings import Settings
+from .timings import Timings
 
 BOUNDARY = "example-boundary"
 MULTIPART = f"multipart/form-data; boundary={BOUNDARY}"
@@ -86,17 +84,19 @@ def request_example(model) -> dict:
 
 def mesh_answer(capability, params: dict, mesh: bytes, settings: Settings) -> bytes:
     """A mesh route's JSON answer to ``params`` on the OBJ ``mesh``."""
-    parsed = mesh_params(capability.params, json.dumps(params).encode())
+    parsed = parse_params(capability.params, json.dumps(params).encode())
     # A route of two meshes (/v1/register) gets the same one twice.
-    parsed.with_parts({name: ("icosahedron.obj", mesh) for name in parsed.POSITIONAL_PARTS})
-    loaded = load_mesh(mesh, "icosahedron.obj", parsed, settings)
-    return capability.answer(loaded, parsed, settings, Output.JSON, Timings())
+    upload = Upload("icosahedron.obj", mesh)
+    files = {part.name: upload for part in capability.parts if isinstance(part, MeshPart)}
+    ctx = Context(settings)
+    given = capability.input_of(parsed, files, ctx)
+    return capability.answer(given, ctx, Output.JSON, Timings())
 
 
 def json_answer(capability, body: dict, settings: Settings) -> bytes:
     """A JSON route's answer to ``body``."""
     request = parse_json(capability.request, json.dumps(body).encode(), JSON)
-    return capability.answer(request, settings, Timings())
+    return capability.answer(request, Context(settings), Timings())
 
 
 def examples() -> dict[tuple[str, str], dict | list]:

@@ -1,18 +1,18 @@
 """PNG parts of a form read into arrays: a density map, a texture mask, an image painted over
 the map. One reader, so every part is checked alike: a PNG, its size from the header before
-a pixel is decoded, its memory charged to the job, a 422 naming the part otherwise."""
+a pixel is decoded, its memory charged to the job, a refusal naming the part otherwise."""
 
 from __future__ import annotations
 
 import io
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import pyspng
 from PIL import Image
 
-from .jobs import charge
-from .problems import Problem
+from .errors import InvalidInput
 
 #: Bytes a pixel costs while read and used: the decoded pixels, the float64 planes (values,
 #: alpha, their product) and a plane's running sums (measured: 32 to 41 for RGB and RGBA).
@@ -40,21 +40,26 @@ class Png:
     alpha: np.ndarray | None
 
 
-def refusal(part: str, words: str) -> Problem:
-    return Problem(422, f"{part}: {words}", "invalid-request", part)
+def refusal(part: str, words: str) -> InvalidInput:
+    return InvalidInput(part, words)
 
 
 def read_png(
-    data: bytes, part: str, size: tuple[int, int] | None = None, grey_only: bool = False
+    data: bytes,
+    part: str,
+    charge: Callable[[int], None],
+    size: tuple[int, int] | None = None,
+    grey_only: bool = False,
 ) -> Png:
     """The PNG part ``part``: 8- or 16-bit grey, grey with alpha, RGB or RGBA (a palette
-    image as its RGB(A)); of ``size`` (width, height) when given.
+    image as its RGB(A)); of ``size`` (width, height) when given. What decoding it takes is
+    given to ``charge`` (bytes) before a pixel is decoded.
 
     Raises
     ------
-    Problem
-        422 naming the part: not a PNG, another size, a mode it cannot be (``grey_only``:
-        only grey, with alpha or not, 8 bits).
+    InvalidInput
+        Naming the part: not a PNG, another size, a mode it cannot be (``grey_only``: only
+        grey, with alpha or not, 8 bits).
     """
     try:
         image = Image.open(io.BytesIO(data))

@@ -11,7 +11,6 @@ import logging
 import re
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from http import HTTPStatus
 
 import orjson
@@ -24,6 +23,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from transforms import EmptyRegionError, TransformInputError
 
+from .errors import JSON_BODY, ErrorPlaces, InvalidInput, OverLimit, UnreadablePart
 from .meshio import MeshFormatError, MeshTooLargeError
 from .observability import REJECTIONS
 
@@ -125,54 +125,44 @@ def problem_response(problem: Problem) -> Response:
     )
 
 
-@dataclass(frozen=True)
-class ErrorPlaces:
-    """Where the fields a core error names lie in a request.
-
-    Attributes
-    ----------
-    prefix : where the parameters are (``params.`` for a multipart form's JSON part)
-    parameters : the names of the parameters (a dotted field counts by its first part);
-        None: every field is one
-    data : the part every other field is about (the uploaded ``mesh``)
-    """
-
-    prefix: str = ""
-    parameters: frozenset[str] | None = None
-    data: str = ""
-
-    def of(self, name: str) -> str:
-        name = _NESTED.get(name, name)
-        if self.parameters is None or name.partition(".")[0] in self.parameters:
-            return f"{self.prefix}{name}"
-        return self.data
-
-
-#: The core's arguments that are parts of a request field: the pole and up of a rotation.
-_NESTED = {"pole": "rotation.pole", "up": "rotation.up"}
-
-
-#: A JSON body: every field is the body's own.
-JSON_BODY = ErrorPlaces()
-
 #: The kind of problem by core error type (the first that matches); others: invalid-input.
 _KINDS = ((EmptyRegionError, "empty-region"),)
 
 
+#: What :func:`problem_of` translates: every error a use-case, a reader or a params model
+#: raises for bad input.
+INPUT_ERRORS = (
+    TransformInputError,
+    InvalidInput,
+    OverLimit,
+    UnreadablePart,
+    MeshFormatError,
+    ValidationError,
+)
+
+
 def problem_of(error: Exception, places: ErrorPlaces = JSON_BODY) -> Problem:
-    """The problem that a core input error, a mesh reader's error or a parameter model's
-    validation error is, its field placed by ``places``; the one translation of them.
+    """The problem that a core input error, a use-case's refusal (:mod:`service.errors`), a
+    mesh reader's error or a parameter model's validation error is, its field placed by
+    ``places``; the one translation of them.
 
     Raises
     ------
     TypeError
         ``error`` is none of those (a bug: let it become a 500).
     """
+    if isinstance(error, InvalidInput):
+        where = places.named(error.field)
+        label = where if error.name is None else f"{where} ({error.name!r})"
+        return Problem(422, f"{label}: {error.message}", "invalid-request", where, error.indices)
+    if isinstance(error, OverLimit):
+        where = places.named(error.field)
+        detail = f"{where}: {error.count:,} items; the limit is {error.limit:,} ({error.setting})"
+        return Problem(413, detail, "too-many-points", where)
+    if isinstance(error, UnreadablePart):
+        return _unreadable(error.error, error.part)
     if isinstance(error, MeshFormatError):
-        part = places.data or "mesh"
-        if isinstance(error, MeshTooLargeError):
-            return Problem(413, f"{part}: {error}", "mesh-too-large", part)
-        return Problem(422, f"{part}: {error}", "unreadable-mesh", part)
+        return _unreadable(error, places.data or "mesh")
     if isinstance(error, ValidationError):
         return validation_problem(error.errors(), places.prefix)
     if isinstance(error, TransformInputError):
@@ -182,12 +172,18 @@ def problem_of(error: Exception, places: ErrorPlaces = JSON_BODY) -> Problem:
     raise TypeError(f"no problem for {type(error).__name__}")
 
 
+def _unreadable(error: MeshFormatError, part: str) -> Problem:
+    if isinstance(error, MeshTooLargeError):
+        return Problem(413, f"{part}: {error}", "mesh-too-large", part)
+    return Problem(422, f"{part}: {error}", "unreadable-mesh", part)
+
+
 @contextmanager
 def core_errors_as_problems(places: ErrorPlaces) -> Iterator[None]:
-    """Raise what :func:`problem_of` makes of any core, reader or validation error."""
+    """Raise what :func:`problem_of` makes of any error of :data:`INPUT_ERRORS`."""
     try:
         yield
-    except (TransformInputError, MeshFormatError, ValidationError) as error:
+    except INPUT_ERRORS as error:
         raise problem_of(error, places) from None
 
 

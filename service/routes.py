@@ -1,6 +1,8 @@
 """The HTTP edge: health, the samples, and the routes of :mod:`service.capabilities`
 registered from their rows. A handler admits the job, reads the body, and runs the
-capability off the event loop (:func:`run_job`); the use-cases are :mod:`service.operations`.
+capability off the event loop (:func:`service.server.admission.run_job`): the body becomes
+the use-case's input (:mod:`service.forms`), the use-case runs with the job's context, and
+its result is answered in the form asked for.
 """
 
 from __future__ import annotations
@@ -14,7 +16,6 @@ from starlette.concurrency import run_in_threadpool
 from starlette.responses import Response
 
 from . import document
-from .admission import run_job
 from .capabilities import (
     JSON_CAPABILITIES,
     MESH_CAPABILITIES,
@@ -23,16 +24,18 @@ from .capabilities import (
     JsonCapability,
     MeshCapability,
 )
-from .encoding import JSON, Timings
-from .inputs import mesh_form, parse_json
+from .capabilities.context import Context
+from .encoding import JSON
+from .errors import JSON_BODY
+from .forms import choose_output, mesh_form, parse_json
 from .meshio import READERS, format_of
 from .observability import metrics_response
-from .operations import sample_infos
-from .outputs import Output, choose_output
-from .problems import JSON_BODY, PROBLEMS, Problem, core_errors_as_problems
-from .samples import SAMPLES
-from .schemas import Health, SampleInfo
-from .settings import Settings
+from .outputs import Output
+from .problems import PROBLEMS, Problem, core_errors_as_problems
+from .samples import SAMPLES, SampleInfo, sample_infos
+from .selfcheck import Health
+from .server.admission import Job, run_job
+from .timings import Timings
 
 router = APIRouter()
 
@@ -128,21 +131,16 @@ def sample_file(
     )
 
 
-# -- jobs --------------------------------------------------------------------------------
-
-
 # -- the capabilities ----------------------------------------------------------------------
 
 
-def answer_json(
-    capability: JsonCapability, body: bytes, content_type: str, settings: Settings
-) -> Response:
+def answer_json(capability: JsonCapability, body: bytes, content_type: str, job: Job) -> Response:
     """A JSON route's answer to its body (CPU-bound: run it off the event loop)."""
-    timings = Timings()
+    timings = Timings(job.deadline)
     with core_errors_as_problems(JSON_BODY):
         with timings.measure("parse"):
             request = parse_json(capability.request, body, content_type)
-        data = capability.answer(request, settings, timings)
+        data = capability.answer(request, Context(job.settings, job.ticket), timings)
     return Response(data, media_type=JSON, headers={"Server-Timing": timings.header()})
 
 
@@ -150,20 +148,21 @@ def answer_mesh(
     capability: MeshCapability,
     body: bytes,
     content_type: str,
-    settings: Settings,
+    job: Job,
     accept: str | None = None,
 ) -> Response:
     """A mesh route's answer to a multipart body, in the form ``Accept`` or
     ``params.output`` asks for (CPU-bound: run it off the event loop)."""
-    timings = Timings()
-    with core_errors_as_problems(replace(MESH_FORM, data=capability.params.MESH_PART)):
+    timings = Timings(job.deadline)
+    ctx = Context(job.settings, job.ticket)
+    with core_errors_as_problems(replace(MESH_FORM, data=capability.mesh.name)):
         with timings.measure("parse"):
-            params, mesh = mesh_form(body, content_type, settings, capability.params)
+            given = mesh_form(body, content_type, capability, ctx)
             output = Output.JSON
             if len(capability.outputs) > 1:
-                requested = getattr(params, "output", None)
+                requested = getattr(given.params, "output", None)
                 output = choose_output(accept, requested, capability.outputs)
-        data = capability.answer(mesh, params, settings, output, timings)
+        data = capability.answer(given, ctx, output, timings)
     headers = {"Server-Timing": timings.header()}
     if len(capability.outputs) > 1:
         headers["Vary"] = "Accept"
@@ -207,7 +206,7 @@ def _mesh_route(capability: MeshCapability) -> None:
         tags=["meshes"],
         description=document.mesh_description(capability),
         responses=PROBLEMS | document.other_forms(capability),
-        openapi_extra=document.multipart_body(capability.params),
+        openapi_extra=document.multipart_body(capability),
     )
 
 

@@ -1,9 +1,17 @@
-"""The sample meshes bundled with the package (real scans; credits in ``samples/SOURCES.md``)."""
+"""The sample meshes bundled with the package (real scans; credits in ``samples/SOURCES.md``)
+and what ``/v1/samples`` says of them."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
+
+from pydantic import Field
+
+from .encoding import Answer
+from .meshio import format_of, read_mesh
+from .settings import Settings
 
 FOLDER = Path(__file__).with_name("samples")
 
@@ -68,3 +76,38 @@ SAMPLES: dict[str, Sample] = {
         ),
     )
 }
+
+
+class SampleInfo(Answer):
+    name: str
+    format: str
+    vertices: int
+    faces: int
+    bytes: int
+    description: str
+    credit: str
+    licence: str
+    url: str = Field(description="Where to download it.")
+
+
+@cache
+def _sample_info(name: str) -> SampleInfo:
+    sample = SAMPLES[name]
+    data = sample.path.read_bytes()
+    # A bundled file is trusted: read with the default limits, whatever the service's are.
+    mesh = read_mesh(data, format_of(name, None), Settings().limits)
+    return SampleInfo(
+        name=name,
+        format=mesh.format,
+        vertices=len(mesh.vertices),
+        faces=len(mesh.faces),
+        bytes=len(data),
+        description=sample.description,
+        credit=sample.credit,
+        licence=sample.licence,
+        url=f"/v1/samples/{name}",
+    )
+
+
+def sample_infos() -> list[SampleInfo]:
+    return [_sample_info(name) for name in SAMPLES]

@@ -1,5 +1,6 @@
 """A start-up check that the transform core works on this machine: flatten the scalp of a
-bundled scan and summarise the result."""
+bundled scan and summarise the result (``/readyz`` answers once it has passed); and the
+health answer."""
 
 from __future__ import annotations
 
@@ -8,9 +9,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import operations
+from .capabilities.context import Context
+from .capabilities.region.params import MeshParams
+from .capabilities.region.resolve import MeshInput, flatten
+from .encoding import Answer
 from .meshio import format_of, read_mesh
-from .params import MeshParams
 from .samples import SAMPLES
 from .settings import Settings
 
@@ -58,7 +61,7 @@ def run_self_check() -> SelfCheck:
     mesh = read_mesh(data, format_of(SAMPLE, None), settings.limits)
     params = MeshParams.model_validate(SCALP_PARAMS)
     start = time.perf_counter()
-    region = operations.flatten(mesh, params, settings)
+    region = flatten(MeshInput(mesh, params), Context(settings))
     flat = region.flat
     v = flat.validation
     return SelfCheck(
@@ -70,3 +73,8 @@ def run_self_check() -> SelfCheck:
         seconds=time.perf_counter() - start,
         flagged=flat.flagged_faces,
     )
+
+
+# The answer of /healthz and /readyz (no docstring: it would be the schema's description).
+class Health(Answer):
+    status: str = "ok"

@@ -32,7 +32,7 @@ class Settings:
     max_jobs : MESHFLAT_MAX_JOBS, jobs computed at once per process
     max_waiting : MESHFLAT_MAX_WAITING, jobs queued for a slot beyond those (their bodies in);
         a request that finds ``max_jobs + max_waiting`` jobs is refused as soon as its headers
-        are in, with a 503 (service.jobs)
+        are in, with a 503 (service.server.jobs)
     max_uploads : MESHFLAT_MAX_UPLOADS, request bodies arriving at once per process (they hold
         no compute slot)
     memory_budget : MESHFLAT_MEMORY_BUDGET, bytes per process for its jobs' bodies, readers
@@ -40,7 +40,11 @@ class Settings:
     min_upload_rate, upload_grace : MESHFLAT_MIN_UPLOAD_RATE bytes/s, MESHFLAT_UPLOAD_GRACE
         seconds: after the grace, a body must have arrived at that mean rate, or a 408
     header_timeout : MESHFLAT_HEADER_TIMEOUT, seconds for a request's headers to arrive on a
-        connection (a new one, or a kept-alive one once it has started a request)
+        connection (a new one, or a kept-alive one once it has started a request); 0: no
+        limit (behind an ingress that keeps one)
+    lingering_close : MESHFLAT_LINGERING_CLOSE, the longest a connection answered before its
+        body was read (a refusal, a 401) is read and dropped before it is closed, seconds; 0:
+        closed at once (behind an ingress that does this itself)
     keep_alive_timeout : MESHFLAT_KEEP_ALIVE_TIMEOUT, seconds an idle connection stays open
     request_timeout : MESHFLAT_REQUEST_TIMEOUT, seconds a job may take from its first byte to
         its answer (a 408 while the body is still arriving, a 504 after)
@@ -65,6 +69,7 @@ class Settings:
     min_upload_rate: int = 64 * 1024
     upload_grace: float = 2.0
     header_timeout: float = 10.0
+    lingering_close: float = 2.0
     keep_alive_timeout: float = 5.0
     request_timeout: float = 60.0
     api_keys: tuple[str, ...] = field(default=(), repr=False)
@@ -176,5 +181,13 @@ def _parse(name: str, text: str, default: object) -> object:
 
 
 #: Settings for which 0 makes sense: no queue (a job beyond MESHFLAT_MAX_JOBS is refused);
-#: the budget from the container.
-_MAY_BE_ZERO = frozenset({"MESHFLAT_MAX_WAITING", "MESHFLAT_MEMORY_BUDGET"})
+#: the budget from the container; no header timer and no lingering close (an ingress in front
+#: does both).
+_MAY_BE_ZERO = frozenset(
+    {
+        "MESHFLAT_MAX_WAITING",
+        "MESHFLAT_MEMORY_BUDGET",
+        "MESHFLAT_HEADER_TIMEOUT",
+        "MESHFLAT_LINGERING_CLOSE",
+    }
+)

@@ -683,8 +683,8 @@ async def test_wrong_content_type(client):
 
 
 async def test_openapi_examples_are_what_the_service_answers(client):
+    from service.capabilities.region.params import MESH_PARAMS_EXAMPLE
     from service.examples import icosahedron_obj
-    from service.params import MESH_PARAMS_EXAMPLE
 
     document = (await client.get("/openapi.json")).json()
 

@@ -12,6 +12,7 @@ from jsonschema import Draft202012Validator
 
 from service.app import create_app
 from service.capabilities import JSON_CAPABILITIES, MESH_CAPABILITIES
+from service.capabilities.inputs import MeshPart
 from service.document import check_references, referenced_models
 from service.examples import icosahedron_obj, request_example
 from service.settings import Settings
@@ -50,8 +51,8 @@ async def test_every_json_answer_conforms_to_its_documented_schema(client, docum
     mesh = icosahedron_obj()
     for capability in MESH_CAPABILITIES:
         params = json.dumps(request_example(capability.params))
-        model = capability.params
-        files = {name: ("ico.obj", mesh) for name in (model.MESH_PART, *model.POSITIONAL_PARTS)}
+        meshes = [part.name for part in capability.parts if isinstance(part, MeshPart)]
+        files = {name: ("ico.obj", mesh) for name in meshes}
         answer = await client.post(capability.path, files=files, data={"params": params})
         assert answer.status_code == 200, answer.text
         conforms(document, capability.path, "200", "application/json", answer.json())

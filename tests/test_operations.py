@@ -20,15 +20,16 @@ import pytest
 from prometheus_client.parser import text_string_to_metric_families
 from starlette.responses import Response
 
-from service import admission, routes
+from service import routes
 from service.app import create_app
-from service.auth import KeyCheck
-from service.encoding import Timings
-from service.jobs import Deadline, JobGate, TimeLimit, current_deadline
 from service.observability import JsonFormatter, capture_warnings, log_config
 from service.problems import Problem
 from service.samples import SAMPLES
+from service.server import admission
+from service.server.auth import KeyCheck
+from service.server.jobs import Deadline, JobGate, TimeLimit
 from service.settings import Settings
+from service.timings import Timings
 
 from .conftest import load_sample
 from .test_api import flatten, problem
@@ -252,7 +253,7 @@ async def test_jobs_beyond_the_bound_are_refused_before_their_body_is_read(monke
     app = create_app(Settings(max_jobs=1, max_waiting=1))
     computing, finish = threading.Event(), threading.Event()
 
-    def held_points(capability, body, content_type, settings):
+    def held_points(capability, body, content_type, job):
         computing.set()
         finish.wait(5)
         return Response(b"{}", media_type="application/json")
@@ -341,8 +342,8 @@ async def test_a_job_past_its_time_limit_is_a_504_and_stops_at_its_next_stage(mo
     stages: list[str] = []
     finished = threading.Event()
 
-    def slow_points(capability, body, content_type, settings):
-        timings = Timings()
+    def slow_points(capability, body, content_type, job):
+        timings = Timings(job.deadline)
         try:
             with timings.measure("parse"):
                 stages.append("parse")
@@ -388,13 +389,9 @@ async def test_a_job_cancelled_before_its_thread_starts_leaves_no_admission_behi
 
 
 def test_timings_refuse_a_stage_after_the_deadline():
-    token = current_deadline.set(Deadline.after(-1.0))
-    try:
-        with pytest.raises(TimeLimit) as raised, Timings().measure("compute"):
-            pass
-        assert raised.value.status == 504
-    finally:
-        current_deadline.reset(token)
+    with pytest.raises(TimeLimit) as raised, Timings(Deadline.after(-1.0)).measure("compute"):
+        pass
+    assert raised.value.status == 504
     with Timings().measure("compute"):  # no deadline outside a job (the CLI)
         pass
 
@@ -559,23 +556,47 @@ async def test_metrics_count_requests_sizes_and_refusals():
     assert after["meshflat_request_duration_seconds"].type == "histogram"
 
 
+class HandClock:
+    """A monotonic clock that moves only when the test moves it."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
 def test_an_idle_worker_releases_memory_once_no_job_came_for_a_while():
     calls: list[int] = []
-    gate = JobGate(max_jobs=1, max_waiting=1, on_idle=lambda: calls.append(1), idle_seconds=0.5)
-
-    def wait_for(count: int) -> None:
-        deadline = time.monotonic() + 10
-        while len(calls) < count and time.monotonic() < deadline:
-            time.sleep(0.01)
-
+    clock = HandClock()
+    gate = JobGate(
+        max_jobs=1,
+        max_waiting=1,
+        on_idle=lambda: calls.append(1),
+        idle_seconds=0.5,
+        clock=clock,
+        watch_idle=False,
+    )
     gate.admit().release()
-    gate.admit().release()  # at once, within the quiet time: only the second timer acts
-    wait_for(1)
-    time.sleep(0.6)  # the first timer has fired by now too, and did nothing
+    clock.now += 0.3
+    gate.admit().release()  # within the quiet time: the quiet spell starts again
+    clock.now += 0.3
+    assert not gate.idle_check()  # 0.6 s since the first, 0.3 s since the last departure
+    clock.now += 0.3
+    assert gate.idle_check() and not gate.idle_check()  # once a quiet spell
     assert calls == [1]
-    held = gate.admit()  # no timer runs while a job is in flight
-    time.sleep(0.6)
+    held = gate.admit()  # nothing is due while a job is in flight
+    clock.now += 60
+    assert not gate.idle_check()
     assert calls == [1]
     held.release()
-    wait_for(2)
+    clock.now += 0.6
+    gate.idle_check()
     assert calls == [1, 1]
+
+
+def test_the_gates_watcher_calls_on_idle_by_itself():
+    called = threading.Event()
+    gate = JobGate(max_jobs=1, max_waiting=1, on_idle=called.set, idle_seconds=0.01)
+    gate.admit().release()
+    assert called.wait(10)

@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from service.outputs import Output, choose_output, render
+from service.capabilities.region import pictures
+from service.forms import choose_output
+from service.outputs import Output
 from service.problems import Problem
 from service.samples import SAMPLES
 
@@ -207,7 +209,7 @@ async def test_a_bad_output_or_image_size_names_the_field(client):
 
 
 async def test_vertex_ids_beyond_float32_refuse_a_glb(client, monkeypatch):
-    monkeypatch.setattr(render, "FLOAT32_EXACT", 100)
+    monkeypatch.setattr(pictures, "FLOAT32_EXACT", 100)
     params = {**SCALP["fsaverage-head.ply"], "output": "glb"}
     body = problem(await flatten(client, "fsaverage-head.ply", params), 422, "params.output")
     assert "float32" in body["detail"] and body["indices"]

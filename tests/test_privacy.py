@@ -9,7 +9,7 @@ import tempfile
 
 import pytest
 
-from service import operations
+from service.capabilities.region import resolve
 
 from .test_api import flatten, problem
 
@@ -85,7 +85,7 @@ async def test_an_unexpected_failure_is_a_bare_500(client, caplog, capfd, monkey
     def fail(*args, **kwargs):
         raise RuntimeError(f"the mesh of {SECRET} broke something")
 
-    monkeypatch.setattr(operations, "select_region", fail)
+    monkeypatch.setattr(resolve, "select_region", fail)
     with caplog.at_level("DEBUG"):
         response = await flatten(client, "x", {}, data=OBJ, filename="a.obj")
     body = problem(response, 500)

@@ -203,7 +203,7 @@ def test_health_command_is_the_containers_health_check(two_workers):
     assert down.returncode == 1 and "/healthz" in down.stderr
 
 
-# -- connections: headers, idle time, framing (service.protocol) ---------------------------
+# -- connections: headers, idle time, framing (service.server.protocol) --------------------
 
 
 @pytest.fixture(scope="module")
@@ -319,7 +319,7 @@ def test_a_client_that_sends_its_whole_body_before_reading_gets_the_early_answer
 
 def test_a_lingering_connection_is_closed_when_its_client_keeps_sending(strict_server):
     """Lingering is bounded: a client that keeps sending after its early answer is cut off
-    after LINGER_SECONDS (2 s)."""
+    after MESHFLAT_LINGERING_CLOSE (2 s by default)."""
     with socket.create_connection(("127.0.0.1", strict_server.port)) as connection:
         connection.sendall(
             b"POST /nowhere HTTP/1.1\r\nHost: x\r\nContent-Length: 10000000000\r\n\r\n"
@@ -333,3 +333,30 @@ def test_a_lingering_connection_is_closed_when_its_client_keeps_sending(strict_s
                 break
             time.sleep(0.05)
     assert cut is not None and 1.5 < cut < 4
+
+
+def test_behind_an_ingress_the_header_timer_and_the_lingering_close_can_be_switched_off():
+    """MESHFLAT_HEADER_TIMEOUT=0 and MESHFLAT_LINGERING_CLOSE=0, for an ingress that does
+    both: a silent connection is left open, and an early answer closes its connection at
+    once (the client that keeps sending is cut off well before the lingering's 2 s)."""
+    with running(MESHFLAT_HEADER_TIMEOUT="0", MESHFLAT_LINGERING_CLOSE="0") as server:
+        with socket.create_connection(("127.0.0.1", server.port)) as silent:
+            silent.settimeout(1.5)
+            with pytest.raises(TimeoutError):
+                silent.recv(1)  # no header timer: nothing comes, the connection stays
+            silent.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+            received, _ = read_all(silent)
+        assert received.startswith(b"HTTP/1.1 200")
+        with socket.create_connection(("127.0.0.1", server.port)) as connection:
+            connection.sendall(
+                b"POST /nowhere HTTP/1.1\r\nHost: x\r\nContent-Length: 10000000000\r\n\r\n"
+            )
+            started, cut = time.monotonic(), None
+            while time.monotonic() - started < 10:
+                try:
+                    connection.sendall(bytes(4096))
+                except OSError:
+                    cut = time.monotonic() - started
+                    break
+                time.sleep(0.05)
+    assert cut is not None and cut < 1.2

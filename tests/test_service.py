@@ -68,7 +68,7 @@ def test_self_check_result():
 
 
 def test_allocator_keeps_large_blocks_on_glibc():
-    from service.allocator import keep_large_blocks
+    from service.server.allocator import keep_large_blocks
 
     assert keep_large_blocks()  # the machines meshflat runs on use glibc
 

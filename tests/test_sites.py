@@ -18,10 +18,9 @@ from scipy.spatial.transform import Rotation
 
 from service.app import create_app
 from service.cli import main
-from service.outputs.picture import Framing
 from service.samples import SAMPLES
 from service.settings import Settings
-from transforms import Layout
+from transforms import Framing, Layout
 from transforms.sites import (
     JAMMING,
     MAX_TRIES_PER_SITE,

@@ -37,7 +37,7 @@ int64 triangle cannot be held in less, so there a read needs the triangles, at m
 times ``MESHFLAT_MAX_FACES`` (120 MB), plus the constant. Kept properties add 8 bytes a row
 each (a colour 16, texture coordinates 16): a file of byte-sized columns (``uchar x y z`` and
 colours and properties) can take some 10 bytes a byte, which the job's budget, charged by
-the vertex and the face (:func:`service.jobs.job_bytes`), holds.
+the vertex and the face (:func:`service.capabilities.context.job_bytes`), holds.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from transforms import FlatRegion, Layout
+from transforms import FlatRegion, Framing, Layout
 from transforms.pixels import face_ids
 from transforms.raster import paint_points, paint_segments, paint_triangles
 
@@ -99,50 +99,6 @@ def grid_colour(coloured: bool) -> str:
 SITES_COLOUR = "#222222"
 #: Sites an SVG draws at the most (each a little square); a PNG draws them all.
 SVG_SITES = 50_000
-
-
-@dataclass(frozen=True)
-class Framing:
-    """Where the map's layout points fall on a ``width`` x ``height`` canvas: its box
-    padded by 4 % (``view``: x and s ranges, ``s = s_sign * y`` growing with theta,
-    downwards), scaled alike in both directions into the box inside the margins and centred
-    there (``plot``: left, top, right, bottom pixels). Pixel ``(column, row)`` covers
-    ``[column, column + 1) x [row, row + 1)``: its centre is at half-integers."""
-
-    s_sign: float
-    view: tuple[float, float, float, float]
-    scale: float
-    plot: tuple[int, int, int, int]
-
-    #: Margins (left, top, right, bottom) for the axes, the legend and the caption.
-    MARGINS = (70, 48, 270, 96)
-
-    @classmethod
-    def of(cls, x: np.ndarray, y: np.ndarray, layout: Layout, width: int, height: int) -> Framing:
-        """The framing of the layout ``x``, ``y`` ((k,) each) on the canvas."""
-        s_sign = 1.0 if layout is Layout.THETA_PHI else -1.0
-        margin_left, margin_top, margin_right, margin_bottom = cls.MARGINS
-        box = (margin_left, margin_top, width - margin_right, height - margin_bottom)
-        x_low, x_high, s_low, s_high = view = _view(np.asarray(x), s_sign * np.asarray(y))
-        scale = min((box[2] - box[0]) / (x_high - x_low), (box[3] - box[1]) / (s_high - s_low))
-        # Centre the view in the box; the plot is the part the view fills.
-        used_w, used_h = (x_high - x_low) * scale, (s_high - s_low) * scale
-        left = box[0] + ((box[2] - box[0]) - used_w) / 2
-        top = box[1] + ((box[3] - box[1]) - used_h) / 2
-        plot = (round(left), round(top), round(left + used_w), round(top + used_h))
-        return cls(s_sign, view, scale, plot)
-
-    def column(self, x) -> np.ndarray:
-        """The canvas column of layout ``x`` values."""
-        return self.plot[0] + (np.asarray(x) - self.view[0]) * self.scale
-
-    def row(self, s) -> np.ndarray:
-        """The canvas row of ``s`` values (``s_sign * y``)."""
-        return self.plot[1] + (np.asarray(s) - self.view[2]) * self.scale
-
-    def pixels(self, points: np.ndarray) -> np.ndarray:
-        """(n, 2) float: the canvas ``(column, row)`` of layout points ((n, 2): x, y)."""
-        return np.stack([self.column(points[:, 0]), self.row(self.s_sign * points[:, 1])], axis=1)
 
 
 @dataclass(frozen=True)
@@ -368,13 +324,6 @@ def _overlays(drawn: tuple[Drawn, ...], sites, canvas, plot, legend: list):
         return tuple(overlays), np.empty((0, 2))
     legend.append((SITES_KEY, SITES_COLOUR, f"sites: {len(sites):,}"))
     return tuple(overlays), canvas(sites)
-
-
-def _view(x: np.ndarray, s: np.ndarray) -> tuple[float, float, float, float]:
-    """The layout's box with a margin of 4 % (and a least size, for a single point)."""
-    x_low, x_high, s_low, s_high = float(x.min()), float(x.max()), float(s.min()), float(s.max())
-    pad = 0.04 * max(x_high - x_low, s_high - s_low, 1e-6)
-    return x_low - pad, x_high + pad, s_low - pad, s_high + pad
 
 
 def _second_of(theta: float, layout: Layout) -> float:

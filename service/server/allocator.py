@@ -12,7 +12,7 @@ whole process keeps the settings above in force for every thread.
 
 The price is that the heap stays at its high-water mark. :func:`release_free_memory` gives the
 free part back to the kernel; the service calls it once a worker has been idle for a second
-(service.jobs), so a busy worker keeps its warm heap and an idle one shrinks.
+(:mod:`.jobs`), so a busy worker keeps its warm heap and an idle one shrinks.
 """
 
 from __future__ import annotations

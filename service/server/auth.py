@@ -13,7 +13,7 @@ import hmac
 
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-from .problems import Problem, problem_response
+from ..problems import Problem, problem_response
 
 PROTECTED_PREFIX = "/v1/"
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from .problems import Problem
+from ..problems import Problem
 
 _DISPOSITION_PARAMETER = re.compile(
     r';\s*([a-zA-Z*]+)="((?:[^"\\]|\\.)*)"'  # name="value" (quoted)

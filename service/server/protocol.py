@@ -7,15 +7,21 @@ then, would stay open for ever. Here a timer starts when a connection opens, and
 the first byte of a next request arrives on a kept-alive one; the headers must be complete
 before it fires (MESHFLAT_HEADER_TIMEOUT), or the connection gets a 408 (if it sent anything)
 and is closed. The body's pace is the application's to judge (MESHFLAT_MIN_UPLOAD_RATE,
-:func:`service.admission.read_body`).
+:func:`service.server.admission.read_body`).
 
 An answer sent before its request's body was read (a refusal, a 401, a 404) ends the
 connection, closed the way nginx's ``lingering_close`` does: the answer and a FIN go out,
 then what the client still sends is read and dropped, unparsed, until it closes, falls
-silent for :data:`LINGER_IDLE` seconds or has been at it for :data:`LINGER_SECONDS`. Closed
-at once, the socket would answer the body's next bytes with a reset, and the client's kernel
-would drop the answer unread: a client that writes its whole body before reading, as most
-do, would see a broken connection instead of its 503 and its ``Retry-After``.
+silent for :data:`LINGER_IDLE` seconds or has been at it for MESHFLAT_LINGERING_CLOSE
+seconds. Closed at once, the socket would answer the body's next bytes with a reset, and the
+client's kernel would drop the answer unread: a client that writes its whole body before
+reading, as most do, would see a broken connection instead of its 503 and its
+``Retry-After``.
+
+Behind an ingress or a proxy that already bounds header time and closes lingering
+connections itself, both can be switched off: MESHFLAT_HEADER_TIMEOUT=0 sets no header timer,
+MESHFLAT_LINGERING_CLOSE=0 closes such a connection at once. The protocol subclasses
+uvicorn's h11 protocol, so uvicorn is pinned below its next minor version (pyproject.toml).
 """
 
 from __future__ import annotations
@@ -27,18 +33,17 @@ from http import HTTPStatus
 import h11
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-from .observability import REJECTIONS
-from .problems import PROBLEM_JSON, Problem, problem_body
-from .settings import Settings
+from ..observability import REJECTIONS
+from ..problems import PROBLEM_JSON, Problem, problem_body
+from ..settings import Settings
 
 
 @functools.cache
-def _header_timeout() -> float:
-    return Settings.from_env().header_timeout
+def _settings() -> Settings:
+    """The worker's settings (uvicorn makes the protocol by its name: it takes no argument)."""
+    return Settings.from_env()
 
 
-#: Longest a connection is read and dropped after its early answer, seconds.
-LINGER_SECONDS = 2.0
 #: Silence that ends the lingering sooner, seconds.
 LINGER_IDLE = 0.5
 
@@ -60,7 +65,8 @@ class _LingeringTransport:
     def close(self) -> None:
         if self.is_closing():
             return
-        if self._protocol.conn.their_state is h11.SEND_BODY:
+        lingers = _settings().lingering_close > 0
+        if lingers and self._protocol.conn.their_state is h11.SEND_BODY:
             self.lingering = True
             self._protocol._start_lingering()
         else:
@@ -115,7 +121,7 @@ class Protocol(H11Protocol):
         self._stop_header_timer()
         if self.timeout_keep_alive_task is not None:
             self.timeout_keep_alive_task.cancel()
-        self._linger_end = self.loop.time() + LINGER_SECONDS
+        self._linger_end = self.loop.time() + _settings().lingering_close
         self.flow.resume_reading()  # a paused read would leave the body to reset the socket
         transport = self.transport._transport
         if transport.can_write_eof():
@@ -123,7 +129,8 @@ class Protocol(H11Protocol):
         self._linger_on()
 
     def _linger_on(self) -> None:
-        """Another :data:`LINGER_IDLE` seconds of reading and dropping, within the total."""
+        """Another :data:`LINGER_IDLE` seconds of reading and dropping, within the total
+        (MESHFLAT_LINGERING_CLOSE)."""
         if self._linger_timer is not None:
             self._linger_timer.cancel()
         when = min(self.loop.time() + LINGER_IDLE, self._linger_end)
@@ -133,7 +140,9 @@ class Protocol(H11Protocol):
         self.transport._transport.close()
 
     def _start_header_timer(self) -> None:
-        self._header_timer = self.loop.call_later(_header_timeout(), self._headers_too_slow)
+        seconds = _settings().header_timeout
+        if seconds > 0:  # 0: no limit here (an ingress in front keeps one)
+            self._header_timer = self.loop.call_later(seconds, self._headers_too_slow)
 
     def _stop_header_timer(self) -> None:
         if self._header_timer is not None:
@@ -145,7 +154,7 @@ class Protocol(H11Protocol):
         if self.transport.is_closing() or self.conn.their_state is not h11.IDLE:
             return
         if self.conn.our_state is h11.IDLE:
-            seconds = _header_timeout()
+            seconds = _settings().header_timeout
             problem = Problem(
                 408,
                 f"the request headers did not arrive within {seconds:g} s "

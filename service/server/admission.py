@@ -1,12 +1,13 @@
-"""Admission of a job's request, between the routes and :mod:`service.jobs`: a place taken
-as soon as the headers are in (or a 503 at once), the body read at the least rate and charged
-to the memory budget as it arrives, and the job run off the event loop in a compute slot,
-within the time limit."""
+"""Admission of a job's request, between the routes and :mod:`.jobs`: a place taken as soon
+as the headers are in (or a 503 at once), the body read at the least rate and charged to the
+memory budget as it arrives, and the job run off the event loop in a compute slot, within the
+time limit."""
 
 from __future__ import annotations
 
 import gc
-import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from functools import partial
 
 import anyio
@@ -15,24 +16,45 @@ from fastapi import FastAPI, Request
 from starlette.requests import ClientDisconnect
 from starlette.responses import Response
 
+from ..settings import Settings
 from .allocator import release_free_memory
 from .jobs import Deadline, JobGate, Ticket, TimeLimit, TooSlow
-from .settings import Settings
+
+
+@dataclass(frozen=True)
+class Job:
+    """A served request's computation as its work sees it.
+
+    Attributes
+    ----------
+    settings : Settings, the service's
+    ticket : Ticket, its admission: the memory budget it charges (``charge``, ``charge_mesh``)
+    deadline : Deadline, the moment its answer is due (a stage starting after it stops)
+    """
+
+    settings: Settings
+    ticket: Ticket
+    deadline: Deadline
+
+
+#: A job's work: ``(body, content_type, job) -> Response``, run in a worker thread.
+Work = Callable[[bytearray, str, Job], Response]
 
 
 def settings_of(request: Request) -> Settings:
     return request.app.state.settings
 
 
-async def run_job(request: Request, work, parse_bytes_per_byte: int) -> Response:
+async def run_job(request: Request, work: Work, parse_bytes_per_byte: int) -> Response:
     """Admit the request as soon as its headers are in (a 503 at once when this process has
-    no room, see :mod:`service.jobs`), read the body (at the least rate, charged to the
-    memory budget), queue the job and run ``work(body, content_type, settings)`` off the
-    event loop in a compute slot, all within the time limit. Parsing the body is charged
+    no room, see :mod:`.jobs`), read the body (at the least rate, charged to the memory
+    budget), queue the job and run ``work(body, content_type, job)`` off the event loop in a
+    compute slot, all within the time limit. Parsing the body is charged
     ``parse_bytes_per_byte`` of the memory budget per byte of it."""
     settings = settings_of(request)
-    ticket = job_gate(request.app).admit()
-    deadline = Deadline.after(settings.request_timeout)
+    gate = job_gate(request.app)
+    ticket = gate.admit()
+    deadline = Deadline.after(settings.request_timeout, gate.clock)
     try:
         try:
             body = await read_body(request, ticket, settings, deadline)
@@ -42,7 +64,9 @@ async def run_job(request: Request, work, parse_bytes_per_byte: int) -> Response
         ticket.uploaded()
         ticket.charge(parse_bytes_per_byte * len(body))
         content_type = request.headers.get("content-type", "")
-        job = partial(ticket.run, work, deadline, body, content_type, settings)
+        job = partial(
+            ticket.run, work, deadline, body, content_type, Job(settings, ticket, deadline)
+        )
         try:
             with anyio.fail_after(max(0.0, deadline.remaining())):
                 return await anyio.to_thread.run_sync(job, abandon_on_cancel=True)
@@ -71,12 +95,12 @@ async def read_body(
     """
     body = bytearray()
     rate, grace = settings.min_upload_rate, settings.upload_grace
-    started = time.monotonic()
+    started = deadline.clock()
     while True:
         # The moment the bytes in so far stop being enough for the least rate.
         due = min(started + grace + len(body) / rate, deadline.at)
         try:
-            with anyio.fail_after(max(1e-3, due - time.monotonic())):
+            with anyio.fail_after(max(1e-3, due - deadline.clock())):
                 message = await request.receive()
         except TimeoutError:
             if deadline.remaining() <= 0:
@@ -93,21 +117,26 @@ async def read_body(
 
 
 def job_gate(app: FastAPI) -> JobGate:
-    """The process's :class:`JobGate` (one per app: a worker process has one app)."""
+    """The process's :class:`JobGate` (one per app: a worker process has one app), made on
+    first use from the app's settings."""
     if getattr(app.state, "job_gate", None) is None:
-        settings = app.state.settings
-        app.state.job_gate = JobGate(
-            settings.max_jobs,
-            settings.max_waiting,
-            max_uploads=settings.max_uploads,
-            memory_budget=settings.memory_budget_bytes,
-            on_idle=_shrink,
-        )
+        app.state.job_gate = gate_of(app.state.settings)
     return app.state.job_gate
 
 
+def gate_of(settings: Settings) -> JobGate:
+    """A job gate with the settings' bounds, whose idle worker gives its memory back."""
+    return JobGate(
+        settings.max_jobs,
+        settings.max_waiting,
+        max_uploads=settings.max_uploads,
+        memory_budget=settings.memory_budget_bytes,
+        on_idle=_shrink,
+    )
+
+
 def _shrink() -> None:
-    """An idle worker gives its free heap back (see service.allocator), after freeing what
+    """An idle worker gives its free heap back (see .allocator), after freeing what
     only reference cycles kept (arrays held by a traceback's frames, say)."""
     gc.collect()
     release_free_memory()

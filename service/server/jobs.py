@@ -9,10 +9,10 @@ A request passes three stages, each bounded per process:
    the computations, and its bytes are charged to the memory budget as they arrive;
 2. **queued**: the body is in; the job waits for a compute slot;
 3. **computing**: at most ``max_jobs`` at once. When the body is in, the job is charged what
-   a reader may allocate beside its mesh (``READER_BYTES_PER_BYTE``); when the reader has
-   counted the vertices and faces, before it builds their arrays, what the mesh and its
-   computation may take (:func:`charge_mesh`, :func:`job_bytes`); once the picture asked for
-   is known, what drawing it takes (:func:`picture_bytes`, :func:`charge`).
+   parsing it may allocate (the row's ``parse_bytes_per_byte``); then the use-case charges
+   its :class:`Ticket` what each step will take before it allocates it (the mesh once its
+   reader has counted it, a picture's raster, sites: the memory model of
+   :mod:`service.capabilities.context`).
 
 The memory budget (:class:`MemoryBudget`) is the bytes a process may hold for its jobs; a
 charge that does not fit is a 503 (a job that could never fit, a 413), so no mix of valid
@@ -20,8 +20,11 @@ requests takes a worker past it.
 
 The time limit runs from admission. A body still arriving at the limit gets a 408; a job
 still computing gets a 504 at the limit. Its thread cannot be stopped, so it stops at its
-next stage (see :class:`~service.encoding.Timings`) and holds its slot until then: the limit
+next stage (see :class:`~service.timings.Timings`) and holds its slot until then: the limit
 bounds how long a client waits, and admission keeps counting the work that is still running.
+
+Times are read from a clock given to the gate (``time.monotonic`` by default), so that the
+idle timer and the deadlines can be tested without waiting.
 """
 
 from __future__ import annotations
@@ -30,50 +33,23 @@ import math
 import threading
 import time
 from collections.abc import Callable
-from contextvars import ContextVar
 from dataclasses import dataclass
 from enum import Enum
 from typing import TypeVar
 
-from .observability import (
+from ..observability import (
     COMPUTE_SECONDS,
     JOBS_COMPUTING,
     JOBS_IN_FLIGHT,
     MEMORY_RESERVED,
     UPLOADS_IN_PROGRESS,
 )
-from .problems import Problem
+from ..problems import Problem
 
 T = TypeVar("T")
-
-#: The deadline of the job computing in this thread (None outside a job, as in the CLI).
-current_deadline: ContextVar[Deadline | None] = ContextVar("current_deadline", default=None)
-#: The ticket of the job computing in this thread (None outside a job).
-current_ticket: ContextVar[Ticket | None] = ContextVar("current_ticket", default=None)
+Clock = Callable[[], float]
 
 MiB = 2**20
-#: What a reader may allocate per byte of its file beside its mesh (the readers keep within
-#: it: see tests/test_meshio.py), charged when the body is in, on top of the body itself.
-READER_BYTES_PER_BYTE = 7
-#: What parsing a JSON body may take per byte (pydantic's objects, then the arrays): about
-#: 20 measured for a /v1/points body, with room.
-JSON_BYTES_PER_BYTE = 32
-#: A computation's memory, an upper bound measured by ``make attack`` (docs/benchmarks.md):
-#: a constant plus bytes per vertex and per face of the mesh; a picture (SVG or PNG) adds its
-#: own raster, per pixel and per face.
-JOB_BASE_BYTES = 64 * MiB
-JOB_BYTES_PER_VERTEX = 200
-JOB_BYTES_PER_FACE = 700
-PICTURE_BASE_BYTES = 128 * MiB
-PICTURE_BYTES_PER_PIXEL = 24
-PICTURE_BYTES_PER_FACE = 400
-#: What the map's triangles and the measuring of one zone add per region face (/v1/measure,
-#: /v1/locate via the map): 308 at the peak of building them and 66 for a zone over most of a
-#: million-face map, measured with tracemalloc, with room.
-MAP_BYTES_PER_FACE = 450
-#: What placing a site may take: its candidates and trees while placing, its values and their
-#: JSON after (about 330 bytes of JSON a site).
-SITE_BYTES = 2_000
 
 
 class Stage(Enum):
@@ -136,61 +112,23 @@ class TooSlow(Problem):
 
 @dataclass(frozen=True)
 class Deadline:
-    """The moment (``time.monotonic``) a job must be done by."""
+    """The moment (on ``clock``) a job must be done by."""
 
     at: float
     seconds: float
+    clock: Clock = time.monotonic
 
     @classmethod
-    def after(cls, seconds: float) -> Deadline:
-        return cls(time.monotonic() + seconds, seconds)
+    def after(cls, seconds: float, clock: Clock = time.monotonic) -> Deadline:
+        return cls(clock() + seconds, seconds, clock)
 
     def remaining(self) -> float:
-        return self.at - time.monotonic()
+        return self.at - self.clock()
 
     def check(self) -> None:
         """Raise the 504 problem if the deadline has passed."""
         if self.remaining() <= 0:
             raise TimeLimit(self.seconds, while_reading=False)
-
-
-def job_bytes(vertices: int, faces: int) -> int:
-    """The memory a computation on a mesh of that size may take (an upper bound)."""
-    return JOB_BASE_BYTES + JOB_BYTES_PER_VERTEX * vertices + JOB_BYTES_PER_FACE * faces
-
-
-def picture_bytes(width: int, height: int, faces: int) -> int:
-    """What drawing a picture of ``width`` x ``height`` pixels of ``faces`` faces adds."""
-    return (
-        PICTURE_BASE_BYTES
-        + PICTURE_BYTES_PER_PIXEL * width * height
-        + (PICTURE_BYTES_PER_FACE * faces)
-    )
-
-
-def charge_mesh(vertices: int, faces: int) -> None:
-    """Charge the job computing in this thread what computing on a mesh of that size may
-    take (:func:`job_bytes`), when its reader has counted it and before it builds the arrays
-    (``Limits.on_counts``); a second count charges only the growth."""
-    ticket = current_ticket.get()
-    if ticket is not None:
-        ticket.charge_mesh(job_bytes(vertices, faces))
-
-
-def charge(nbytes: int) -> None:
-    """Charge the job computing in this thread ``nbytes`` more of its process's memory
-    budget (nothing outside a job, as in the CLI).
-
-    Raises
-    ------
-    Busy
-        The budget has no room for it now.
-    TooMuchMemory
-        It is more than the whole budget.
-    """
-    ticket = current_ticket.get()
-    if ticket is not None:
-        ticket.charge(nbytes)
 
 
 class MemoryBudget:
@@ -227,6 +165,9 @@ class JobGate:
     memory_budget : bytes for all jobs together (None: no limit)
     on_idle : called (in the gate's watcher thread) once no job has been in flight for
         ``idle_seconds`` since the last one left; once per quiet spell
+    clock : the seconds of a monotonic clock (``time.monotonic``)
+    watch_idle : whether a watcher thread calls :meth:`idle_check` when it is due; without
+        one, the owner calls it (a test, moving its own clock)
     """
 
     def __init__(
@@ -237,6 +178,8 @@ class JobGate:
         memory_budget: int | None = None,
         on_idle: Callable[[], object] | None = None,
         idle_seconds: float = 1.0,
+        clock: Clock = time.monotonic,
+        watch_idle: bool = True,
     ) -> None:
         self.max_jobs, self.limit, self.max_uploads = max_jobs, max_jobs + max_waiting, max_uploads
         self.memory = MemoryBudget(memory_budget)
@@ -248,6 +191,8 @@ class JobGate:
         self._last_departure = 0.0
         self._idle_due = False  # a job has left since on_idle last ran
         self._on_idle, self._idle_seconds = on_idle, idle_seconds
+        self.clock = clock
+        self._watch_idle = watch_idle and on_idle is not None
         self._watcher: threading.Thread | None = None
         self._seconds = 1.0  # running mean of a job's compute time, for Retry-After
 
@@ -302,28 +247,38 @@ class JobGate:
                 UPLOADS_IN_PROGRESS.dec()
             else:
                 self._jobs -= 1
-            self._last_departure, self._idle_due = time.monotonic(), True
-            if self._on_idle is not None and self._watcher is None:
+            self._last_departure, self._idle_due = self.clock(), True
+            if self._watch_idle and self._watcher is None:
                 self._watcher = threading.Thread(target=self._watch, daemon=True)
                 self._watcher.start()
             self._lock.notify()
         JOBS_IN_FLIGHT.dec()
 
+    def _idle_left(self) -> float | None:
+        """Seconds until on_idle is due (0 or less: now), or None when nothing is due (a job
+        is in flight, or none has left since on_idle last ran). Call under the lock."""
+        if self._on_idle is None or self._admitted or not self._idle_due:
+            return None
+        return self._last_departure + self._idle_seconds - self.clock()
+
+    def idle_check(self) -> bool:
+        """Call on_idle if the quiet spell since the last departure has lasted
+        ``idle_seconds`` (once per spell); whether it was called."""
+        with self._lock:
+            left = self._idle_left()
+            if left is None or left > 0:
+                return False
+            self._idle_due = False
+        self._on_idle()
+        return True
+
     def _watch(self) -> None:
         """One thread per gate, for its life: waits for a quiet spell, then calls on_idle."""
         while True:
             with self._lock:
-                while True:
-                    if self._admitted or not self._idle_due:
-                        self._lock.wait()
-                        continue
-                    quiet_for = self._last_departure + self._idle_seconds - time.monotonic()
-                    if quiet_for > 0:
-                        self._lock.wait(quiet_for)
-                        continue
-                    self._idle_due = False
-                    break
-            self._on_idle()
+                while (left := self._idle_left()) is None or left > 0:
+                    self._lock.wait(left)  # None: until a job leaves
+            self.idle_check()
 
     def _record(self, seconds: float) -> None:
         with self._lock:
@@ -392,7 +347,6 @@ class Ticket:
             if self._released:  # abandoned before this thread got to it
                 raise TimeLimit(deadline.seconds, while_reading=False)
             self._stage = Stage.COMPUTING
-        tokens = []
         try:
             # Wait for a slot no longer than the deadline; a job whose client has already had
             # its 504 does not start at all.
@@ -402,15 +356,10 @@ class Ticket:
             started = time.monotonic()
             try:
                 deadline.check()
-                # Seen by Timings and charge() in this thread.
-                tokens = [current_deadline.set(deadline), current_ticket.set(self)]
                 result = work(*args)
                 self._gate._record(time.monotonic() - started)
                 return result
             finally:
-                if tokens:
-                    current_ticket.reset(tokens[1])
-                    current_deadline.reset(tokens[0])
                 COMPUTE_SECONDS.inc(time.monotonic() - started)
                 JOBS_COMPUTING.dec()
                 self._gate._slots.release()

@@ -1,20 +1,77 @@
-"""The zones and curves of a /v1/measure request as the core takes them: rings checked with
-GEOS (through shapely: simple, at least three distinct points, holes inside the outer ring
-and apart), and the zones' pairwise overlaps as polygons of their own.
+"""Zones and curves drawn on the map, in the layout's coordinates (/v1/measure, /v1/sites,
+/v1/register): their params, and as the core takes them: rings checked with GEOS (through
+shapely: simple, at least three distinct points, holes inside the outer ring and apart), the
+zones' pairwise overlaps as polygons of their own.
 
-A bad ring is a 422 naming the zone (its position and name) and the ring.
+A bad ring is refused naming the zone (its position and name) and the ring.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 import shapely
+from pydantic import Field, model_validator
 
-from .params import Curve, Ring, Zone
-from .problems import Problem
+from ..errors import InvalidInput
+from .fields import MapCoordinates, Name, Strict
+
+
+class _MapPoints(Strict):
+    """Points on the map: as many ``y`` as ``x``."""
+
+    x: MapCoordinates
+    y: MapCoordinates
+
+    @model_validator(mode="after")
+    def _one_y_per_x(self) -> _MapPoints:
+        if len(self.x) != len(self.y):
+            raise ValueError(f"x, y: one y per x; got {len(self.x)} x and {len(self.y)} y")
+        return self
+
+
+class Ring(_MapPoints):
+    """A closed ring on the map, in the layout's coordinates (``vertices.x`` and
+    ``vertices.y`` of a flatten answer): straight edges from each point to the next and from
+    the last back to the first (which need not be repeated)."""
+
+    x: MapCoordinates = Field(min_length=3)
+    y: MapCoordinates = Field(min_length=3)
+
+
+class Zone(Strict):
+    """An area drawn on the map: an outer ring and the holes cut out of it."""
+
+    name: Name
+    outer: Ring
+    holes: Annotated[list[Ring], Field(max_length=256)] = Field(
+        [], description="Rings inside the outer one, apart from each other."
+    )
+
+
+class Curve(_MapPoints):
+    """A polyline drawn on the map (a hairline, an incision), in the layout's coordinates."""
+
+    name: Name
+    x: MapCoordinates = Field(min_length=2)
+    y: MapCoordinates = Field(min_length=2)
+
+
+def check_names(kind: str, drawn: list) -> None:
+    """Refuse two of ``drawn`` (zones or curves, ``kind``) of one name: answers, overlaps
+    and the picture's legend name them."""
+    seen: dict[str, int] = {}
+    for i, item in enumerate(drawn):
+        if item.name in seen:
+            raise ValueError(
+                f"{kind}.{i}: the name {item.name!r} is that of {kind}.{seen[item.name]}; "
+                "each needs its own"
+            )
+        seen[item.name] = i
+
 
 #: Where GEOS says a polygon is invalid: "Self-intersection[x y]".
 _WHERE = re.compile(r"\[(?P<x>\S+) (?P<y>\S+)\]")
@@ -35,16 +92,13 @@ def checked_zone(zone: Zone, number: int) -> Outline:
 
     Raises
     ------
-    Problem
-        422: a ring of fewer than three distinct points, a ring that crosses or touches
-        itself, a hole outside the outer ring, holes that cross or nest.
+    InvalidInput
+        A ring of fewer than three distinct points, a ring that crosses or touches itself, a
+        hole outside the outer ring, holes that cross or nest (named ``zones.{number}...``).
     """
-    field = f"params.zones.{number}"
-    label = f"{field} ({zone.name!r})"
-    rings = [_ring(zone.outer, f"{field}.outer", f"{label}, outer ring")]
-    rings += [
-        _ring(hole, f"{field}.holes.{k}", f"{label}, hole {k}") for k, hole in enumerate(zone.holes)
-    ]
+    field = f"zones.{number}"
+    rings = [_ring(zone.outer, f"{field}.outer", zone.name)]
+    rings += [_ring(hole, f"{field}.holes.{k}", zone.name) for k, hole in enumerate(zone.holes)]
     polygon = shapely.Polygon(rings[0], rings[1:])
     if not polygon.is_valid:
         hole = next(
@@ -57,40 +111,34 @@ def checked_zone(zone: Zone, number: int) -> Outline:
         )
         where = _where(shapely.is_valid_reason(polygon))
         if hole is not None:
-            raise Problem(
-                422,
-                f"{label}, hole {hole}: a hole must lie inside the outer ring{where}",
-                "invalid-request",
+            raise InvalidInput(
                 f"{field}.holes.{hole}",
+                f"a hole must lie inside the outer ring{where}",
+                name=zone.name,
             )
-        raise Problem(
-            422,
-            f"{label}: its holes must lie apart from each other and from the outer ring{where}",
-            "invalid-request",
+        raise InvalidInput(
             f"{field}.holes",
+            f"its holes must lie apart from each other and from the outer ring{where}",
+            name=zone.name,
         )
     return Outline(zone.name, tuple(rings), polygon)
 
 
-def _ring(ring: Ring, field: str, label: str) -> np.ndarray:
+def _ring(ring: Ring, field: str, zone: str) -> np.ndarray:
     points = _distinct_in_turn(ring.x, ring.y)
     if len(points) > 1 and (points[0] == points[-1]).all():
         points = points[:-1]  # closed by repeating the first point
     distinct = len(np.unique(points, axis=0))
     if distinct < 3:
-        raise Problem(
-            422,
-            f"{label}: a ring needs at least three distinct points; it has {distinct}",
-            "invalid-request",
-            field,
+        raise InvalidInput(
+            field, f"a ring needs at least three distinct points; it has {distinct}", name=zone
         )
     if not shapely.LinearRing(points).is_simple:
         where = _where(shapely.is_valid_reason(shapely.Polygon(points)))
-        raise Problem(
-            422,
-            f"{label}: the ring crosses or touches itself{where}; draw it without crossings",
-            "invalid-request",
+        raise InvalidInput(
             field,
+            f"the ring crosses or touches itself{where}; draw it without crossings",
+            name=zone,
         )
     return points
 
@@ -100,17 +148,13 @@ def checked_curve(curve: Curve, number: int) -> np.ndarray:
 
     Raises
     ------
-    Problem
-        422: fewer than two distinct points.
+    InvalidInput
+        Fewer than two distinct points (named ``curves.{number}``).
     """
     points = _distinct_in_turn(curve.x, curve.y)
     if len(points) < 2:
-        field = f"params.curves.{number}"
-        raise Problem(
-            422,
-            f"{field} ({curve.name!r}): a curve needs at least two distinct points",
-            "invalid-request",
-            field,
+        raise InvalidInput(
+            f"curves.{number}", "a curve needs at least two distinct points", name=curve.name
         )
     return points
 

@@ -1,0 +1,46 @@
+"""What the service can do: one module a capability, each with its params model, the parts it
+reads, its use-case, its answer model, its other forms and its table row (``ROWS``).
+
+This list of modules is the registry: the routes (:mod:`service.routes`), the OpenAPI
+document (:mod:`service.document`), its examples, the command line and the batch are derived
+from their rows. What several capabilities share lives beside them: the region every mesh
+route starts from (:mod:`.region`), drawn zones (:mod:`.drawn`), units (:mod:`.units`), the
+field types (:mod:`.fields`), typed inputs (:mod:`.inputs`), the rows (:mod:`.rows`) and the
+context a use-case runs in (:mod:`.context`).
+"""
+
+from __future__ import annotations
+
+from ..errors import ErrorPlaces
+from . import fit, flatten, locate, measure, points, register, sites, transfer, validate
+from .rows import Capability, JsonCapability, MeshCapability
+
+#: The capability modules, in the order of the API's reference.
+MODULES = (flatten, validate, fit, locate, measure, sites, register, transfer, points)
+
+#: Every row of the table.
+CAPABILITIES: tuple[Capability, ...] = tuple(row for module in MODULES for row in module.ROWS)
+MESH_CAPABILITIES = tuple(c for c in CAPABILITIES if isinstance(c, MeshCapability))
+JSON_CAPABILITIES = tuple(c for c in CAPABILITIES if isinstance(c, JsonCapability))
+
+#: Where a mesh route's fields lie: the parameters of every mesh route in the ``params``
+#: part; whatever else the core names (vertices, faces, points it derived from them) is the
+#: uploaded mesh's.
+MESH_FORM = ErrorPlaces(
+    "params.", frozenset(name for c in MESH_CAPABILITIES for name in c.params.model_fields), "mesh"
+)
+
+#: The mesh routes by command-line command.
+MESH_COMMANDS = {capability.command: capability for capability in MESH_CAPABILITIES}
+
+__all__ = [
+    "CAPABILITIES",
+    "JSON_CAPABILITIES",
+    "MESH_CAPABILITIES",
+    "MESH_COMMANDS",
+    "MESH_FORM",
+    "MODULES",
+    "Capability",
+    "JsonCapability",
+    "MeshCapability",
+]

@@ -1,0 +1,109 @@
+"""What a use-case is given beside its input: the settings, the memory budget it charges and
+the threads it may use; and the memory model it charges by.
+
+A use-case charges what a step will allocate before it allocates it (a picture's raster, a
+map's triangles, sites), so that no mix of valid requests takes a worker past its budget.
+In a served request the budget is the job's admission ticket (:mod:`service.server.jobs`),
+whose charge may refuse (503 when the process has no room now, 413 when the job could never
+fit); on the command line nothing is charged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from ..settings import Settings
+
+MiB = 2**20
+#: What a reader may allocate per byte of its file beside its mesh (the readers keep within
+#: it: see tests/test_meshio.py), charged when the body is in, on top of the body itself.
+READER_BYTES_PER_BYTE = 7
+#: What parsing a JSON body may take per byte (pydantic's objects, then the arrays): about
+#: 20 measured for a /v1/points body, with room.
+JSON_BYTES_PER_BYTE = 32
+#: A computation's memory, an upper bound measured by ``make attack`` (docs/benchmarks.md):
+#: a constant plus bytes per vertex and per face of the mesh; a picture (SVG or PNG) adds its
+#: own raster, per pixel and per face.
+JOB_BASE_BYTES = 64 * MiB
+JOB_BYTES_PER_VERTEX = 200
+JOB_BYTES_PER_FACE = 700
+PICTURE_BASE_BYTES = 128 * MiB
+PICTURE_BYTES_PER_PIXEL = 24
+PICTURE_BYTES_PER_FACE = 400
+#: What the map's triangles and the measuring of one zone add per region face (/v1/measure,
+#: /v1/locate via the map): 308 at the peak of building them and 66 for a zone over most of a
+#: million-face map, measured with tracemalloc, with room.
+MAP_BYTES_PER_FACE = 450
+#: What placing a site may take: its candidates and trees while placing, its values and their
+#: JSON after (about 330 bytes of JSON a site).
+SITE_BYTES = 2_000
+
+
+def job_bytes(vertices: int, faces: int) -> int:
+    """The memory a computation on a mesh of that size may take (an upper bound)."""
+    return JOB_BASE_BYTES + JOB_BYTES_PER_VERTEX * vertices + JOB_BYTES_PER_FACE * faces
+
+
+def picture_bytes(width: int, height: int, faces: int) -> int:
+    """What drawing a picture of ``width`` x ``height`` pixels of ``faces`` faces adds."""
+    return (
+        PICTURE_BASE_BYTES
+        + PICTURE_BYTES_PER_PIXEL * width * height
+        + (PICTURE_BYTES_PER_FACE * faces)
+    )
+
+
+class Budget(Protocol):
+    """Memory a job may hold."""
+
+    def charge(self, nbytes: int) -> None:
+        """Hold ``nbytes`` more, or raise the problem that says there is no room."""
+
+    def charge_mesh(self, nbytes: int) -> None:
+        """Hold ``nbytes`` for the job's mesh, or the growth over what an earlier count of
+        the same mesh held."""
+
+
+class Unlimited:
+    """No budget: the command line and the examples of the OpenAPI document."""
+
+    def charge(self, nbytes: int) -> None:
+        pass
+
+    def charge_mesh(self, nbytes: int) -> None:
+        pass
+
+
+@dataclass(frozen=True)
+class Context:
+    """The settings, the memory budget and the threads of one computation.
+
+    Attributes
+    ----------
+    settings : Settings, the limits the use-case enforces (MESHFLAT_MAX_POINTS, ...)
+    budget : Budget, what the use-case charges its allocations to
+    threads : int, threads the core may use (default ``settings.threads``)
+    """
+
+    settings: Settings = field(default_factory=Settings)
+    budget: Budget = field(default_factory=Unlimited)
+    threads: int = 0
+
+    def __post_init__(self) -> None:
+        if self.threads < 1:
+            object.__setattr__(self, "threads", self.settings.threads)
+
+    def charge(self, nbytes: int) -> None:
+        """Charge ``nbytes`` to the budget before they are allocated."""
+        self.budget.charge(nbytes)
+
+    def charge_mesh(self, vertices: int, faces: int) -> None:
+        """Charge what computing on the job's mesh of that size may take (:func:`job_bytes`),
+        once its reader has counted it and before it builds the arrays; a second count of the
+        same mesh charges only the growth."""
+        self.budget.charge_mesh(job_bytes(vertices, faces))
+
+    def charge_other_mesh(self, vertices: int, faces: int) -> None:
+        """Charge a second mesh of the job (a follow-up scan) on top of the first."""
+        self.budget.charge(job_bytes(vertices, faces))

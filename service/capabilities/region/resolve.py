@@ -1,0 +1,386 @@
+"""A mesh request's region resolved: the faces it names, the chart and frame it asks for
+(fitted where any is ``"auto"``), flattened (:func:`flatten`). Every mesh route starts here.
+
+The use-cases know nothing of HTTP: bad input surfaces as the core's
+:class:`~transforms.TransformInputError` or as :class:`~..errors.InvalidInput`, both placed in
+the request by :func:`service.problems.problem_of`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+import numpy as np
+
+from transforms import (
+    Chart,
+    Fit,
+    FitBounds,
+    FitFixed,
+    FlatRegion,
+    Frame,
+    Landmarks,
+    MapTriangles,
+    Method,
+    PoleCap,
+    TransformInputError,
+    Untangled,
+    default_choice,
+    fit_region,
+    flatten_region,
+    untangle,
+)
+from transforms import selection as select
+
+from ...errors import InvalidInput
+from ...images import Png
+from ...meshio import Mesh
+from ..context import MAP_BYTES_PER_FACE, Context
+from ..units import mm_per_unit
+from .params import DEFAULT_SIGMA, AutoPole, ChartParams, MeshParams, PoleUp, TextureMask
+
+P = TypeVar("P", bound=MeshParams)
+
+
+@dataclass(frozen=True)
+class MeshInput(Generic[P]):
+    """What a mesh route computes on: the mesh, its params, and the ``mask`` part
+    (``region.texture_mask``'s PNG), read from a form or the command line.
+
+    Attributes
+    ----------
+    mesh : Mesh, as read
+    params : MeshParams (the route's model)
+    mask : Png or None
+    """
+
+    mesh: Mesh
+    params: P
+    mask: Png | None = None
+
+
+# -- parameters into the core's objects ---------------------------------------------------
+
+
+def chart_of(params: ChartParams) -> Chart:
+    """The chart the parameters name (sigma 0.3 when neither sigma nor a pole angle is set)."""
+    if params.method is Method.STANDARD:
+        return Chart.standard()
+    if params.pole_angle_deg is not None and params.sigma is None:
+        cap = PoleCap.from_rho_deg(params.pole_angle_deg)
+    else:
+        cap = PoleCap.from_sigma(DEFAULT_SIGMA if params.sigma is None else params.sigma)
+    return Chart.from_method(params.method, cap)
+
+
+def frame_of(params: ChartParams, center: np.ndarray) -> Frame:
+    """The frame at ``center`` with the parameters' rotation (identity when none: a mesh
+    request without one has it chosen by :func:`resolve` instead)."""
+    if params.rotation is None or params.rotation == "identity":
+        return Frame.identity(center)
+    if isinstance(params.rotation, PoleUp):
+        return Frame.from_pole_up(params.rotation.pole, params.rotation.up, center)
+    return Frame.from_matrix(params.rotation, center)
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The region a request names: its file face ids (ascending), the centre the
+    parameters ask for (before any fit), and the region as answers repeat it (a cone with
+    its apex resolved; None for the whole mesh), so that sent back it selects these faces."""
+
+    faces: np.ndarray
+    center: np.ndarray
+    region: dict | None
+
+
+def select_region(given: MeshInput) -> Selection:
+    """The faces and the centre of ``params.region`` and ``params.center``
+    (:mod:`transforms.selection`); a cone is taken around the centre of the whole mesh.
+
+    Raises
+    ------
+    TransformInputError
+        Ids out of range or repeated, unknown groups, a zero cone axis, a centroid of no
+        area; :class:`~transforms.EmptyRegionError` when nothing is selected.
+    InvalidInput
+        A mask part without a texture_mask region, or the other way round.
+    """
+    mesh, params = given.mesh, given.params
+    region = params.region
+    if given.mask is not None and (region is None or region.texture_mask is None):
+        raise InvalidInput(
+            "mask", "a mask part is read for a region.texture_mask only, and the region is another"
+        )
+    if region is not None and region.cone is not None:
+        return _cone_selection(mesh, params)
+    faces = select.nonempty(_region_faces(given))
+    resolved = None if region is None else region.model_dump(exclude_none=True)
+    return Selection(faces, _center(mesh, faces, params.center), resolved)
+
+
+def _cone_selection(mesh: Mesh, params: MeshParams) -> Selection:
+    """A cone's faces, its apex resolved (by default the whole mesh's box centre)."""
+    cone = params.region.cone
+    center = _center(mesh, None, params.center)
+    if cone.apex is not None:
+        apex = np.asarray(cone.apex, dtype=np.float64)
+    elif params.center in ("bbox_center", "auto"):
+        apex = center  # the same box centre, of the whole mesh: found once
+    else:
+        apex = select.bbox_center(mesh.vertices, mesh.faces)
+    faces = select.cone_faces(mesh.vertices, mesh.faces, apex, cone.axis, cone.half_angle_deg)
+    resolved = {"cone": {**cone.model_dump(), "apex": apex.tolist()}}
+    return Selection(select.nonempty(faces), center, resolved)
+
+
+def _region_faces(given: MeshInput) -> np.ndarray:
+    """The file face ids of any region but a cone (all of them for none)."""
+    mesh, region, n_faces = given.mesh, given.params.region, len(given.mesh.faces)
+    if region is None:
+        return np.arange(n_faces)
+    if region.scalp is not None:
+        scalp = region.scalp
+        landmarks = checked_landmarks(mesh, scalp.landmarks, "region.scalp.landmarks")
+        offset = scalp.offset_mm / mm_per_unit(scalp.units, "region.scalp.units")
+        return landmarks.scalp_faces(mesh.vertices, mesh.faces, offset)
+    if region.vertex_color is not None or region.feature_id is not None:
+        return _painted_faces(mesh, region)
+    if region.texture_mask is not None:
+        return _masked_faces(mesh, region.texture_mask, given.mask)
+    if region.faces is not None:
+        return select.faces_listed(region.faces, n_faces)
+    if region.vertices is not None:
+        return select.faces_of_vertices(mesh.faces, region.vertices, len(mesh.vertices))
+    return mesh.group_faces(region.groups)
+
+
+def _painted_faces(mesh: Mesh, region) -> np.ndarray:
+    """The faces of a region painted in the file's vertex colours or ids.
+
+    Raises
+    ------
+    TransformInputError
+        The file has no such colours or attribute (naming what it has), or no face is in.
+    """
+    attributes = mesh.attributes
+    if region.vertex_color is not None:
+        paint = region.vertex_color
+        if attributes.colors is None:
+            raise lacking(mesh, "region.vertex_color", "vertex colours")
+        return select.faces_by_color(
+            mesh.faces, attributes.colors, paint.channel, paint.min, paint.rule
+        )
+    wanted = region.feature_id
+    for per_face, values in ((False, attributes.vertex), (True, attributes.face)):
+        if wanted.attribute in values:
+            return select.faces_by_ids(
+                mesh.faces, values[wanted.attribute], wanted.values, per_face, wanted.rule
+            )
+    raise lacking(mesh, "region.feature_id.attribute", f"attribute {wanted.attribute!r}")
+
+
+def _masked_faces(mesh: Mesh, mask: TextureMask, image: Png | None) -> np.ndarray:
+    """The faces under the form's ``mask`` PNG, read through the mesh's texture coordinates.
+
+    Raises
+    ------
+    InvalidInput
+        No mask part.
+    TransformInputError
+        The file has no texture coordinates (naming what it has), or no face is in.
+    """
+    if image is None:
+        raise InvalidInput(
+            "mask",
+            "region.texture_mask needs the mask: a multipart part 'mask', a PNG (--mask on "
+            "the command line)",
+        )
+    attributes = mesh.attributes
+    if attributes.uv is None:
+        raise lacking(
+            mesh, "region.texture_mask", "texture coordinates (glTF TEXCOORD_0, OBJ vt, PLY u v)"
+        )
+    shade = image.values if image.alpha is None else image.values * image.alpha
+    return select.faces_by_mask(attributes.uv, attributes.uv_faces, shade, mask.min)
+
+
+def lacking(mesh: Mesh, field: str, what: str) -> TransformInputError:
+    """The refusal of a request for ``what`` the file lacks, naming what it has."""
+    return TransformInputError(
+        field,
+        f"the {mesh.format.upper()} file has no {what}; it has {mesh.attributes.described()}",
+    )
+
+
+def region_faces(mesh: Mesh, selection: Selection) -> np.ndarray:
+    """(m, 3) int: the region's faces, the mesh's own array (no copy) for the whole mesh."""
+    if len(selection.faces) == len(mesh.faces):  # ascending and distinct: every face, in order
+        return mesh.faces
+    return mesh.faces[selection.faces]
+
+
+def _center(mesh: Mesh, face_ids: np.ndarray | None, center) -> np.ndarray:
+    """A world point, or the centre named (``auto`` starts from the bounding-box centre) of
+    the faces ``face_ids`` (None: all), which are copied out only then."""
+    if not isinstance(center, str):
+        return np.asarray(center, dtype=np.float64)
+    name = "bbox_center" if center == "auto" else center
+    faces = mesh.faces if face_ids is None else mesh.faces[face_ids]
+    return select.named_center(mesh.vertices, faces, name)
+
+
+def fixed_choices(params: MeshParams, center: np.ndarray, head: Frame | None = None) -> FitFixed:
+    """What the caller fixed for :func:`transforms.fit_region` and
+    :func:`transforms.default_choice` (None: choose it; no rotation or no cap given counts
+    as chosen); the ``head``'s frame (from landmarks) fixes the centre and the rotation."""
+    rotation, up = params.rotation, None
+    if head is not None:
+        center, rotation = head.center, Frame.from_matrix(head.rotation)
+    elif rotation is None or rotation == "auto":
+        rotation = None
+    elif isinstance(rotation, AutoPole):
+        rotation, up = None, rotation.up
+    else:
+        rotation = frame_of(params, np.zeros(3))
+    sigma = None
+    given = params.sigma is not None or params.pole_angle_deg is not None
+    if given and params.sigma != "auto" and params.method is not Method.STANDARD:
+        sigma = chart_of(params).cap.sigma
+    return FitFixed(
+        center=None if params.center == "auto" and head is None else center,
+        rotation=rotation,
+        up=None if up is None else np.asarray(up, dtype=np.float64),
+        sigma=sigma,
+    )
+
+
+def fit_bounds(params: MeshParams) -> FitBounds:
+    return FitBounds(params.min_kernel_depth, params.min_margin_deg)
+
+
+# -- meshes ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MeshRegion:
+    """A request's region flattened: its file face ids, the chart and frame used, the
+    flattened region, and the fit when any parameter was chosen.
+
+    Attributes
+    ----------
+    mesh : Mesh, as read
+    selection : Selection, the region's file face ids and the region as answers repeat it
+    chart, frame : what the region was flattened with
+    flat : FlatRegion, positions in ``faces`` and ``flat.vertex_ids``
+    fit : Fit or None
+    untangled : Untangled or None, the layout made fold-free (``params.untangle``)
+    """
+
+    mesh: Mesh
+    selection: Selection
+    chart: Chart
+    frame: Frame
+    flat: FlatRegion
+    fit: Fit | None
+    untangled: Untangled | None = None
+
+    @property
+    def layout(self) -> tuple[np.ndarray, np.ndarray]:
+        """(k,) float each: the layout answered, repaired when untangled."""
+        if self.untangled is None:
+            return self.flat.x, self.flat.y
+        return self.untangled.x, self.untangled.y
+
+    @property
+    def faces(self) -> np.ndarray:
+        """(m,) int: the region's file face ids, ascending."""
+        return self.selection.faces
+
+
+def resolve(
+    mesh: Mesh, selection: Selection, params: MeshParams, ctx: Context
+) -> tuple[Chart, Frame, Fit | None]:
+    """The chart and frame the parameters name; fitted (with the fit) where any is ``"auto"``
+    (and always for /v1/fit's params, whose ``auto`` is always true); the rotation and sigma not
+    given chosen by :func:`transforms.default_choice` (no search) otherwise."""
+    head = head_frame(mesh, params)
+    fixed = fixed_choices(params, selection.center, head)
+    if not params.auto:
+        warped = params.method is not Method.STANDARD
+        if fixed.rotation is not None and (fixed.sigma is not None or not warped):
+            frame = head if head is not None else frame_of(params, selection.center)
+            return chart_of(params), frame, None
+        chosen = default_choice(
+            mesh.vertices,
+            region_faces(mesh, selection),
+            fixed,
+            fit_bounds(params),
+            method=params.method,
+            layout=params.layout,
+            threads=ctx.threads,
+        )
+        return chosen.chart, chosen.frame, chosen
+    fit = fit_region(
+        mesh.vertices,
+        region_faces(mesh, selection),
+        fixed,
+        fit_bounds(params),
+        method=params.method,
+        layout=params.layout,
+        threads=ctx.threads,
+    )
+    return fit.chart, fit.frame, fit
+
+
+def head_frame(mesh: Mesh, params: MeshParams) -> Frame | None:
+    """The frame of ``params.frame``'s landmarks (:meth:`transforms.Landmarks.frame`), each
+    checked on the mesh's surface; None without landmarks."""
+    if params.frame is None:
+        return None
+    landmarks = checked_landmarks(mesh, params.frame.landmarks, "frame.landmarks")
+    return landmarks.frame()
+
+
+def checked_landmarks(mesh: Mesh, given, field: str) -> Landmarks:
+    """The landmarks of ``given`` (the params' model), checked as a head's and on the
+    mesh's surface; errors name ``field``'s landmark."""
+    landmarks = Landmarks.of(given.model_dump(exclude_none=True), field=field)
+    landmarks.check_on_surface(mesh.vertices, mesh.faces)
+    return landmarks
+
+
+def flatten(given: MeshInput, ctx: Context) -> MeshRegion:
+    """The region flattened with the chart and frame :func:`resolve` gives: the use-case of
+    /v1/flatten, /v1/validate and /v1/fit, and where every other mesh route starts."""
+    mesh, params = given.mesh, given.params
+    selection = select_region(given)
+    chart, frame, fit = resolve(mesh, selection, params, ctx)
+    if fit is not None:
+        flat = fit.region
+    else:
+        faces = region_faces(mesh, selection)
+        flat = flatten_region(
+            mesh.vertices, faces, frame, chart, threads=ctx.threads, layout=params.layout
+        )
+    untangled = untangle_layout(mesh, flat) if params.untangle else None
+    return MeshRegion(mesh, selection, chart, frame, flat, fit, untangled)
+
+
+def untangle_layout(mesh: Mesh, flat: FlatRegion) -> Untangled:
+    """The region's layout made fold-free (:func:`transforms.untangle`)."""
+    shapes = mesh.vertices[flat.vertex_ids]
+    front = flat.layout.front_orientation(flat.validation.winding)
+    return untangle(flat.x, flat.y, flat.faces, shapes, front)
+
+
+def map_triangles(region: MeshRegion, ctx: Context) -> MapTriangles:
+    """The region's triangles on its answered map (untangled when asked) and on the
+    surface: the correspondence of docs/math.md, section 12."""
+    flat = region.flat
+    ctx.charge(MAP_BYTES_PER_FACE * len(flat.faces))
+    x, y = region.layout
+    surface = region.mesh.vertices[flat.vertex_ids]
+    front = flat.layout.front_orientation(flat.validation.winding)
+    return MapTriangles.of(x, y, surface, flat.faces, front)

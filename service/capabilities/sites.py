@@ -1,0 +1,590 @@
+"""``POST /v1/sites``: sites (grafts) placed on the region at a density, one for the region
+or one per zone drawn on the map, or from a density map: Poisson-disk samples of the surface
+with their normals, face ids and map points (docs/math.md, section 13)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Annotated
+
+import numpy as np
+from pydantic import ConfigDict, Field, model_validator
+
+from transforms import Framing, MapTriangles, cover_zone, world_to_angles
+from transforms.region import flagged_mask
+from transforms.sites import (
+    SPACING_RULE,
+    SitePart,
+    Sites,
+    SitesDoNotFit,
+    minimum_distance,
+    place_sites,
+    site_normals,
+)
+
+from ..encoding import Answer
+from ..errors import InvalidInput, check_count
+from ..images import Png
+from ..outputs import Output
+from ..outputs.picture import Drawn
+from .context import SITE_BYTES, Context
+from .drawn import Outline, Zone, check_names, checked_zone, overlaps
+from .fields import PictureParams, PositiveNumber, choice, output_choice
+from .inputs import MASK, MeshPart, PngPart
+from .region.answers import ResolvedParams
+from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
+from .region.pictures import glb, map_renderers
+from .region.resolve import MeshInput, MeshRegion, flatten, map_triangles
+from .rows import MeshCapability
+from .units import KnownDistance, LengthUnit, Units, in_cm2, mm_per_unit
+
+#: Sites per cm² a density may ask for (a site every 0.1 mm or so).
+MAX_DENSITY_PER_CM2 = 10_000.0
+DensityPerCm2 = Annotated[float, Field(allow_inf_nan=False, gt=0, le=MAX_DENSITY_PER_CM2)]
+
+
+class SiteZone(Zone):
+    """A zone drawn on the map (as for /v1/measure) and the density of sites in it."""
+
+    density_per_cm2: DensityPerCm2 | None = Field(
+        None, description="Sites per cm² of the zone's surface (default: params.density_per_cm2)."
+    )
+
+
+class SitesParams(MeshParams, PictureParams):
+    """The JSON of the ``params`` field of /v1/sites: a region and its frame as for
+    /v1/measure, the density (one for the region, or one per zone), and the count, spacing
+    and seed of the sites."""
+
+    density_per_cm2: DensityPerCm2 | None = Field(
+        None,
+        description="Sites per cm² over the whole region; with zones, of each zone that "
+        "gives none.",
+    )
+    zones: Annotated[list[SiteZone], Field(max_length=256)] = Field(
+        [],
+        description="Zones drawn on the map (as for /v1/measure), each with its density; "
+        "sites go only into zones, which must not overlap.",
+    )
+    units: choice(LengthUnit) | KnownDistance | None = Field(
+        None,
+        description="The mesh's length unit (mm, cm or m), or its scale from a known "
+        "distance: needed to turn sites per cm² into sites per mesh unit².",
+    )
+    count: int | None = Field(
+        None,
+        ge=1,
+        description="An exact total: the zones keep their relative densities and the "
+        "spacing adapts. Default: each zone's area times its density, rounded.",
+    )
+    min_spacing_mm: PositiveNumber | None = Field(
+        None,
+        description="No two sites closer than this in 3D, millimetres. Default: "
+        "0.7 / sqrt(density) in each zone, at the density placed (docs/math.md, section 13).",
+    )
+    density_range: Annotated[list[Annotated[float, Field(ge=0, le=MAX_DENSITY_PER_CM2)]],
+                             Field(min_length=2, max_length=2)] | None = Field(
+        None,
+        description="With a density_map part: the sites per cm² its grey values 0 and 255 "
+        "stand for, [lo, hi] (linear between).",
+    )  # fmt: skip
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="Same inputs and seed: same sites.")
+    allow_flagged: bool = Field(
+        False, description="Whether sites may go on triangles the validation flags."
+    )
+    output: output_choice(
+        (Output.JSON, Output.PLY, Output.GLB, Output.SVG, Output.PNG),
+        "json (application/json); ply (application/ply: a point cloud with normals and face "
+        "ids); glb (model/gltf-binary: the region mesh and a POINTS primitive of the sites); "
+        "svg (image/svg+xml) or png (image/png): the map with the sites and the zones.",
+    ) = None
+
+    @model_validator(mode="after")
+    def _a_density_for_each(self) -> SitesParams:
+        if self.density_range is not None:
+            lo, hi = self.density_range
+            if lo > hi or self.zones or self.density_per_cm2 is not None:
+                raise ValueError(
+                    "density_range: [lo, hi] with lo <= hi, for a density_map part, without "
+                    "zones or density_per_cm2"
+                )
+            return self
+        if self.density_per_cm2 is not None:
+            return self
+        if not self.zones:
+            raise ValueError(
+                "density_per_cm2: sites per cm² of the region; or zones; or, with a "
+                "density_map part, density_range [lo, hi] (the sites per cm² of grey 0 and 255)"
+            )
+        for i, zone in enumerate(self.zones):
+            if zone.density_per_cm2 is None:
+                raise ValueError(
+                    f"zones.{i} ({zone.name!r}): give its density_per_cm2, or "
+                    "params.density_per_cm2 for every zone without one"
+                )
+        return self
+
+    @model_validator(mode="after")
+    def _names_tell_apart(self) -> SitesParams:
+        check_names("zones", self.zones)
+        return self
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {**MESH_PARAMS_EXAMPLE, "density_per_cm2": 3, "units": "cm", "seed": 7},
+                {
+                    **MESH_PARAMS_EXAMPLE,
+                    "zones": [
+                        {
+                            "name": "crown",
+                            "outer": {
+                                "x": [-1.8, -1.35, -1.35, -1.8],
+                                "y": [1.4, 1.4, 1.75, 1.75],
+                            },
+                            "density_per_cm2": 30,
+                        }
+                    ],
+                    "units": "mm",
+                },
+            ]
+        }
+    )
+
+
+@dataclass(frozen=True)
+class SiteZoneResult:
+    """One part that got sites: a zone, or the whole region (``outline`` None).
+
+    Attributes
+    ----------
+    name : str
+    outline : Outline or None
+    area : float, its surface area, mesh units²
+    open_area : float, the part of it sites may go on (flagged triangles left out unless
+        allowed), mesh units²
+    density_per_cm2 : float, the density asked for
+    quota : int, its sites
+    spacing : float or None, the least distance between its sites and any other, mesh units
+        (None without sites)
+    achieved : float, its sites per cm² of ``open_area``
+    """
+
+    name: str
+    outline: Outline | None
+    area: float
+    open_area: float
+    density_per_cm2: float
+    quota: int
+    spacing: float | None
+    achieved: float
+
+
+@dataclass(frozen=True)
+class Placed:
+    """Sites placed on a region (docs/math.md, section 13).
+
+    Attributes
+    ----------
+    region : MeshRegion
+    triangles : MapTriangles
+    sites : Sites, positions in the region's faces, barycentric weights, points, parts
+    normals : (n, 3) float, unit: the region's vertex normals interpolated
+    map_points : (n, 2) float, the layout's x, y (the correspondence of section 12)
+    theta, phi : (n,) float, the transform of the points
+    zones : tuple of SiteZoneResult, in the order of ``sites.part``
+    min_distance : float, the smallest distance between two sites, measured
+    mm_per_unit : float
+    """
+
+    region: MeshRegion
+    triangles: MapTriangles
+    sites: Sites
+    normals: np.ndarray
+    map_points: np.ndarray
+    theta: np.ndarray
+    phi: np.ndarray
+    zones: tuple[SiteZoneResult, ...]
+    min_distance: float
+    mm_per_unit: float
+
+
+@dataclass(frozen=True)
+class SitesInput(MeshInput[SitesParams]):
+    """A sites request: the mesh, the params, the mask and the ``density_map`` part."""
+
+    density_map: Png | None = None
+
+
+def place(given: SitesInput, ctx: Context) -> Placed:
+    """Sites on the region of ``params`` at its densities (:func:`transforms.sites.place_sites`):
+    the count of each zone its area times its density (or shares of ``count``), spaced at
+    least ``min_spacing_mm`` and the default rule's spacing apart."""
+    params = given.params
+    scale = mm_per_unit(params.units)
+    if scale is None:
+        raise InvalidInput(
+            "units",
+            "sites per cm² need the mesh's length unit (mm, cm or m) or a known distance",
+        )
+    outlines = _apart([checked_zone(zone, k) for k, zone in enumerate(params.zones)])
+    image = _density_image(params, given.density_map)
+    region = flatten(given, ctx)
+    triangles = map_triangles(region, ctx)
+    open_faces = ~flagged_mask(region.flat.validation, len(triangles)) | params.allow_flagged
+    if image is not None:
+        found = [_density_map_part(region, triangles, image, open_faces)]
+    else:
+        found = list(_zone_parts(triangles, params, outlines, open_faces))
+    unit_area = scale**2 / 100.0  # cm² per mesh unit²
+    expected = [float(np.dot(part.core.area, part.core.density)) * unit_area for part in found]
+    total = params.count if params.count is not None else sum(expected)
+    check_count(round(total), ctx.settings.max_sites, "sites", "MESHFLAT_MAX_SITES")
+    quotas = _quotas(expected, params.count)
+    ctx.charge(SITE_BYTES * sum(quotas))
+    asked = None if params.min_spacing_mm is None else params.min_spacing_mm / scale
+    parts, results = [], []
+    for part, quota, count in zip(found, quotas, expected, strict=True):
+        # The density placed: as asked, scaled to the quota (a count, or rounding).
+        placed = part.core.density * unit_area * (quota / count if count > 0 else 0.0)
+        if asked is None:  # the default rule (13.1) at the density placed
+            with np.errstate(divide="ignore"):
+                spacing = SPACING_RULE / np.sqrt(placed)
+            spacing[placed == 0] = 1.0  # no site goes there
+        else:
+            spacing = np.full_like(placed, asked)
+        parts.append(part.sites(quota, spacing))
+        least = float(spacing[placed > 0].min()) if quota and (placed > 0).any() else None
+        results.append(part.result(quota, least, unit_area))
+    sites = _placed(triangles, parts, params, scale)
+    normals = site_normals(triangles.surface_points, triangles.faces, sites, region.frame.center)
+    map_points = triangles.on_map(sites.triangles, sites.weights)
+    theta, phi, _ = world_to_angles(sites.points, region.frame, region.chart)
+    return Placed(
+        region, triangles, sites, normals, map_points, theta, phi, tuple(results),
+        minimum_distance(sites.points), scale,
+    )  # fmt: skip
+
+
+def _apart(outlines: list[Outline]) -> list[Outline]:
+    """The zones, refused when two overlap (a site's density would be ambiguous there)."""
+    for i, j, _ in overlaps(outlines):
+        raise InvalidInput(
+            f"zones.{j}",
+            f"overlaps params.zones.{i} ({outlines[i].name!r}): a site's density would be "
+            "ambiguous there",
+            name=outlines[j].name,
+        )
+    return outlines
+
+
+def _placed(triangles: MapTriangles, parts: list[SitePart], params: SitesParams, mm_per_unit):
+    """:func:`transforms.sites.place_sites` with the seed; a part too full is refused, naming
+    the parameter that asked for too many."""
+    try:
+        return place_sites(
+            triangles.surface_points, triangles.faces, parts, np.random.default_rng(params.seed)
+        )
+    except SitesDoNotFit as error:
+        if params.min_spacing_mm is not None:
+            field = "min_spacing_mm"
+        elif params.density_range is not None:
+            field = "density_range"
+        elif params.zones:
+            field = f"zones.{error.part}"
+        else:
+            field = "density_per_cm2"
+        raise InvalidInput(
+            field,
+            f"{error.words}, at a spacing of {error.spacing * mm_per_unit:.4g} mm; ask for "
+            "fewer sites (count, density) or a smaller min_spacing_mm",
+            name=error.name,
+        ) from None
+
+
+@dataclass(frozen=True)
+class _Part:
+    """A zone's (or the region's) triangles open to sites, as the core's part before its
+    quota and spacing (known once every part's expected count is), with what the answer says
+    of the zone: its outline, its whole surface area and the one density asked for (None for
+    a density map). ``core.density`` is the density asked for on each triangle, per cm²."""
+
+    core: SitePart
+    outline: Outline | None
+    area: float
+    asked: float | None
+
+    def sites(self, quota: int, spacing: np.ndarray) -> SitePart:
+        """The core's part: ``quota`` sites at ``spacing`` ((j,) float) on these triangles."""
+        return replace(self.core, quota=quota, spacing=spacing)
+
+    def result(self, quota: int, spacing: float | None, unit_area: float) -> SiteZoneResult:
+        weight, density = self.core.area, self.core.density
+        open_area = float(weight[density > 0].sum())
+        mean = self.asked
+        if mean is None:  # a density map: its mean over the area it puts sites on
+            mean = float(np.dot(weight, density) / open_area) if open_area else 0.0
+        open_cm2 = open_area * unit_area
+        achieved = quota / open_cm2 if open_cm2 > 0 else 0.0
+        return SiteZoneResult(
+            self.core.name, self.outline, self.area, open_area, mean, quota, spacing, achieved
+        )
+
+
+def _zone_parts(triangles: MapTriangles, params: SitesParams, outlines, open_faces):
+    """A part for each zone (its own density, or params.density_per_cm2), or the region's."""
+    area = triangles.surface_area
+    if not outlines:
+        faces = np.flatnonzero(open_faces)
+        asked = float(params.density_per_cm2)
+        density = np.full(len(faces), asked)
+        core = SitePart(faces, area[faces], 0, 0.0, density, name="region")
+        yield _Part(core, None, float(area.sum()), asked)
+        return
+    for outline, zone in zip(outlines, params.zones, strict=True):
+        cover = cover_zone(triangles, outline.rings)
+        faces = np.concatenate([cover.inside, cover.partial])
+        weight = np.concatenate([area[cover.inside], area[cover.partial] * cover.share])
+        partial = np.r_[np.zeros(len(cover.inside), bool), np.ones(len(cover.partial), bool)]
+        keep = open_faces[faces]
+        asked = float(zone.density_per_cm2 or params.density_per_cm2)
+        density = np.full(int(keep.sum()), asked)
+
+        def inside(faces, weights, cover=cover):
+            return cover.winding(triangles.on_map(faces, weights)) != 0
+
+        core = SitePart(
+            faces[keep], weight[keep], 0, 0.0, density, partial[keep], inside,
+            area[faces[keep]], outline.name,
+        )  # fmt: skip
+        yield _Part(core, outline, cover.total(area), asked)
+
+
+def _density_image(params: SitesParams, density_map: Png | None) -> np.ndarray | None:
+    """(h, w) float: the density_map part's sites per cm² (grey 0-255 to density_range), or
+    None without density_range.
+
+    Raises
+    ------
+    InvalidInput
+        A map without density_range, or density_range without a map.
+    """
+    if params.density_range is None:
+        if density_map is not None:
+            raise InvalidInput(
+                "density_map", "a density map needs params.density_range, and no zones or density"
+            )
+        return None
+    if density_map is None:
+        raise InvalidInput(
+            "density_map",
+            "density_range needs the map: a multipart part 'density_map', a grey PNG",
+        )
+    low, high = params.density_range
+    return low + (high - low) * density_map.values
+
+
+def _density_map_part(region: MeshRegion, triangles: MapTriangles, image, open_faces) -> _Part:
+    """The region's open triangles, each at the density of the pixel under its centroid on
+    the map, in the framing of the PNG answer (:class:`transforms.Framing`)."""
+    height, width = image.shape
+    x, y = region.layout
+    framing = Framing.of(x, y, region.flat.layout, width, height)
+    centroids = np.column_stack([triangles.corner_x.mean(axis=0), triangles.corner_y.mean(axis=0)])
+    column, row = np.floor(framing.pixels(centroids)).astype(np.int64).T
+    shown = (column >= 0) & (column < width) & (row >= 0) & (row < height)
+    density = np.zeros(len(centroids))
+    density[shown] = image[row[shown], column[shown]]
+    faces = np.flatnonzero(open_faces)
+    area = triangles.surface_area
+    core = SitePart(faces, area[faces], 0, 0.0, density[faces], name="density map")
+    return _Part(core, None, float(area.sum()), None)
+
+
+def _quotas(expected: list[float], count: int | None) -> list[int]:
+    """Each part's sites: its expected number rounded, or, with ``count``, its share of
+    ``count`` by the largest remainders (the total exact, the ratios kept)."""
+    expected = np.asarray(expected, dtype=np.float64)
+    if count is None:
+        return np.rint(expected).astype(int).tolist()
+    if not expected.sum() > 0:
+        raise InvalidInput("count", "no part of the region is open to sites at a density above 0")
+    share = expected / expected.sum() * count
+    quotas = np.floor(share).astype(int)
+    order = np.argsort(-(share - quotas), kind="stable")
+    quotas[order[: count - quotas.sum()]] += 1
+    return quotas.tolist()
+
+
+class SiteArrays(Answer):
+    position: list[list[float]] = Field(description="World points [x, y, z] on the surface.")
+    normal: list[list[float]] = Field(
+        description="Unit normals: the region's vertex normals (each the sum of its faces' "
+        "normals weighted by area) interpolated with the barycentric weights, pointing away "
+        "from the frame's centre."
+    )
+    face: list[int] = Field(description="The file's id of the triangle each site is on.")
+    barycentric: list[list[float]] = Field(
+        description="Weights of the triangle's corners (in the file's order), in [0, 1] and "
+        "summing to 1: position is their combination of the corners."
+    )
+    theta: list[float] = Field(description="The transform of position: polar angle, radians.")
+    phi: list[float] = Field(description="The transform of position: azimuth, radians.")
+    x: list[float] = Field(
+        description="The layout's x of the site: the same weights of the triangle's corners "
+        "on the map (the correspondence of /v1/measure)."
+    )
+    y: list[float] = Field(description="The layout's y, likewise.")
+
+
+class ZoneSites(Answer):
+    name: str = Field(description="The zone's name; 'region' for density_per_cm2.")
+    area_cm2: float = Field(description="The zone's surface area, cm² (as /v1/measure's).")
+    open_area_cm2: float = Field(
+        description="The part of it sites may go on: without the triangles the validation "
+        "flags, unless allow_flagged."
+    )
+    density_per_cm2: float = Field(description="The density asked for.")
+    sites: int = Field(description="Sites placed in the zone.")
+    achieved_density_per_cm2: float = Field(
+        description="sites / open_area_cm2: the density asked for, to a site's rounding (or "
+        "scaled to params.count)."
+    )
+    spacing_mm: float | None = Field(
+        description="The least distance kept between the zone's sites and any other site "
+        "(zones are placed densest first, each keeping its own spacing); null without sites."
+    )
+
+
+class SitesResponse(Answer):
+    params: ResolvedParams
+    units: Units = Field(description="The scale used.")
+    count: int = Field(description="Sites placed.")
+    zones: list[ZoneSites]
+    min_distance: float | None = Field(
+        description="The smallest 3D distance between two sites, measured, mesh units (null "
+        "for fewer than two)."
+    )
+    min_distance_mm: float | None = Field(description="The same in mm.")
+    sites: SiteArrays
+
+    @classmethod
+    def of(cls, placed: Placed) -> SitesResponse:
+        scale, sites = placed.mm_per_unit, placed.sites
+        closest = None if not np.isfinite(placed.min_distance) else placed.min_distance
+        return cls.build(
+            params=ResolvedParams.of_region(placed.region),
+            units=Units.build(mm_per_unit=scale),
+            count=len(sites.triangles),
+            zones=[
+                ZoneSites.build(
+                    name=zone.name,
+                    area_cm2=in_cm2(zone.area, scale),
+                    open_area_cm2=in_cm2(zone.open_area, scale),
+                    density_per_cm2=zone.density_per_cm2,
+                    sites=zone.quota,
+                    achieved_density_per_cm2=zone.achieved,
+                    spacing_mm=None if zone.spacing is None else zone.spacing * scale,
+                )
+                for zone in placed.zones
+            ],
+            min_distance=closest,
+            min_distance_mm=None if closest is None else closest * scale,
+            sites=SiteArrays.build(
+                position=sites.points,
+                normal=placed.normals,
+                face=placed.region.faces[sites.triangles],
+                barycentric=sites.weights,
+                theta=placed.theta,
+                phi=placed.phi,
+                x=np.ascontiguousarray(placed.map_points[:, 0]),
+                y=np.ascontiguousarray(placed.map_points[:, 1]),
+            ),
+        )
+
+
+def sites_ply(placed: Placed, params: SitesParams, ctx: Context) -> bytes:
+    """The sites as a binary PLY point cloud: ``x y z`` (double), ``nx ny nz`` (float, unit
+    normals) and ``face`` (int, the file's triangle id) per vertex."""
+    sites = placed.sites
+    row = np.dtype(
+        [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("nx", "<f4"), ("ny", "<f4"),
+         ("nz", "<f4"), ("face", "<i4")]
+    )  # fmt: skip
+    table = np.empty(len(sites.triangles), dtype=row)
+    for k, axis in enumerate("xyz"):
+        table[axis] = sites.points[:, k]
+        table[f"n{axis}"] = placed.normals[:, k]
+    table["face"] = placed.region.faces[sites.triangles]
+    header = (
+        "ply\nformat binary_little_endian 1.0\ncomment meshflat sites\n"
+        f"element vertex {len(table)}\n"
+        "property double x\nproperty double y\nproperty double z\n"
+        "property float nx\nproperty float ny\nproperty float nz\n"
+        "property int face\nend_header\n"
+    )
+    return header.encode("ascii") + table.tobytes()
+
+
+def sites_glb(placed: Placed, params: SitesParams, ctx: Context) -> bytes:
+    """The region as /v1/flatten's GLB, with the sites as a POINTS primitive (none when no
+    site was placed: glTF has no empty accessors)."""
+    sites = (placed.sites.points, placed.normals) if len(placed.sites.points) else None
+    return glb(placed.region, params, sites)
+
+
+def _site_zones(placed: Placed) -> tuple[Drawn, ...]:
+    return tuple(
+        Drawn(zone.outline.rings, True, zone.name, f"{zone.quota:,} sites")
+        for zone in placed.zones
+        if zone.outline is not None
+    )
+
+
+#: The forms of placed sites besides JSON, by :class:`Output`.
+RENDERERS = {
+    Output.PLY: sites_ply,
+    Output.GLB: sites_glb,
+    # The map with the zones and the sites (an SVG draws up to SVG_SITES of them).
+    **map_renderers(lambda placed: placed.region, _site_zones, lambda placed: placed.map_points),
+}
+
+
+#: The density map: a grey PNG on the PNG answer's grid.
+DENSITY_MAP = PngPart(
+    "density_map",
+    "A grey PNG (8 bits) in the framing of the PNG answer: image_width by image_height "
+    "pixels, the map where the PNG answer draws it. Each region triangle takes the density of "
+    "the pixel under its centroid on the map: params.density_range maps grey 0-255 to sites "
+    "per cm².",
+    framed=True,
+    grey_only=True,
+)
+
+ROWS = (
+    MeshCapability(
+        name="sites",
+        path="/v1/sites",
+        summary="Place sites (grafts) on the region at a density",
+        description="Multipart like /v1/measure; `params` also holds the density, "
+        "`density_per_cm2` for the whole region or `zones` (as /v1/measure's, not "
+        "overlapping) each with its own, and `units` (required: densities are per cm²). "
+        "Sites are Poisson-disk samples of the surface (random sequential adsorption, "
+        "docs/math.md section 13): each zone gets its area times its density, rounded (or, "
+        "with `count`, its share of that exact total), no two sites closer than "
+        "`min_spacing_mm` or the default rule's 0.7 / sqrt(density), across triangle and zone "
+        "borders; none on flagged triangles unless `allow_flagged`; the same `seed`, the same "
+        "sites, in any pose of the mesh. Answers the sites (position, unit normal, face id, "
+        "barycentric weights, theta and phi, and the layout's x and y), the count, per zone "
+        "its area, sites and achieved density, and the smallest distance between two sites, "
+        "measured. Or, by the Accept header or params.output: a PLY point cloud with normals "
+        "and face ids, the region's GLB with the sites as a POINTS primitive, or the map with "
+        "the sites and zones (SVG or PNG).",
+        params=SitesParams,
+        parts=(MeshPart("mesh"), MASK, DENSITY_MAP),
+        input=SitesInput,
+        operation=place,
+        response=SitesResponse,
+        renderers=RENDERERS,
+    ),
+)

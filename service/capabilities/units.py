@@ -1,0 +1,99 @@
+"""A mesh's length unit: the ``units`` parameter (a unit, or a distance known in
+millimetres), millimetres per mesh unit from it, and lengths and areas in mm and cm²."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Annotated
+
+import numpy as np
+from pydantic import Field
+
+from ..encoding import Answer
+from ..errors import InvalidInput
+from .fields import PositiveNumber, Strict, Vector3
+
+#: Millimetres per mesh unit a known distance may give (areas in cm² stay finite).
+MM_PER_UNIT = (1e-3, 1e6)
+
+
+class LengthUnit(StrEnum):
+    """The length units a mesh may be in."""
+
+    MM = "mm"
+    CM = "cm"
+    M = "m"
+
+    @property
+    def mm(self) -> float:
+        """Millimetres in one unit."""
+        return {"mm": 1.0, "cm": 10.0, "m": 1000.0}[self.value]
+
+
+class KnownDistance(Strict):
+    """The mesh's scale from a distance known in millimetres."""
+
+    between: Annotated[list[Vector3], Field(min_length=2, max_length=2)] = Field(
+        description="Two world points of the mesh, [[x, y, z], [x, y, z]] (the pupils, say)."
+    )
+    mm: PositiveNumber = Field(description="Their distance in millimetres.")
+
+
+def mm_per_unit(units: LengthUnit | KnownDistance | None, field: str = "units") -> float | None:
+    """Millimetres per mesh unit, from ``units`` (the params' ``field``); None without.
+
+    Raises
+    ------
+    InvalidInput
+        The two points of a known distance coincide, or give a scale beyond
+        :data:`MM_PER_UNIT`.
+    """
+    if units is None:
+        return None
+    if not isinstance(units, KnownDistance):
+        return LengthUnit(units).mm
+    start, end = (np.asarray(point, dtype=np.float64) for point in units.between)
+    distance = float(np.linalg.norm(end - start))
+    if not distance > 0:
+        raise InvalidInput(
+            f"{field}.between",
+            "the two points coincide; give two points the known distance apart",
+        )
+    scale = units.mm / distance
+    low, high = MM_PER_UNIT
+    if not low <= scale <= high:
+        raise InvalidInput(
+            field,
+            f"{units.mm:g} mm over a distance of {distance:g} mesh units is {scale:.3g} mm per "
+            f"unit; the scale must be within {low:g} to {high:g} mm per unit (a micron to a "
+            "kilometre)",
+        )
+    return scale
+
+
+def in_mm(length: float, mm_per_unit: float | None) -> float | None:
+    """A length in mm, None without units."""
+    return None if mm_per_unit is None else length * mm_per_unit
+
+
+def in_cm2(area: float, mm_per_unit: float | None) -> float | None:
+    """An area in cm², None without units."""
+    return None if mm_per_unit is None else area * mm_per_unit**2 / 100.0
+
+
+def area_text(area: float, mm_per_unit: float | None) -> str:
+    """An area as a picture labels it: cm² with units, mesh units² without."""
+    if mm_per_unit is None:
+        return f"{area:.4g} units²"
+    return f"{area * mm_per_unit**2 / 100.0:.2f} cm²"
+
+
+def length_text(length: float, mm_per_unit: float | None) -> str:
+    """A length as a picture labels it: mm with units, mesh units without."""
+    if mm_per_unit is None:
+        return f"{length:.4g} units"
+    return f"{length * mm_per_unit:.1f} mm"
+
+
+class Units(Answer):
+    mm_per_unit: float = Field(description="Millimetres per mesh unit, as params.units gives it.")

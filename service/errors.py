@@ -1,0 +1,111 @@
+"""The use-cases' own refusals, beside the core's :class:`~transforms.TransformInputError`,
+and where the fields they name lie in a request (:class:`ErrorPlaces`).
+
+They know no HTTP: :func:`service.problems.problem_of` turns each into its problem+json
+answer, placing ``field`` in the request the way it places the core's fields (a parameter
+under ``params.`` for a mesh route, a file part by its own name).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from transforms.errors import MAX_LISTED
+
+
+class InvalidInput(Exception):
+    """An input the service cannot use, which only the service can tell is wrong (the file
+    lacks what the region asks for, two zones overlap, a registration did not hold).
+
+    Attributes
+    ----------
+    field : str, the parameter (dotted, as in ``zones.1.outer``) or file part at fault
+    message : str, what is wrong and what would do, in words
+    name : str or None, the name the client gave the item (a zone's), shown beside the field
+    indices : tuple of int, the offending vertex, face or point ids, if any
+    """
+
+    def __init__(
+        self, field: str, message: str, *, name: str | None = None, indices: Sequence[int] = ()
+    ) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field, self.message, self.name = field, message, name
+        self.indices = tuple(int(i) for i in indices[:MAX_LISTED])
+
+
+class OverLimit(Exception):
+    """More items than a setting of the service allows (query points, drawn points, sites).
+
+    Attributes
+    ----------
+    field : str, the parameter that holds them
+    count, limit : int
+    setting : str, the environment variable that sets the limit
+    """
+
+    def __init__(self, field: str, count: int, limit: int, setting: str) -> None:
+        super().__init__(f"{field}: {count:,} items; the limit is {limit:,} ({setting})")
+        self.field, self.count, self.limit, self.setting = field, count, limit, setting
+
+
+def check_count(count: int, limit: int, field: str, setting: str = "MESHFLAT_MAX_POINTS") -> None:
+    """Refuse more than ``limit`` items in ``field``.
+
+    Raises
+    ------
+    OverLimit
+        ``count`` is above ``limit``.
+    """
+    if count > limit:
+        raise OverLimit(field, count, limit, setting)
+
+
+class UnreadablePart(Exception):
+    """A file part that could not be read: ``error`` is the reader's
+    (:class:`~service.meshio.MeshFormatError`, a mesh beyond a limit included), ``part`` the
+    form's part (or the command line's argument) it came in."""
+
+    def __init__(self, part: str, error: Exception) -> None:
+        super().__init__(f"{part}: {error}")
+        self.part, self.error = part, error
+
+
+@dataclass(frozen=True)
+class ErrorPlaces:
+    """Where the fields a core error names lie in a request.
+
+    Attributes
+    ----------
+    prefix : where the parameters are (``params.`` for a multipart form's JSON part)
+    parameters : the names of the parameters (a dotted field counts by its first part);
+        None: every field is one
+    data : the part every other field is about (the uploaded ``mesh``)
+    """
+
+    prefix: str = ""
+    parameters: frozenset[str] | None = None
+    data: str = ""
+
+    def of(self, name: str) -> str:
+        """Where a core error's field lies: a parameter, or else the uploaded data (the core
+        names its arguments, and a mesh's arrays are the data's)."""
+        name = _NESTED.get(name, name)
+        if self.parameters is None or name.partition(".")[0] in self.parameters:
+            return f"{self.prefix}{name}"
+        return self.data
+
+    def named(self, name: str) -> str:
+        """Where a use-case's field lies: a parameter, or else what it names itself (a file
+        part, the answer's sites)."""
+        if self.parameters is None or name.partition(".")[0] in self.parameters:
+            return f"{self.prefix}{name}"
+        return name
+
+
+#: The core's arguments that are parts of a request field: the pole and up of a rotation.
+_NESTED = {"pole": "rotation.pole", "up": "rotation.up"}
+
+
+#: A JSON body: every field is the body's own.
+JSON_BODY = ErrorPlaces()

@@ -12,10 +12,11 @@ It starts from choices that can be explained one by one: the centre is the kerne
 point (its Chebyshev centre), the pole the middle of the largest cap that holds no region
 direction seen from there (:mod:`.emptycap`), the roll the rule of :func:`roll_axis`, sigma
 the best of a 1D search with the cap inside the empty cap; then it refines the free ones
-together (Nelder-Mead). The search works on an area-weighted sample of the faces
-(:mod:`.sampling`) in a frame built from the starting choice, so its path does not depend on
-how the mesh is posed; the answer is checked, and its energy and margins reported, on every
-face. Any of the three may be fixed by the caller.
+together (quasi-Newton steps: scipy's L-BFGS-B, the gradients in closed form, by forward
+differences for the separable method). The search works on an area-weighted sample of the
+faces (:mod:`.sampling`) in a frame built from the starting choice, so its path does not
+depend on how the mesh is posed; the answer is checked, and its energy and margins
+reported, on every face. Any of the three may be fixed by the caller.
 """
 
 from __future__ import annotations

@@ -22,8 +22,8 @@ from transforms import (
     fit_region,
     flatten_region,
 )
-from transforms.emptycap import largest_empty_cap
 from transforms.fit import SIGMA_SEARCH
+from transforms.fit.emptycap import largest_empty_cap
 
 from .conftest import grid_mesh, load_sample, scalp, sphere_mesh
 
@@ -214,7 +214,7 @@ def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest
     weight) plus the energy of the faces seen from the front measured alone, so their own
     energies play no part."""
     from transforms.fit import _Candidate, _Problem
-    from transforms.objective import BACKFACING_WEIGHT
+    from transforms.fit.objective import BACKFACING_WEIGHT
 
     vertices, faces = load_sample("nefertiti-lowres.obj")
     centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2

@@ -14,7 +14,7 @@ direction seen from there (:mod:`.emptycap`), the roll the rule of :func:`roll_a
 the best of a 1D search with the cap inside the empty cap; then it refines the free ones
 together (quasi-Newton steps: scipy's L-BFGS-B, the gradients in closed form, by forward
 differences for the separable method). The search works on an area-weighted sample of the
-faces (:mod:`.sampling`) in a frame built from the starting choice, so its path does not
+faces (:mod:`transforms.sampling`) in a frame built from the starting choice, so its path does not
 depend on how the mesh is posed; the answer is checked, and its energy and margins
 reported, on every face. Any of the three may be fixed by the caller.
 """
@@ -28,18 +28,18 @@ from functools import cached_property
 import numpy as np
 from scipy.optimize import minimize
 
-from .arrays import as_direction, as_faces, as_points, as_vector, blocks, cross_rows, unit_rows
-from .cap import PoleCap
-from .chart import Chart, Method
+from ..arrays import as_direction, as_faces, as_points, as_vector, blocks, cross_rows, unit_rows
+from ..cap import PoleCap
+from ..chart import Chart, Method
+from ..errors import TransformInputError, listed_rows
+from ..frames import Frame
+from ..layouts import Layout
+from ..region import FlatRegion, flatten_region
+from ..sampling import area_sample
+from ..viewpoint import check_center_sees_area
 from .emptycap import cap_radius, largest_empty_cap
-from .errors import TransformInputError, listed_rows
-from .frames import Frame
 from .kernel import Kernel, chebyshev_center, kernel_planes
-from .layouts import Layout
 from .objective import Candidates, FaceEnergy, Motion, region_energy
-from .region import FlatRegion, flatten_region
-from .sampling import area_sample
-from .viewpoint import check_center_sees_area
 
 #: Faces the search evaluates each candidate on (the slide on fewer), and vertices the pole's
 #: hull is built from.
@@ -207,7 +207,7 @@ def fit_region(
     fixed : FitFixed, default: choose all
     bounds : FitBounds, default: ``FitBounds()``
     method : the chart's method; ``standard`` has no sigma
-    layout : the layout whose energy is minimised and returned (:mod:`.layouts`)
+    layout : the layout whose energy is minimised and returned (:mod:`transforms.layouts`)
     threads : int
 
     Returns
@@ -217,7 +217,7 @@ def fit_region(
     Raises
     ------
     TransformInputError
-        Bad input (as :func:`.region.flatten_region`), or a sigma for ``standard``.
+        Bad input (as :func:`transforms.region.flatten_region`), or a sigma for ``standard``.
     """
     fixed = fixed or FitFixed()
     bounds = bounds or FitBounds()
@@ -1003,8 +1003,9 @@ class _Coordinates:
 
 def _rotations_from_pole_up(poles: np.ndarray, up: np.ndarray) -> np.ndarray:
     """(k, 3, 3) world-to-local rotations with local ``+Y`` along ``poles`` (k, 3) and the
-    part of ``up`` (3,) orthogonal to it as local ``+Z``: :meth:`.Frame.from_pole_up` for a
-    batch (``up`` is the start's local Z, far from parallel to a slightly tilted pole)."""
+    part of ``up`` (3,) orthogonal to it as local ``+Z``:
+    :meth:`transforms.Frame.from_pole_up` for a batch (``up`` is the start's local Z, far
+    from parallel to a slightly tilted pole)."""
     y_axes = poles / np.linalg.norm(poles, axis=1, keepdims=True)
     x_axes = cross_rows(y_axes, up)
     x_axes /= np.linalg.norm(x_axes, axis=1, keepdims=True)

@@ -213,8 +213,8 @@ def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest
     validation judges it). The objective is their share of the sample's area (times the
     weight) plus the energy of the faces seen from the front measured alone, so their own
     energies play no part."""
-    from transforms.fit import _Candidate, _Problem
     from transforms.fit.objective import BACKFACING_WEIGHT
+    from transforms.fit.problem import _Candidate, _Problem
 
     vertices, faces = load_sample("nefertiti-lowres.obj")
     centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
@@ -236,7 +236,7 @@ def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest
 def test_a_large_region_explains_with_energies_measured_on_runs_of_its_faces(monkeypatch):
     """Beyond EXPLAIN_FACES the start's energy and the reported sigmas' are estimated on
     runs of consecutive faces; the answer's own energy stays exact."""
-    import transforms.fit as fit_module
+    import transforms.fit.problem as fit_module
 
     vertices, faces = scalp()
     exact = fit_region(vertices, faces)

@@ -233,16 +233,12 @@ def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest
     assert problem.energy(_Candidate(centre, rotation, 0.5)) == pytest.approx(expected, rel=1e-9)
 
 
-def test_a_large_region_explains_with_energies_measured_on_runs_of_its_faces(monkeypatch):
+def test_a_large_region_explains_with_energies_measured_on_runs_of_its_faces():
     """Beyond EXPLAIN_FACES the start's energy and the reported sigmas' are estimated on
     runs of consecutive faces; the answer's own energy stays exact."""
-    import transforms.fit.problem as fit_module
-
     vertices, faces = scalp()
     exact = fit_region(vertices, faces)
-    monkeypatch.setattr(fit_module, "EXPLAIN_FACES", 400)
-    monkeypatch.setattr(fit_module, "_EXPLAIN_RUN", 16)
-    estimated = fit_region(vertices, faces)
+    estimated = fit_region(vertices, faces, explain_faces=400, explain_run=16)
     e, x = estimated.explanation, exact.explanation
     assert e.energy_end == x.energy_end
     assert e.energy_end == estimated.region.distortion.isometric.mean

@@ -48,6 +48,7 @@ from .explain import (
     _Seen,
 )
 from .problem import (
+    _EXPLAIN_RUN,
     COARSE_SAMPLE_FACES,
     EXPLAIN_FACES,
     HULL_VERTICES,
@@ -86,6 +87,8 @@ def fit_region(
     method: str | Method = Method.DISTORTED,
     layout: Layout | str = Layout.THETA_PHI,
     threads: int = 1,
+    explain_faces: int = EXPLAIN_FACES,
+    explain_run: int = _EXPLAIN_RUN,
 ) -> Fit:
     """Choose the parameters ``fixed`` leaves as None and flatten the region with them.
 
@@ -104,6 +107,11 @@ def fit_region(
     method : the chart's method; ``standard`` has no sigma
     layout : the layout whose energy is minimised and returned (:mod:`transforms.layouts`)
     threads : int
+    explain_faces, explain_run : int >= 1, where the explanation's energies (the start's
+        and at ``REPORTED_SIGMAS``) are measured: on every face of a region of up to
+        ``explain_faces``, beyond that on every k-th run of ``explain_run`` consecutive
+        faces, about ``explain_faces`` in all (the answer's own energy is always measured
+        on every face)
 
     Returns
     -------
@@ -112,11 +120,21 @@ def fit_region(
     Raises
     ------
     TransformInputError
-        Bad input (as :func:`transforms.region.flatten_region`), or a sigma for ``standard``.
+        Bad input (as :func:`transforms.region.flatten_region`), a sigma for ``standard``,
+        or ``explain_faces`` or ``explain_run`` below 1.
     """
     fixed = fixed or FitFixed()
     bounds = bounds or FitBounds()
-    problem = _Problem.checked(vertices, faces, fixed, method, threads, layout)
+    problem = _Problem.checked(
+        vertices,
+        faces,
+        fixed,
+        method,
+        threads,
+        layout,
+        explain_faces=explain_faces,
+        explain_run=explain_run,
+    )
     search = _start(problem, fixed, bounds)
     start = search.initial
     if search.move_center:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from numbers import Integral
 
 import numpy as np
 
@@ -52,8 +53,9 @@ _TIE = 1e-9
 #: points, zooms and points per zoom.
 _SLIDE_SIGMA_SEARCH = (9, 1, 5)
 #: Faces the explanation's energies (the start's and at ``REPORTED_SIGMAS``) are measured
-#: on: every face of a region up to this many, beyond it every k-th (the answer's own
-#: energy is always measured on every face).
+#: on: every face of a region up to this many, beyond it every k-th run of ``_EXPLAIN_RUN``
+#: (the answer's own energy is always measured on every face). The defaults of
+#: :func:`transforms.fit.fit_region`'s ``explain_faces`` and ``explain_run``.
 EXPLAIN_FACES = 16384
 _EXPLAIN_RUN = 128
 
@@ -119,13 +121,25 @@ class _Candidate:
 
 
 class _Problem:
-    """A region, its kernel planes, and its sample: what the search evaluates."""
+    """A region, its kernel planes, and its sample: what the search evaluates.
+
+    ``explain_faces`` and ``explain_run``: where :meth:`region_energies` measures the region
+    (as :func:`transforms.fit.fit_region` takes them)."""
 
     def __init__(
-        self, points: np.ndarray, faces: np.ndarray, method: Method, threads: int, layout: Layout
+        self,
+        points: np.ndarray,
+        faces: np.ndarray,
+        method: Method,
+        threads: int,
+        layout: Layout,
+        *,
+        explain_faces: int = EXPLAIN_FACES,
+        explain_run: int = _EXPLAIN_RUN,
     ):
         self.points, self.faces, self.method, self.threads = points, faces, method, threads
         self.layout = layout
+        self.explain_faces, self.explain_run = explain_faces, explain_run
         self.used = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(points)))
         self.region_points = points[self.used]
         self.planes = kernel_planes(points, faces)
@@ -142,9 +156,23 @@ class _Problem:
         self.hull_points = self.region_points[self.hull_rows]
 
     @classmethod
-    def checked(cls, vertices, faces, fixed: FitFixed, method, threads: int, layout) -> _Problem:
+    def checked(
+        cls,
+        vertices,
+        faces,
+        fixed: FitFixed,
+        method,
+        threads: int,
+        layout,
+        *,
+        explain_faces: int = EXPLAIN_FACES,
+        explain_run: int = _EXPLAIN_RUN,
+    ) -> _Problem:
         """The problem of a caller's region, its input checked (as
         :func:`transforms.fit.fit_region`)."""
+        for name, value in (("explain_faces", explain_faces), ("explain_run", explain_run)):
+            if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
+                raise TransformInputError(name, f"must be a whole number >= 1, got {value!r}")
         method = Method(method)
         points = as_points(vertices, "vertices")
         faces = as_faces(faces, len(points))
@@ -156,7 +184,15 @@ class _Problem:
             )
         if fixed.center is not None:
             check_center_sees_area(points, faces, as_vector(fixed.center, "center"))
-        return cls(points, faces, method, threads, Layout(layout))
+        return cls(
+            points,
+            faces,
+            method,
+            threads,
+            Layout(layout),
+            explain_faces=explain_faces,
+            explain_run=explain_run,
+        )
 
     @cached_property
     def coarse(self) -> FaceEnergy:
@@ -217,14 +253,14 @@ class _Problem:
     def region_energies(self, candidates: list[_Candidate]) -> np.ndarray:
         """(k,) the energy of the region for each candidate (docs/math.md, section 7), as
         :meth:`flatten` would report it, without the validation: on every face up to
-        ``EXPLAIN_FACES``, beyond that on every k-th run of ``_EXPLAIN_RUN`` faces in the
+        ``explain_faces``, beyond that on every k-th run of ``explain_run`` faces in the
         region's order (a ratio estimate of the area-weighted mean, its weights unbiased)."""
-        faces = self.faces
-        if len(faces) > EXPLAIN_FACES:
+        faces, most, run = self.faces, self.explain_faces, self.explain_run
+        if len(faces) > most:
             # Every k-th run of consecutive faces: neighbours in a file share vertices, so
             # the runs cost fewer vertices' angles than single faces would.
-            runs = np.arange(0, len(faces), _EXPLAIN_RUN * -(-len(faces) // EXPLAIN_FACES))
-            picked = (runs[:, None] + np.arange(_EXPLAIN_RUN)).ravel()
+            runs = np.arange(0, len(faces), run * -(-len(faces) // most))
+            picked = (runs[:, None] + np.arange(run)).ravel()
             faces = faces[picked[picked < len(faces)]]
         used = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(self.points)))
         position = np.zeros(len(self.points), dtype=np.int64)

@@ -1,4 +1,4 @@
-"""The largest cap free of region directions, where the pole goes (transforms.emptycap;
+"""The largest cap free of region directions, where the pole goes (transforms.fit.emptycap;
 docs/math.md, section 9)."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from transforms.emptycap import largest_empty_cap
+from transforms.fit.emptycap import largest_empty_cap
 
 from .conftest import sphere_mesh
 

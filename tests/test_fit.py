@@ -22,8 +22,8 @@ from transforms import (
     fit_region,
     flatten_region,
 )
-from transforms.emptycap import largest_empty_cap
 from transforms.fit import SIGMA_SEARCH
+from transforms.fit.emptycap import largest_empty_cap
 
 from .conftest import grid_mesh, load_sample, scalp, sphere_mesh
 
@@ -213,8 +213,8 @@ def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest
     validation judges it). The objective is their share of the sample's area (times the
     weight) plus the energy of the faces seen from the front measured alone, so their own
     energies play no part."""
-    from transforms.fit import _Candidate, _Problem
-    from transforms.objective import BACKFACING_WEIGHT
+    from transforms.fit.objective import BACKFACING_WEIGHT
+    from transforms.fit.problem import _Candidate, _Problem
 
     vertices, faces = load_sample("nefertiti-lowres.obj")
     centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
@@ -233,16 +233,12 @@ def test_the_objective_judges_a_centre_by_what_it_sees_from_behind_then_the_rest
     assert problem.energy(_Candidate(centre, rotation, 0.5)) == pytest.approx(expected, rel=1e-9)
 
 
-def test_a_large_region_explains_with_energies_measured_on_runs_of_its_faces(monkeypatch):
+def test_a_large_region_explains_with_energies_measured_on_runs_of_its_faces():
     """Beyond EXPLAIN_FACES the start's energy and the reported sigmas' are estimated on
     runs of consecutive faces; the answer's own energy stays exact."""
-    import transforms.fit as fit_module
-
     vertices, faces = scalp()
     exact = fit_region(vertices, faces)
-    monkeypatch.setattr(fit_module, "EXPLAIN_FACES", 400)
-    monkeypatch.setattr(fit_module, "_EXPLAIN_RUN", 16)
-    estimated = fit_region(vertices, faces)
+    estimated = fit_region(vertices, faces, explain_faces=400, explain_run=16)
     e, x = estimated.explanation, exact.explanation
     assert e.energy_end == x.energy_end
     assert e.energy_end == estimated.region.distortion.isometric.mean

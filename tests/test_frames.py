@@ -92,9 +92,20 @@ def test_from_matrix_refuses_non_rotations(matrix, says):
 
 
 def test_tolerance_is_1e9():
-    nearly = np.eye(3)
-    nearly[0, 1] = 4e-10
-    Frame.from_matrix(nearly)  # within 1e-9: accepted
+    """Off by e in one entry, R R^T differs from I by e (and e^2, lost to rounding) with the
+    determinant still 1: accepted up to 1e-9, refused beyond it."""
+    for off in (4e-10, 9e-10):  # within 1e-9: accepted as given
+        nearly = np.eye(3)
+        nearly[0, 1] = off
+        frame = Frame.from_matrix(nearly)
+        np.testing.assert_array_equal(frame.rotation, nearly)
+        assert np.abs(frame.rotation @ frame.rotation.T - np.eye(3)).max() <= 1e-9
+    for off in (1.1e-9, 4e-9):  # beyond 1e-9: refused
+        beyond = np.eye(3)
+        beyond[0, 1] = off
+        with pytest.raises(TransformInputError, match="not orthonormal") as caught:
+            Frame.from_matrix(beyond)
+        assert caught.value.field == "rotation"
 
 
 def test_frames_are_immutable():

@@ -1,10 +1,10 @@
-"""The kernel of a region and its deepest point (transforms.kernel; docs/math.md, section 9)."""
+"""The kernel of a region and its deepest point (transforms.fit.kernel; docs/math.md, section 9)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from transforms.kernel import chebyshev_center, kernel_planes
+from transforms.fit.kernel import chebyshev_center, kernel_planes
 
 from .conftest import sphere_mesh
 

@@ -1,4 +1,4 @@
-"""The fit's objective for many candidates at once (transforms.objective; docs/math.md,
+"""The fit's objective for many candidates at once (transforms.fit.objective; docs/math.md,
 sections 7 and 9): it agrees with what a flatten measures, one candidate or many, and its
 slope agrees with finite differences."""
 
@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from transforms import Chart, Frame, Layout, Method, PoleCap, flatten_region
-from transforms.objective import Candidates, FaceEnergy, Motion, region_energy
+from transforms.fit.objective import Candidates, FaceEnergy, Motion, region_energy
 
 from .conftest import scalp
 

@@ -61,11 +61,12 @@ def test_where_triangles_overlap_the_later_one_holds_the_centre():
     assert ids[3, 3] == 1
 
 
-def test_the_answer_does_not_depend_on_chunks_or_threads(monkeypatch):
+def test_the_answer_does_not_depend_on_chunks_or_threads():
     corners = tiling(40, 30, 200, 150, 0.3)
     whole = pixels.face_ids(corners, 150, 200)
-    monkeypatch.setattr(pixels, "CHUNK_PAIRS", 7)
-    np.testing.assert_array_equal(pixels.face_ids(corners, 150, 200, threads=2), whole)
+    np.testing.assert_array_equal(
+        pixels.face_ids(corners, 150, 200, threads=2, chunk_pairs=7), whole
+    )
 
 
 def test_means_of_a_linear_image_are_its_value_at_the_centroid():

@@ -14,6 +14,7 @@ area in 3D or in the layout) have no affine map and are left out; the validation
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,10 @@ _SAMPLE = 32768
 _BRACKET = 0.004
 _P95 = 0.95
 _BINS = 1024
+
+#: Values around the ``q`` quantile of a weighted sample: ``(sample, weights, q)`` to
+#: ``(low, high)`` (:func:`_bracket`).
+Bracket = Callable[[np.ndarray, np.ndarray, float], tuple[float, float]]
 
 
 @dataclass(frozen=True)
@@ -106,7 +111,7 @@ def face_distortion(measures: FaceMeasures) -> FaceDistortion:
     )
 
 
-def distortion(measures: FaceMeasures) -> Distortion:
+def distortion(measures: FaceMeasures, *, bracket: Bracket | None = None) -> Distortion:
     """Area-weighted mean, 95th percentile and maximum of the three measures.
 
     One pass over the faces computes each measure block by block and keeps only its sums,
@@ -116,6 +121,9 @@ def distortion(measures: FaceMeasures) -> Distortion:
     Parameters
     ----------
     measures : FaceMeasures, from :func:`.faces.measure_faces`
+    bracket : how the 95th percentile is bracketed from the sample, here and in
+        :func:`weighted_quantile` when a bracket misses; None: :func:`_bracket`. Any bracket
+        gives the same answer, a good one sooner.
 
     Returns
     -------
@@ -125,8 +133,9 @@ def distortion(measures: FaceMeasures) -> Distortion:
     weights = measures.double_area  # any common factor cancels in means and quantiles
     total = float(weights[_rows_of(measured, slice(None), len(measures))].sum())
     sample = measured[:: max(measured.size // _SAMPLE, 1)]
+    bracket = _bracket if bracket is None else bracket
     brackets = [
-        _bracket(values, weights[sample], _P95)
+        bracket(values, weights[sample], _P95)
         for values in _measures_of(measures, sample, squared_scale)
     ]
     sums, largest, below = np.zeros(3), np.full(3, -np.inf), np.zeros(3)
@@ -151,7 +160,7 @@ def distortion(measures: FaceMeasures) -> Distortion:
         else:  # the sample misled: do it the long way
             per_face = face_distortion(measures)
             values = (per_face.conformal, per_face.area, per_face.isometric)[i]
-            p95.append(weighted_quantile(values, per_face.weights, _P95))
+            p95.append(weighted_quantile(values, per_face.weights, _P95, bracket=bracket))
     conformal, area, isometric = (
         Summary(mean=float(sums[i] / total), p95=p95[i], max=float(largest[i])) for i in range(3)
     )
@@ -214,7 +223,9 @@ def _measures_of(
     return conformal, area, squares
 
 
-def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
+def weighted_quantile(
+    values: np.ndarray, weights: np.ndarray, q: float, *, bracket: Bracket | None = None
+) -> float:
     """The smallest value ``v`` with at least the fraction ``q`` of the weight on values
     ``<= v``.
 
@@ -228,6 +239,8 @@ def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> floa
     values : (k,) float, finite, k >= 1
     weights : (k,) float, >= 0, positive sum
     q : float in [0, 1]
+    bracket : how the sample brackets the answer; None: :func:`_bracket`. Any bracket gives
+        the same answer (one that misses falls back to the histogram), a good one sooner.
     """
     values = np.asarray(values, dtype=np.float64)
     weights = np.asarray(weights, dtype=np.float64)
@@ -239,7 +252,8 @@ def weighted_quantile(values: np.ndarray, weights: np.ndarray, q: float) -> floa
     if len(values) <= _SORT_BELOW:
         return _sorted_quantile(values, weights, target)
     stride = max(len(values) // _SAMPLE, 1)
-    low, high = _bracket(values[::stride], weights[::stride], q)
+    bracket = _bracket if bracket is None else bracket
+    low, high = bracket(values[::stride], weights[::stride], q)
     below, inside = 0.0, []
     for block in blocks(len(values)):
         v, w = values[block], weights[block]

@@ -52,8 +52,16 @@ class Runs:
         return cls(*columns, height, width)
 
     @classmethod
-    def chunks(cls, corners: np.ndarray, height: int, width: int, threads: int = 1):
-        """The runs of ``corners``, a chunk of about ``CHUNK_PAIRS`` (triangle, row) pairs at
+    def chunks(
+        cls,
+        corners: np.ndarray,
+        height: int,
+        width: int,
+        threads: int = 1,
+        *,
+        chunk_pairs: int = CHUNK_PAIRS,
+    ):
+        """The runs of ``corners``, a chunk of about ``chunk_pairs`` (triangle, row) pairs at
         a time, in ascending order of triangles, ``threads`` chunks found at once: what is
         held stays bounded, however large the triangles are on the grid."""
         corners = np.asarray(corners, dtype=np.float64)
@@ -64,7 +72,7 @@ class Runs:
         ends = np.cumsum(rows)
         cuts, start = [], 0
         while start < len(corners):
-            budget = (ends[start - 1] if start else 0) + CHUNK_PAIRS
+            budget = (ends[start - 1] if start else 0) + chunk_pairs
             stop = max(int(np.searchsorted(ends, budget, side="right")), start + 1)
             cuts.append((start, stop))
             start = stop
@@ -108,10 +116,11 @@ class Runs:
             weights = np.asarray(values, dtype=np.float64)
             out[low:high] += np.bincount(self.triangle - low, weights, minlength=high - low)
 
-    def pixels(self):
-        """Chunks of (flat pixels, their triangles), run after run in order."""
-        for part in range(0, len(self.start), CHUNK_PAIRS):
-            yield self._pixels(np.arange(part, min(part + CHUNK_PAIRS, len(self.start))))
+    def pixels(self, *, chunk_pairs: int = CHUNK_PAIRS):
+        """Chunks of (flat pixels, their triangles), run after run in order, ``chunk_pairs``
+        runs a chunk."""
+        for part in range(0, len(self.start), chunk_pairs):
+            yield self._pixels(np.arange(part, min(part + chunk_pairs, len(self.start))))
 
     def _pixels(self, runs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The flat pixels of ``runs`` and their triangles."""
@@ -128,7 +137,14 @@ def _prefix(image: np.ndarray) -> np.ndarray:
     return prefix
 
 
-def face_ids(corners: np.ndarray, height: int, width: int, threads: int = 1) -> np.ndarray:
+def face_ids(
+    corners: np.ndarray,
+    height: int,
+    width: int,
+    threads: int = 1,
+    *,
+    chunk_pairs: int = CHUNK_PAIRS,
+) -> np.ndarray:
     """(height, width) int32: the triangle holding each pixel's centre, -1 where none does
     (the later one where several do).
 
@@ -136,10 +152,14 @@ def face_ids(corners: np.ndarray, height: int, width: int, threads: int = 1) -> 
     ----------
     corners : (m, 3, 2) float, the triangles' corners ``(x, y)`` = ``(column, row)`` in pixel
         units
+    chunk_pairs : int, (triangle, row) pairs found at once, and runs painted at once
+        (:meth:`Runs.chunks`, :meth:`Runs.pixels`): it bounds the memory held, never the
+        answer
     """
     ids = np.full(height * width, -1, dtype=np.int32)
-    for runs in Runs.chunks(corners, height, width, threads):  # later ones paint over
-        for pixel, triangle in runs.pixels():
+    # Later triangles paint over earlier ones.
+    for runs in Runs.chunks(corners, height, width, threads, chunk_pairs=chunk_pairs):
+        for pixel, triangle in runs.pixels(chunk_pairs=chunk_pairs):
             ids[pixel] = triangle
     return ids.reshape(height, width)
 

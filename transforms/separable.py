@@ -28,6 +28,7 @@ in ``rtsafe``): the bracket at least halves every second step, so it always conv
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from functools import partial
 
 import numpy as np
@@ -44,14 +45,21 @@ HALLEY_RTOL = 1e-6
 #: The bracket halves at least every second step; 2 * 53 steps reach the float spacing at pi.
 MAX_ITERATIONS = 120
 
+#: A starting guess for the polar angle: ``(gamma, s, k)`` to ``theta`` (module docstring).
+StartingGuess = Callable[[np.ndarray, np.ndarray, float], np.ndarray]
 
-def separable_forward(points, rho: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+
+def separable_forward(
+    points, rho: float, *, starting_guess: StartingGuess | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Separable coordinates of local points.
 
     Parameters
     ----------
     points : (n, 3) float, local frame
     rho : float, pole angle in radians, in ``[cap.RHO_MIN, cap.RHO_MAX]``
+    starting_guess : where the root search for ``theta`` starts (:func:`separable_theta`);
+        None: :func:`_starting_guess`
 
     Returns
     -------
@@ -64,11 +72,18 @@ def separable_forward(points, rho: float) -> tuple[np.ndarray, np.ndarray, np.nd
     TransformInputError
         Non-finite coordinates, a point at the centre, or ``rho`` out of range.
     """
-    return points_to_angles(as_points(points), partial(separable_angles, rho=check_rho(rho)))
+    angles_of = partial(separable_angles, rho=check_rho(rho), starting_guess=starting_guess)
+    return points_to_angles(as_points(points), angles_of)
 
 
 def separable_angles(
-    x: np.ndarray, y: np.ndarray, z: np.ndarray, r: np.ndarray, rho: float
+    x: np.ndarray,
+    y: np.ndarray,
+    z: np.ndarray,
+    r: np.ndarray,
+    rho: float,
+    *,
+    starting_guess: StartingGuess | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Both separable angles of already checked local coordinates.
 
@@ -77,16 +92,27 @@ def separable_angles(
     x, y, z : (n,) float, local coordinates
     r : (n,) float, ``|q| > 0``
     rho : float, checked pole angle
+    starting_guess : as for :func:`separable_theta`
 
     Returns
     -------
     theta, phi : (n,) float
     """
     phi = half_open_azimuth(np.arctan2(y - r * math.cos(rho), x))
-    return separable_theta(x / r, np.hypot(y, z) / r, np.arctan2(z, y), rho), phi
+    theta = separable_theta(
+        x / r, np.hypot(y, z) / r, np.arctan2(z, y), rho, starting_guess=starting_guess
+    )
+    return theta, phi
 
 
-def separable_theta(u_x: np.ndarray, s: np.ndarray, beta: np.ndarray, rho: float) -> np.ndarray:
+def separable_theta(
+    u_x: np.ndarray,
+    s: np.ndarray,
+    beta: np.ndarray,
+    rho: float,
+    *,
+    starting_guess: StartingGuess | None = None,
+) -> np.ndarray:
     """The polar angle: the root of ``G`` (module docstring) for every direction at once.
 
     Parameters
@@ -95,6 +121,10 @@ def separable_theta(u_x: np.ndarray, s: np.ndarray, beta: np.ndarray, rho: float
     s : (n,) float, ``sqrt(u_y^2 + u_z^2)``
     beta : (n,) float, ``atan2(u_z, u_y)``
     rho : float, pole angle in radians
+    starting_guess : callable ``(gamma, s, k) -> theta`` on (n,) arrays (``gamma = rho -
+        beta`` as below, ``k = 1 - 2 rho / pi``), where the search starts; any guess in
+        ``[0, pi]`` converges (the bracket starts as ``[0, pi]``), a good one sooner.
+        None: :func:`_starting_guess`
 
     Returns
     -------
@@ -105,7 +135,7 @@ def separable_theta(u_x: np.ndarray, s: np.ndarray, beta: np.ndarray, rho: float
     # gamma = rho - beta, taken in (2 rho - 2 pi, 2 rho] so that A = gamma + k theta.
     gamma = rho - beta
     gamma = np.where(gamma > 2.0 * rho, gamma - 2.0 * math.pi, gamma)
-    theta = _starting_guess(gamma, s, k)
+    theta = (_starting_guess if starting_guess is None else starting_guess)(gamma, s, k)
 
     result = np.empty_like(theta)
     active = np.arange(theta.size)

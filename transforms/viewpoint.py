@@ -6,7 +6,7 @@ region seen from a point of its own plane: its centroid always is one, its bound
 centre is one when the plane is a plane of the axes or the region is symmetric in it, and
 so is any point of its surface), nothing can be mapped, and the centre is at fault, not
 the faces. A region whose faces have no area in 3D is a different fault, named by the
-faces (:func:`.kernel.kernel_planes`, :mod:`.metrics`).
+faces (:func:`.fit.kernel.kernel_planes`, :mod:`.metrics`).
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ import math
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from .arrays import unit_rows
+from ..arrays import unit_rows
 
 
 def largest_empty_cap(directions: np.ndarray) -> tuple[np.ndarray, float]:

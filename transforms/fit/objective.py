@@ -22,13 +22,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .arrays import unit_scale
-from .chart import Method
-from .faces import DEGENERATE_RTOL
-from .layouts import MERCATOR_THETA_MARGIN, Layout, measured_second
-from .separable import separable_angles
-from .spherical import MIN_RADIUS, angles
-from .warp import plus_minus
+from ..arrays import unit_scale
+from ..chart import Method
+from ..faces import DEGENERATE_RTOL
+from ..layouts import MERCATOR_THETA_MARGIN, Layout, measured_second
+from ..separable import separable_angles
+from ..spherical import MIN_RADIUS, angles
+from ..warp import plus_minus
 
 #: What a candidate pays for each unit of the fraction of the area it sees from behind
 #: (1% costs 10, more than any energy difference the faces seen from the front make).
@@ -139,7 +139,7 @@ class FaceEnergy:
     points : (n, 3) float, world coordinates of the vertices the faces use (only those)
     faces : (m, 3) int, indices into ``points``
     method : the chart's method
-    layout : the layout whose energy is measured (:mod:`.layouts`)
+    layout : the layout whose energy is measured (:mod:`transforms.layouts`)
     """
 
     def __init__(self, points: np.ndarray, faces: np.ndarray, method: Method, layout: Layout):
@@ -222,8 +222,9 @@ def region_energy(
     block: int = 1 << 13,
 ) -> np.ndarray:
     """The area-weighted isometric energy of every face (docs/math.md, section 7) for each
-    candidate: what :func:`.region.flatten_region` reports as ``distortion.isometric.mean``,
-    without the validation, the percentiles or any per-face array of the region's size.
+    candidate: what :func:`transforms.region.flatten_region` reports as
+    ``distortion.isometric.mean``, without the validation, the percentiles or any per-face
+    array of the region's size.
 
     Parameters
     ----------
@@ -256,7 +257,7 @@ def region_energy(
 
 
 def _unit_scale(points: np.ndarray) -> float:
-    """:func:`.arrays.unit_scale` of the largest coordinate: the energy has no unit."""
+    """:func:`transforms.arrays.unit_scale` of the largest coordinate: the energy has no unit."""
     return unit_scale(float(np.abs(points).max()) if len(points) else 0.0)
 
 

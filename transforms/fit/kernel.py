@@ -23,10 +23,10 @@ from scipy.optimize import linprog
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .arrays import blocks, unit_scale
-from .errors import TransformInputError
-from .sampling import area_sample
-from .topology import region_edges
+from ..arrays import blocks, unit_scale
+from ..errors import TransformInputError
+from ..sampling import area_sample
+from ..topology import region_edges
 
 #: Faces in the first linear program, and the most violated faces added per round.
 _FIRST_FACES = 2048

@@ -304,7 +304,7 @@ MESH_CAPABILITIES = (
         "as a 16-bit grey PNG and the coverage mask (data: URLs in the JSON, or one 16-bit "
         "grey and alpha PNG with params.output png). Look-ups: params.output face_ids or "
         "barycentric answers the file's face id a pixel (-1 outside) and the centre's "
-        "weights in its corners, little-endian behind a 16-byte header (the README says "
+        "weights in its corners, little-endian behind a 16-byte header (docs/api.md says "
         "how to read it).",
         params=TransferParams,
         operation=operations.transfer,

@@ -929,7 +929,7 @@ class TransferParams(MeshParams, FramingParams):
         "json (application/json): the values carried; png (image/png): with values, the "
         "16-bit grey and alpha PNG of them (the alpha 65535 where a triangle holds the pixel); "
         "face_ids or barycentric (application/octet-stream): the look-up images, a "
-        "little-endian array behind a 16-byte header (the README says how to read it).",
+        "little-endian array behind a 16-byte header (docs/api.md says how to read it).",
     ) = None
 
     @field_validator("value_range")

@@ -1,5 +1,6 @@
 # meshflat: the service in a small image that runs as a non-root user on a read-only root
-# filesystem. Every setting is a MESHFLAT_* environment variable (README, "Settings").
+# filesystem. Every setting is a MESHFLAT_* environment variable (docs/operations.md,
+# "Settings").
 #
 #   docker build -t meshflat .
 #   docker run --read-only --tmpfs /tmp -p 8000:8000 -e MESHFLAT_API_KEYS=... meshflat

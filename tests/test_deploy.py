@@ -38,6 +38,13 @@ KEDA_SCHEMA = Path(__file__).parent / "schemas" / "keda-scaledobject.schema.json
 SMOKE_TEST = ROOT / "deploy" / "container-smoke-test.sh"
 #: The oldest and the newest Kubernetes the manifests are checked against.
 KUBERNETES = ("1.30.0", kubernetes_validate.latest_version())
+#: Where running in production is documented: the names and commands the manifests and the
+#: smoke test use must be the ones it gives.
+OPERATIONS_DOC = ROOT / "docs" / "operations.md"
+
+
+def operations_doc() -> str:
+    return OPERATIONS_DOC.read_text()
 
 
 def documents() -> list[dict]:
@@ -142,10 +149,10 @@ def test_the_deployment_matches_the_image_and_the_service():
     assert pod["terminationGracePeriodSeconds"] > grace
 
 
-def test_the_smoke_test_is_a_valid_script_named_in_the_readme_and_run_by_ci():
+def test_the_smoke_test_is_a_valid_script_named_in_the_docs_and_run_by_ci():
     subprocess.run(["bash", "-n", str(SMOKE_TEST)], check=True)
     name = "deploy/container-smoke-test.sh"
-    assert name in (ROOT / "README.md").read_text()
+    assert name in operations_doc()
     assert name in (ROOT / ".ci" / "run").read_text()
 
 
@@ -216,9 +223,9 @@ def test_the_keda_and_batch_manifests_are_not_applied_with_the_service():
         kinds = {doc["kind"] for doc in yaml.safe_load_all(path.read_text()) if doc}
         apart = bool(kinds & {"ScaledObject", "Job"})
         assert (path.parent != top) == apart, path
-    readme = (ROOT / "README.md").read_text()
-    assert "kubectl apply -f deploy/kubernetes/keda/" in readme
-    assert "kubectl apply -f deploy/kubernetes/batch/" in readme
+    documented = operations_doc()
+    assert "kubectl apply -f deploy/kubernetes/keda/" in documented
+    assert "kubectl apply -f deploy/kubernetes/batch/" in documented
 
 
 # -- the batch's Indexed Job -----------------------------------------------------------------
@@ -238,13 +245,13 @@ def test_the_indexed_job_shards_one_manifest_over_its_pods():
     assert args.processes == int(container["resources"]["limits"]["cpu"])
     assert JOB_INDEX_VARIABLE == "JOB_COMPLETION_INDEX"  # the variable Kubernetes sets
 
-    # The manifest and the outputs are on the data volume, a claim named in the README.
+    # The manifest and the outputs are on the data volume, a claim named in the docs.
     data = next(volume for volume in pod["volumes"] if "persistentVolumeClaim" in volume)
     mount = next(m for m in container["volumeMounts"] if m["name"] == data["name"])
     assert Path(args.manifest).is_relative_to(mount["mountPath"])
     assert Path(args.out).is_relative_to(mount["mountPath"])
     claim = data["persistentVolumeClaim"]["claimName"]
-    assert claim in (ROOT / "README.md").read_text()
+    assert claim in operations_doc()
 
     # Failed scans (exit status 1) are not retried: they would fail again.
     rule = spec["podFailurePolicy"]["rules"][0]
@@ -272,7 +279,7 @@ def test_the_indexed_job_runs_as_the_deployment_does():
         assert not selector.items() <= labels.items(), kind
 
 
-def test_the_job_command_is_the_readmes():
+def test_the_job_command_is_the_documented_one():
     job = document("Job")
     command = shlex.join(job["spec"]["template"]["spec"]["containers"][0]["command"][:5])
-    assert command in (ROOT / "README.md").read_text()
+    assert command in operations_doc()

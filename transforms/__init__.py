@@ -19,9 +19,9 @@ from .cap import RHO_MAX, RHO_MIN, SIGMA_MAX, SIGMA_MIN, PoleCap, check_rho, che
 from .chart import Chart, Method, angles_to_world, world_to_angles
 from .errors import TransformInputError
 from .faces import DEGENERATE_RTOL, FaceMeasures, measure_faces
-from .framing import Framing
 from .fit import Fit, FitBounds, FitExplanation, FitFixed, default_choice, fit_region
 from .frames import Frame, check_rotation
+from .framing import Framing
 from .landmarks import LANDMARK_NAMES, Landmarks
 from .layouts import LAYOUT_ORIENTATION, Layout, layout_xy
 from .locate import Hits, LocateIndex, locate
@@ -65,8 +65,8 @@ __all__ = [
     "FitExplanation",
     "FitFixed",
     "FlatRegion",
-    "Framing",
     "Frame",
+    "Framing",
     "Hits",
     "Landmarks",
     "Layout",

@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arrays import blocks, unit_rows
-from .layouts import LAYOUT_ORIENTATION
 from .errors import TransformInputError
 from .faces import FaceMeasures
+from .layouts import LAYOUT_ORIENTATION
 from .margins import arcs_to_point, arcs_to_seam
 from .parallel import run_all
 from .topology import region_edges

@@ -53,7 +53,7 @@ class TransferParams(MeshParams, FramingParams):
         "json (application/json): the values carried; png (image/png): with values, the "
         "16-bit grey and alpha PNG of them (the alpha 65535 where a triangle holds the pixel); "
         "face_ids or barycentric (application/octet-stream): the look-up images, a "
-        "little-endian array behind a 16-byte header (the README says how to read it).",
+        "little-endian array behind a 16-byte header (docs/api.md says how to read it).",
     ) = None
 
     @field_validator("value_range")
@@ -360,7 +360,7 @@ ROWS = (
         "as a 16-bit grey PNG and the coverage mask (data: URLs in the JSON, or one 16-bit "
         "grey and alpha PNG with params.output png). Look-ups: params.output face_ids or "
         "barycentric answers the file's face id a pixel (-1 outside) and the centre's "
-        "weights in its corners, little-endian behind a 16-byte header (the README says "
+        "weights in its corners, little-endian behind a 16-byte header (docs/api.md says "
         "how to read it).",
         params=TransferParams,
         parts=(MeshPart("mesh"), MASK, IMAGE),

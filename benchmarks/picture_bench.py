@@ -30,7 +30,7 @@ from PIL import Image, ImageDraw
 
 from benchmarks.docs import run_report
 from benchmarks.measure_bench import HALF_ANGLE_DEG, SIGMA, SUBDIVISIONS, progress
-from benchmarks.transforms_bench import subdivided
+from fixtures.meshes import subdivided
 from service.meshio import Mesh
 from service.operations import MeshRegion, Selection
 from service.outputs import Output

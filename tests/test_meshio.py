@@ -15,7 +15,7 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from benchmarks.hostile import obj_group_names
+from fixtures.hostile import obj_group_names
 from service.meshio import Limits, MeshFormatError, MeshTooLargeError, ply, read_mesh, text
 from service.meshio.obj import MAX_GROUP_NAMES
 from service.samples import SAMPLES
@@ -565,7 +565,7 @@ def test_a_file_without_triangle_elements_names_what_it_has():
 def test_a_real_scan_written_as_strips_reads_back_its_triangles():
     """Lee Perry-Smith's scan as one tristrips row: each triangle a strip of its own, ended by
     -1 (binary, as scanners write it; the zoo's writer)."""
-    from benchmarks.zoo import strips_ply
+    from fixtures.zoo import strips_ply
 
     mesh = read_mesh(SAMPLES["lee-perry-smith.obj"].path.read_bytes(), "obj", LIMITS)
     strips = read_mesh(strips_ply(mesh), "ply", LIMITS)

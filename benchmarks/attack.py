@@ -2,7 +2,7 @@
 
 Runs a real server (``--workers`` processes, API keys on) and, one case after another:
 
-* **memory**: each hostile upload of :mod:`benchmarks.hostile` (``--size`` bytes) and two
+* **memory**: each hostile upload of :mod:`fixtures.hostile` (``--size`` bytes) and two
   honest scans, one at a time: the reader's peak allocation per byte of the file (read here,
   under tracemalloc), and the peak resident memory a worker gained while it handled the
   request (from /proc, sampled every 5 ms) against what the job was charged to the memory
@@ -43,8 +43,8 @@ from dataclasses import dataclass, field
 import httpx
 
 from benchmarks.docs import publish
-from benchmarks.hostile import HOSTILE, HOSTILE_JSON
 from benchmarks.server import children_of, rss_bytes, serving
+from fixtures.hostile import HOSTILE, HOSTILE_JSON
 from service.capabilities.context import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE, job_bytes
 from service.meshio import Mesh, MeshFormatError, format_of, read_mesh
 from service.samples import SAMPLES

@@ -29,9 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.docs import publish
-from benchmarks.transforms_bench import machine
-from benchmarks.zoo import SCALP_FS, SCALP_LPS, SHARED, TOP_GOAT, TOP_NEFERTITI
+from benchmarks.docs import machine, publish
+from fixtures.zoo import SCALP_FS, SCALP_LPS, SHARED, TOP_GOAT, TOP_NEFERTITI
 from service.meshio import format_of, read_mesh
 from service.samples import SAMPLES
 from service.settings import Settings

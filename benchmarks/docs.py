@@ -1,12 +1,44 @@
 """Where the benchmarks record their latest tables: sections of docs/benchmarks.md between
-HTML comment markers, rewritten by each run with ``--write-docs``."""
+HTML comment markers, rewritten by each run with ``--write-docs``; and the line that ends
+each table (:func:`footer`: the machine, the libraries, the time)."""
 
 from __future__ import annotations
 
+import datetime
+import os
+import platform
 import sys
 from pathlib import Path
 
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
+
+
+def machine() -> str:
+    """One line describing where the benchmark ran."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    memory = ""
+    try:
+        kib = int(Path("/proc/meminfo").read_text().split()[1])
+        memory = f", {kib / 2**20:.0f} GiB"
+    except (OSError, ValueError, IndexError):
+        pass
+    return f"{cpu}, {cores} cores{memory}; {platform.system()} {platform.release()}"
+
+
+def footer(*libraries: str) -> str:
+    """The line that ends a report: the machine, ``libraries`` (``"numpy 2.4"``, ...) and
+    the time of the run."""
+    used = ", ".join([f"Python {platform.python_version()}", *libraries])
+    when = datetime.datetime.now(datetime.UTC)
+    return f"Machine: {machine()}. {used}. Run {when:%Y-%m-%d %H:%M} UTC."
 
 
 def record(name: str, heading: str, report: str) -> None:
@@ -38,7 +70,6 @@ def run_report(
 
     import numpy as np
 
-    from benchmarks.transforms_bench import footer
     from service.server.allocator import keep_large_blocks
 
     parser = argparse.ArgumentParser(description=doc.split("\n\n")[0])

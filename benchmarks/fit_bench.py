@@ -42,9 +42,9 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from benchmarks.docs import publish
+from benchmarks.docs import footer, publish
 from benchmarks.server import status_bytes
-from benchmarks.transforms_bench import footer, subdivided
+from fixtures.meshes import subdivided
 from service.server.allocator import keep_large_blocks
 from transforms import Chart, Frame, PoleCap, fit_region, flatten_region
 from transforms.faces import measure_faces

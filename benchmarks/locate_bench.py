@@ -32,10 +32,9 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from benchmarks.docs import publish
+from benchmarks.docs import footer, publish
 from benchmarks.fit_bench import ladder_rung
 from benchmarks.server import serving, status_bytes
-from benchmarks.transforms_bench import footer
 from service.examples import MULTIPART, multipart_body
 from service.server.allocator import keep_large_blocks
 from transforms import Chart, Frame, LocateIndex, PoleCap, locate

@@ -50,9 +50,9 @@ from importlib.metadata import version
 import numpy as np
 import shapely
 
-from benchmarks.docs import publish
+from benchmarks.docs import footer, publish
 from benchmarks.fit_bench import compact
-from benchmarks.transforms_bench import footer, subdivided
+from fixtures.meshes import subdivided
 from service.server.allocator import keep_large_blocks
 from transforms import (
     LAYOUT_ORIENTATION,

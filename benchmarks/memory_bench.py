@@ -33,9 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.docs import publish
+from benchmarks.docs import footer, publish
 from benchmarks.server import status_bytes
-from benchmarks.transforms_bench import footer
 
 #: Targets from the issue: a flatten's temporaries per face, and a fit's peak against the
 #: flatten's on the same region.

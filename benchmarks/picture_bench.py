@@ -31,7 +31,7 @@ from PIL import Image, ImageDraw
 
 from benchmarks.docs import run_report
 from benchmarks.measure_bench import HALF_ANGLE_DEG, SIGMA, SUBDIVISIONS, progress
-from benchmarks.transforms_bench import subdivided
+from fixtures.meshes import subdivided
 from service.capabilities.context import Context
 from service.capabilities.flatten import FlattenParams
 from service.capabilities.region.pictures import RENDERERS, face_colouring

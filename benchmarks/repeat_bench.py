@@ -2,8 +2,8 @@
 bench-repeat``), on every sample scan: how far the map moves on the scalp when the landmarks
 are placed 2 mm off, and how well a follow-up scan's map lands on the baseline's.
 
-Per scan: its landmarks are the surface points nearest hand-placed spots (``SCANS``; for the
-goat, the same anatomy: between the eyes, the back of the skull, the fronts of the ear
+Per scan: its landmarks are the surface points nearest hand-placed spots (fixtures/landmarks.py;
+for the goat, the same anatomy: between the eyes, the back of the skull, the fronts of the ear
 openings), its scalp the anatomical region 10 mm above the brow and the inion, sigma 0.3.
 Scans without units are read with a tragi distance of 145 mm. Distances are measured on the
 map's trusted triangles only (those neither folded, back-facing, degenerate, nor across the
@@ -37,12 +37,11 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from benchmarks.docs import publish
+from benchmarks.docs import footer, publish
 from benchmarks.measure_bench import progress
-from benchmarks.transforms_bench import footer
-from benchmarks.zoo import available, scan_bytes
+from fixtures.landmarks import NEAR, NEAR_GOAT, NEAR_LEE_PERRY_SMITH, NEAR_NEFERTITI
+from fixtures.zoo import available, scan_bytes
 from service.server.allocator import keep_large_blocks
-from tests.test_landmarks import NEAR, NEAR_LEE_PERRY_SMITH
 from transforms import (
     LAYOUT_ORIENTATION,
     Chart,
@@ -80,30 +79,8 @@ class Scan:
 SCANS = (
     Scan("fsaverage-head.ply", NEAR, 1.0, "head, mm"),
     Scan("lee-perry-smith.obj", NEAR_LEE_PERRY_SMITH, None, "head and shoulders"),
-    Scan(
-        "nefertiti-lowres.obj",
-        {
-            "nasion": [0, 40, 156],
-            "inion": [0, 60, -97],
-            "left_tragus": [75, 10, 45],
-            "right_tragus": [-75, 10, 45],
-            "vertex": [0, 250, 0],
-        },
-        1.0,
-        "bust; its scalp is the crown",
-    ),
-    Scan(
-        "goathead.obj",
-        {
-            "nasion": [-1.5, 4.75, 0.7],
-            "inion": [5.0, 3.0, 0.7],
-            "left_tragus": [2.0, 4.2, 3.9],
-            "right_tragus": [2.0, 4.2, -2.5],
-            "vertex": [1.0, 6.2, 0.7],
-        },
-        None,
-        "goat; horns on the scalp",
-    ),
+    Scan("nefertiti-lowres.obj", NEAR_NEFERTITI, 1.0, "bust; its scalp is the crown"),
+    Scan("goathead.obj", NEAR_GOAT, None, "goat; horns on the scalp"),
 )
 
 

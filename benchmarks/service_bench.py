@@ -34,9 +34,9 @@ import httpx
 import numpy as np
 import trimesh
 
-from benchmarks.docs import publish
+from benchmarks.docs import footer, publish
 from benchmarks.server import free_port, status_bytes, wait_ready
-from benchmarks.transforms_bench import footer, subdivided
+from fixtures.meshes import subdivided
 from service.capabilities import MESH_COMMANDS
 from service.capabilities.context import Unlimited
 from service.examples import MULTIPART, multipart_body

@@ -38,10 +38,10 @@ from importlib.metadata import version
 import numpy as np
 import trimesh
 
-from benchmarks.docs import publish
+from benchmarks.docs import footer, publish
 from benchmarks.fit_bench import compact
 from benchmarks.measure_bench import progress, quiet
-from benchmarks.transforms_bench import footer, subdivided
+from fixtures.meshes import subdivided
 from service.server.allocator import keep_large_blocks
 from transforms.arrays import triangle_areas
 from transforms.sites import SitePart, default_spacing, minimum_distance, place_sites, site_normals

@@ -20,10 +20,7 @@ in fresh zeroed pages on every call). Prints Markdown tables; ``--write-docs`` a
 from __future__ import annotations
 
 import argparse
-import datetime
-import io
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -31,13 +28,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
-from pathlib import Path
 
 import numpy as np
-import trimesh
 
-from benchmarks.docs import publish
-from service.samples import SAMPLES
+from benchmarks.docs import footer, publish
+from fixtures.meshes import subdivided
 from service.server.allocator import keep_large_blocks
 from transforms import Chart, Frame, PoleCap, assess_region, world_to_angles
 
@@ -57,20 +52,6 @@ class Case:
     @property
     def region_vertices(self) -> np.ndarray:
         return self.vertices[np.unique(self.faces)]
-
-
-def subdivided(name: str, times: int) -> tuple[np.ndarray, np.ndarray]:
-    """A bundled sample, each face split into 4 ``times`` times."""
-    mesh = trimesh.load(
-        io.BytesIO(SAMPLES[name].path.read_bytes()),
-        file_type=name.rsplit(".", 1)[1],
-        process=False,
-        force="mesh",
-    )
-    vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
-    for _ in range(times):
-        vertices, faces = trimesh.remesh.subdivide(vertices, faces)
-    return np.ascontiguousarray(vertices), np.ascontiguousarray(faces, dtype=np.int64)
 
 
 def cases(subdivisions: int) -> list[Case]:
@@ -150,34 +131,6 @@ def vtk_peer(vertices: np.ndarray, faces: np.ndarray, centre: np.ndarray):
         return numpy_support.vtk_to_numpy(spherical.GetOutput().GetPointData().GetTCoords())
 
     return run, coordinates, vtk.vtkVersion.GetVTKVersion()
-
-
-def machine() -> str:
-    """One line describing where the benchmark ran."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    memory = ""
-    try:
-        kib = int(Path("/proc/meminfo").read_text().split()[1])
-        memory = f", {kib / 2**20:.0f} GiB"
-    except (OSError, ValueError, IndexError):
-        pass
-    return f"{cpu}, {cores} cores{memory}; {platform.system()} {platform.release()}"
-
-
-def footer(*libraries: str) -> str:
-    """The line that ends a report: the machine, ``libraries`` (``"numpy 2.4"``, ...) and
-    the time of the run."""
-    used = ", ".join([f"Python {platform.python_version()}", *libraries])
-    when = datetime.datetime.now(datetime.UTC)
-    return f"Machine: {machine()}. {used}. Run {when:%Y-%m-%d %H:%M} UTC."
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from benchmarks.hostile import HOSTILE
+from fixtures.hostile import HOSTILE
 from service.samples import SAMPLES
 
 #: The upload limit of the app the corpus is sent to (small, so the big cases stay small).
@@ -483,7 +483,7 @@ def cases() -> list[Case]:
     return [_with_generated(case, generated) for case in c] + hostile_cases()
 
 
-#: What the service says of each of the readers' worst offenders (benchmarks/hostile.py):
+#: What the service says of each of the readers' worst offenders (fixtures/hostile.py):
 #: no vertices at all, or triangles that have no area (or none seen from the centre).
 _HOSTILE_DETAILS = {
     "OBJ of newlines": ("mesh:", "no vertex"),

@@ -17,9 +17,9 @@ import httpx
 import numpy as np
 import pytest
 
+from fixtures.meshes import subdivided_ply
 from service.samples import SAMPLES
 
-from .conftest import load_sample
 from .test_serve import running
 from .tools import require
 
@@ -464,7 +464,6 @@ def test_colour_by_shows_the_distortion_on_the_map_and_the_head(server, tmp_path
     """ "Colour by": the map and the 3D view flattened again, the map's triangles in the
     measure's colours with its bar, the head in the same colours; on the bundled scalp and
     on a generated 200k-face region (beyond the outline limit: the raster carries them)."""
-    import trimesh
 
     problems: list[str] = []
     with chromium() as browser:
@@ -485,11 +484,8 @@ def test_colour_by_shows_the_distortion_on_the_map_and_the_head(server, tmp_path
         ARTIFACTS.mkdir(exist_ok=True)
         page.screenshot(path=str(ARTIFACTS / "demo-colour.png"), full_page=True)
 
-        vertices, faces = load_sample(SAMPLE)
-        for _ in range(3):
-            vertices, faces = trimesh.remesh.subdivide(vertices, faces)
         big = tmp_path / "fsaverage-260k.ply"
-        big.write_bytes(trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply"))
+        big.write_bytes(subdivided_ply(SAMPLE, 3))
         page.set_input_files("#file", str(big))
         page.fill("#axis", "0, 0, 1")
         page.fill("#angle", "130")

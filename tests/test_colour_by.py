@@ -15,6 +15,7 @@ import pytest
 import trimesh
 from PIL import Image
 
+from fixtures.meshes import subdivided_ply
 from service.outputs.colours import STEPS, ColourBy, palette
 from service.outputs.lookup import read_lookup
 from service.samples import SAMPLES
@@ -188,15 +189,8 @@ async def test_the_glb_vertex_colours_are_their_faces_colours_weighed_by_area(cl
     np.testing.assert_allclose(glb_floats(glb, "COLOR_0"), linear, atol=1e-6)
 
 
-def subdivided_scalp(times: int) -> bytes:
-    vertices, faces = load_sample(NAME)
-    for _ in range(times):
-        vertices, faces = trimesh.remesh.subdivide(vertices, faces)
-    return trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply")
-
-
 async def test_a_large_region_shows_its_colours_in_a_bounded_svg(client):
-    data = subdivided_scalp(3)  # 260k faces; the scalp about 100k, beyond the outline limit
+    data = subdivided_ply(NAME, 3)  # 260k faces; the scalp about 100k, beyond the outline limit
     params = {**PARAMS, "colour_by": "isometric"}
     png = await picture(client, {**params, "output": "png"}, data)
     image = np.asarray(Image.open(io.BytesIO(png.content)))

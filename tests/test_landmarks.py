@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from fixtures.landmarks import NEAR, NEAR_LEE_PERRY_SMITH
 from transforms import Chart, Landmarks, PoleCap, TransformInputError, flatten_region
 from transforms.landmarks import CENTER_RAISE, OFF_SURFACE, distance_to_triangles
 from transforms.topology import face_components
@@ -17,23 +18,6 @@ from .test_api import flatten, obj_of, problem
 
 NAME = "fsaverage-head.ply"
 VERTICES, FACES = load_sample(NAME)
-#: Where the landmarks are on fsaverage's head (millimetres; +y forward, +z up).
-NEAR = {
-    "nasion": [0, 95, 0],
-    "inion": [0, -120, -20],
-    "left_tragus": [-80, -10, -20],
-    "right_tragus": [80, -10, -20],
-    "vertex": [0, -20, 100],
-}
-#: The same spots on ``lee-perry-smith.obj`` (Y up, the face towards +Z, no units).
-NEAR_LEE_PERRY_SMITH = {
-    "nasion": [0, 1.75, 2.16],
-    "inion": [-0.09, 1.43, -1.89],
-    "left_tragus": [1.63, 1.37, 0.03],
-    "right_tragus": [-1.80, 1.31, 0.05],
-    "vertex": [0, 4, 0],
-}
-
 
 CHART = Chart.distorted(PoleCap.from_sigma(0.3))
 

@@ -15,9 +15,11 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from benchmarks.hostile import obj_group_names
-from service.meshio import Limits, MeshFormatError, MeshTooLargeError, ply, read_mesh, text
-from service.meshio.obj import MAX_GROUP_NAMES
+from fixtures.hostile import obj_group_names
+from service.meshio import Limits, MeshFormatError, MeshTooLargeError, read_mesh
+from service.meshio.obj import MAX_GROUP_NAMES, read_obj
+from service.meshio.ply import read_ply
+from service.meshio.stl import read_stl
 from service.samples import SAMPLES
 
 from .corpus import glb as container
@@ -565,7 +567,7 @@ def test_a_file_without_triangle_elements_names_what_it_has():
 def test_a_real_scan_written_as_strips_reads_back_its_triangles():
     """Lee Perry-Smith's scan as one tristrips row: each triangle a strip of its own, ended by
     -1 (binary, as scanners write it; the zoo's writer)."""
-    from benchmarks.zoo import strips_ply
+    from fixtures.zoo import strips_ply
 
     mesh = read_mesh(SAMPLES["lee-perry-smith.obj"].path.read_bytes(), "obj", LIMITS)
     strips = read_mesh(strips_ply(mesh), "ply", LIMITS)
@@ -759,15 +761,11 @@ def test_counts_are_checked_before_anything_is_made_for_them():
 # -- chunks: what a reader reads does not depend on where the chunks end ---------------------
 
 
-def read_in_chunks(data, fmt: str, monkeypatch, chunk: int, rows: int = 3):
+def read_in_chunks(data, fmt: str, chunk: int, rows: int = 3):
     """``data`` read with chunks of ``chunk`` bytes (and PLY batches of ``rows`` rows)."""
-    monkeypatch.setattr(text, "CHUNK_BYTES", chunk)
-    monkeypatch.setattr(ply, "_BATCH_ROWS", rows)
-    monkeypatch.setattr(ply, "_STRIP_ITEMS", rows + 2)
-    try:
-        return read_mesh(data, fmt, LIMITS)
-    finally:
-        monkeypatch.undo()
+    if fmt == "ply":
+        return read_ply(data, LIMITS, chunk_bytes=chunk, batch_rows=rows, strip_items=rows + 2)
+    return {"obj": read_obj, "stl": read_stl}[fmt](data, LIMITS, chunk_bytes=chunk)
 
 
 def assert_same_mesh(mesh, other):
@@ -794,7 +792,7 @@ EDGY_OBJ = (
 
 
 @pytest.mark.parametrize("chunk", [1, 2, 3, 5, 8, 13, 64, 4096])
-def test_obj_reads_the_same_however_its_text_is_cut_into_chunks(monkeypatch, chunk):
+def test_obj_reads_the_same_however_its_text_is_cut_into_chunks(chunk):
     whole = read_mesh(EDGY_OBJ, "obj", LIMITS)
     assert whole.faces.tolist()[:7] == [
         [0, 1, 2], [0, 2, 3], [0, 2, 4], [1, 2, 3], [1, 3, 4], [1, 4, 0], [4, 3, 2]
@@ -803,7 +801,7 @@ def test_obj_reads_the_same_however_its_text_is_cut_into_chunks(monkeypatch, chu
     assert whole.group_faces(["scalp"]).tolist() == [0, 1, 2, 3, 4, 5]
     assert "not" not in whole.groups and whole.faces.tolist()[-2:] == [[5, 3, 2], [0, 1, 2]]
     assert whole.groups["face"].tolist() == [[6, len(whole.faces) - 1]]  # "g" ends it
-    assert_same_mesh(read_in_chunks(EDGY_OBJ, "obj", monkeypatch, chunk), whole)
+    assert_same_mesh(read_in_chunks(EDGY_OBJ, "obj", chunk), whole)
 
 
 @pytest.mark.parametrize("chunk", [1, 4, 16, 1000])
@@ -819,10 +817,9 @@ def test_obj_reads_the_same_however_its_text_is_cut_into_chunks(monkeypatch, chu
         ("v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\n", r"vertex 2 \(line 3\)"),
     ],
 )
-def test_obj_errors_name_the_line_however_the_text_is_cut(monkeypatch, chunk, text, says):
-    monkeypatch.setattr("service.meshio.text.CHUNK_BYTES", chunk)
+def test_obj_errors_name_the_line_however_the_text_is_cut(chunk, text, says):
     with pytest.raises(MeshFormatError, match=says):
-        read_mesh(obj(text), "obj", LIMITS)
+        read_obj(obj(text), LIMITS, chunk_bytes=chunk)
 
 
 def _random_obj(rng: np.random.Generator) -> bytes:
@@ -845,12 +842,12 @@ def _random_obj(rng: np.random.Generator) -> bytes:
 
 
 @pytest.mark.parametrize("seed", range(20))
-def test_random_obj_files_read_the_same_in_any_chunks(monkeypatch, seed):
+def test_random_obj_files_read_the_same_in_any_chunks(seed):
     rng = np.random.default_rng(seed)
     data = _random_obj(rng)
     whole = read_mesh(data, "obj", LIMITS)
     for chunk in rng.integers(1, 40, 3).tolist():
-        assert_same_mesh(read_in_chunks(data, "obj", monkeypatch, chunk), whole)
+        assert_same_mesh(read_in_chunks(data, "obj", chunk), whole)
 
 
 PLY_FILES = {
@@ -865,14 +862,12 @@ PLY_FILES = {
 
 @pytest.mark.parametrize("name", sorted(PLY_FILES))
 @pytest.mark.parametrize(("chunk", "rows"), [(1, 1), (7, 2), (64, 5)])
-def test_ply_reads_the_same_in_any_chunks_and_batches(monkeypatch, name, chunk, rows):
+def test_ply_reads_the_same_in_any_chunks_and_batches(name, chunk, rows):
     data = PLY_FILES[name]
-    assert_same_mesh(
-        read_in_chunks(data, "ply", monkeypatch, chunk, rows), read_mesh(data, "ply", LIMITS)
-    )
+    assert_same_mesh(read_in_chunks(data, "ply", chunk, rows), read_mesh(data, "ply", LIMITS))
 
 
-def test_binary_ply_of_mixed_sizes_keeps_every_polygon_in_order(monkeypatch):
+def test_binary_ply_of_mixed_sizes_keeps_every_polygon_in_order():
     """Runs of one shape and rows walked one by one, with a property after the list."""
     rng = np.random.default_rng(1)
     sizes = np.concatenate([rng.integers(3, 7, 50), np.full(40, 3), rng.integers(3, 5, 30)])
@@ -883,14 +878,14 @@ def test_binary_ply_of_mixed_sizes_keeps_every_polygon_in_order(monkeypatch):
     body += b"".join(struct.pack(f">iB{len(p)}iB", 0, len(p), *p, 9) for p in polygons)
     fanned = [[p[0], p[k], p[k + 1]] for p in polygons for k in range(1, len(p) - 1)]
     assert read_mesh(header + body, "ply", LIMITS).faces.tolist() == fanned
-    assert read_in_chunks(header + body, "ply", monkeypatch, 16, 7).faces.tolist() == fanned
+    assert read_in_chunks(header + body, "ply", 16, 7).faces.tolist() == fanned
 
 
 @pytest.mark.parametrize("chunk", [1, 9, 100])
-def test_ascii_stl_reads_the_same_in_any_chunks(monkeypatch, chunk):
+def test_ascii_stl_reads_the_same_in_any_chunks(chunk):
     data = trimesh.Trimesh(PENTAGON, FANNED, process=False).export(file_type="stl_ascii").encode()
     data = data.replace(b"facet normal", b"facet  normal").replace(b"vertex", b"VERTEX")
-    mesh = read_in_chunks(data, "stl", monkeypatch, chunk)
+    mesh = read_in_chunks(data, "stl", chunk)
     np.testing.assert_array_equal(mesh.vertices, PENTAGON[np.ravel(FANNED)])
     np.testing.assert_array_equal(mesh.faces, np.arange(3 * len(FANNED)).reshape(-1, 3))
 
@@ -932,10 +927,9 @@ def test_binary_stl_ignores_normals_and_attributes():
     ],
 )
 @pytest.mark.parametrize("chunk", [3, 1 << 18])
-def test_ascii_stl_mistakes_name_the_line(monkeypatch, body, says, chunk):
-    monkeypatch.setattr(text, "CHUNK_BYTES", chunk)  # 3: every line read in pieces
-    with pytest.raises(MeshFormatError, match=says):
-        read_mesh(f"solid x\n{body}endsolid x\n".encode(), "stl", LIMITS)
+def test_ascii_stl_mistakes_name_the_line(body, says, chunk):
+    with pytest.raises(MeshFormatError, match=says):  # chunk 3: every line read in pieces
+        read_stl(f"solid x\n{body}endsolid x\n".encode(), LIMITS, chunk_bytes=chunk)
 
 
 def test_an_ascii_stl_cut_short_is_refused():

@@ -156,7 +156,7 @@ def test_gltf_colours_ids_and_texture_coordinates_are_kept_a_vertex():
 
 
 @pytest.mark.parametrize("chunk", [5, 37, 1 << 18])
-def test_obj_colours_and_texture_references_read_alike_in_any_chunks(monkeypatch, chunk):
+def test_obj_colours_and_texture_references_read_alike_in_any_chunks(chunk):
     lines = [
         "v 0 0 0 1 0 0",
         "v 1 0 0 0 255 0",  # a writer of 0 to 255 (any number above 1 says so)
@@ -171,7 +171,7 @@ def test_obj_colours_and_texture_references_read_alike_in_any_chunks(monkeypatch
         "f -4/-4 -3/-3 -2/-2",
         "f 1 2 3",
     ]
-    mesh = read_in_chunks(("\n".join(lines) + "\n").encode(), "obj", monkeypatch, chunk)
+    mesh = read_in_chunks(("\n".join(lines) + "\n").encode(), "obj", chunk)
     attributes = mesh.attributes
     np.testing.assert_array_equal(
         mesh.faces, [[0, 1, 2], [0, 2, 3], [0, 2, 3], [0, 1, 2], [0, 1, 2]]

@@ -19,28 +19,20 @@ from pathlib import Path
 
 import httpx
 import pytest
-import trimesh
-from trimesh.remesh import subdivide
 
-from .conftest import load_sample
+from fixtures.meshes import subdivided_ply
+
 from .test_operations import families, sample
 
 KEY = "serve-test-key"
 REGION = {"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}}
 
 
-def subdivided_head() -> bytes:
-    """fsaverage-head.ply subdivided four times (1,039,872 faces, a 20 MB PLY): the
-    separable fit of its top (the slowest fit: its angles come from a root search, its
-    gradients from differences) computes for most of a second, long enough to signal or
-    kill the worker while it does."""
-    vertices, faces = load_sample("fsaverage-head.ply")
-    for _ in range(4):
-        vertices, faces = subdivide(vertices, faces)
-    return trimesh.Trimesh(vertices, faces, process=False).export(file_type="ply")
-
-
-HEAD = subdivided_head()
+#: fsaverage-head.ply subdivided four times (1,039,872 faces, a 20 MB PLY): the separable fit
+#: of its top (the slowest fit: its angles come from a root search, its gradients from
+#: differences) computes for most of a second, long enough to signal or kill the worker
+#: while it does.
+HEAD = subdivided_ply("fsaverage-head.ply", 4)
 SLOW_FIT = REGION | {"method": "separable"}
 
 

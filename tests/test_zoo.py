@@ -1,12 +1,14 @@
-"""A small subset of the scan zoo (benchmarks/zoo.py, ``make bench-zoo``): turned and
-re-encoded scans, the region alone, seam-free with the defaults, fold-free with untangling,
-and identical when the answer's params are sent back."""
+"""A small subset of the scan zoo (fixtures/zoo.py), measured as ``make bench-zoo`` measures
+every case (benchmarks/zoo.py): turned and re-encoded scans, the region alone, seam-free with
+the defaults, fold-free with untangling, and identical when the answer's params are sent
+back."""
 
 from __future__ import annotations
 
 import pytest
 
-from benchmarks.zoo import CASES, run_case
+from benchmarks.zoo import run_case
+from fixtures.zoo import CASES
 
 
 @pytest.mark.parametrize("name", ["fsaverage scalp, Y-up", "Lee Perry-Smith, PLY triangle strips"])

@@ -56,6 +56,7 @@ from .mesh import (
     vertex_error,
 )
 from .text import (
+    CHUNK_BYTES,
     ChunkWalk,
     Lines,
     Tokens,
@@ -78,8 +79,9 @@ _OTHER, _VERTEX, _FACE, _TEXCOORD, _GROUP, _OBJECT, _MATERIAL = range(7)
 MAX_GROUP_NAMES = 65_536
 
 
-def read_obj(data: bytes | memoryview, limits: Limits) -> Mesh:
-    """Parse an OBJ file held in memory.
+def read_obj(data: bytes | memoryview, limits: Limits, *, chunk_bytes: int = CHUNK_BYTES) -> Mesh:
+    """Parse an OBJ file held in memory, ``chunk_bytes`` of text at a time
+    (:data:`text.CHUNK_BYTES`; tests make it small to put lines on the chunks' edges).
 
     Raises
     ------
@@ -88,7 +90,7 @@ def read_obj(data: bytes | memoryview, limits: Limits) -> Mesh:
         polygons with fewer than three corners, or counts beyond ``limits``.
     """
     buffer = as_bytes_array(data)
-    counted = _Pass(buffer, kept={}).run()
+    counted = _Pass(buffer, kept={}, chunk_bytes=chunk_bytes).run()
     if counted.vertices == 0:
         raise MeshFormatError("no vertex ('v') lines: is this an OBJ file?")
     if counted.face_lines == 0:
@@ -190,8 +192,15 @@ class _Pass(ChunkWalk):
     first chunks' lines (by where they begin) for the next pass, up to :data:`_KEPT_BYTES`.
     """
 
-    def __init__(self, buffer: np.ndarray, out: _Output | None = None, kept=None) -> None:
+    def __init__(
+        self,
+        buffer: np.ndarray,
+        out: _Output | None = None,
+        kept=None,
+        chunk_bytes: int = CHUNK_BYTES,
+    ) -> None:
         self.buffer, self.out, self.kept = buffer, out, {} if kept is None else kept
+        self.chunk_bytes = chunk_bytes
         self.line = self.vertices = self.triangles = self.face_lines = 0
         self.texcoords = self.coloured = 0  # vt lines, and v lines with a colour
         self.open: _Open | None = None
@@ -201,7 +210,7 @@ class _Pass(ChunkWalk):
         buffer = self.buffer
         ends = self.kept.pop("ends", None)  # the counting pass's chunks, for the filling one
         if ends is None:
-            ends = self.kept["ends"] = list(chunks(buffer))
+            ends = self.kept["ends"] = list(chunks(buffer, chunk_bytes=self.chunk_bytes))
         self.walk(buffer, ends)
         return self
 

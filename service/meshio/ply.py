@@ -125,8 +125,19 @@ class _Batch:
     counts: tuple[np.ndarray, ...] | None = None
 
 
-def read_ply(data: bytes | memoryview, limits: Limits) -> Mesh:
-    """Parse a PLY file held in memory.
+def read_ply(
+    data: bytes | memoryview,
+    limits: Limits,
+    *,
+    chunk_bytes: int = text.CHUNK_BYTES,
+    batch_rows: int = _BATCH_ROWS,
+    strip_items: int = _STRIP_ITEMS,
+) -> Mesh:
+    """Parse a PLY file held in memory, a batch of rows at a time: at most ``batch_rows``
+    rows (:data:`_BATCH_ROWS`) in about ``chunk_bytes`` of the file
+    (:data:`text.CHUNK_BYTES`), and triangle strips ``strip_items`` items at a time
+    (:data:`_STRIP_ITEMS`). Tests make them small to put rows and strips on the batches'
+    edges.
 
     Raises
     ------
@@ -140,7 +151,15 @@ def read_ply(data: bytes | memoryview, limits: Limits) -> Mesh:
         replace(e, max_items=limits.max_faces + 2) if e.name == "tristrips" else e for e in elements
     ]
     vertex, indices = _what_to_read(elements, limits)
-    reader = _Body(as_bytes_array(data), order, vertex, indices)
+    reader = _Body(
+        as_bytes_array(data),
+        order,
+        vertex,
+        indices,
+        chunk_bytes=chunk_bytes,
+        batch_rows=batch_rows,
+        strip_items=strip_items,
+    )
     plan = reader.plan(elements, body)
     check_counts(vertex.count, reader.sink.triangles, limits)
     vertices, faces = reader.fill(plan)
@@ -196,9 +215,21 @@ def _index_property(element: _Element) -> str:
 class _Body:
     """The rows after the header: found and counted (:meth:`plan`), then read (:meth:`fill`)."""
 
-    def __init__(self, buffer: np.ndarray, order: str | None, vertex, indices: dict) -> None:
+    def __init__(
+        self,
+        buffer: np.ndarray,
+        order: str | None,
+        vertex,
+        indices: dict,
+        *,
+        chunk_bytes: int,
+        batch_rows: int,
+        strip_items: int,
+    ) -> None:
         self.buffer, self.order, self.vertex, self.indices = buffer, order, vertex, indices
-        self.sink = _Sink(vertex.count)
+        #: A batch's bytes and rows at most (:func:`read_ply`).
+        self.chunk_bytes, self.batch_rows = chunk_bytes, batch_rows
+        self.sink = _Sink(vertex.count, None, strip_items)
         #: The vertex element's other scalar properties, and the face element's scalar
         #: properties a triangle, as :meth:`fill` reads them (name -> values).
         self.vertex_values: dict[str, np.ndarray] = {}
@@ -209,9 +240,11 @@ class _Body:
         plan, position = [], body
         for element in elements:
             if self.order:
-                batches, position = _binary_batches(self.buffer, position, element, self.order)
+                batches, position = _binary_batches(
+                    self.buffer, position, element, self.order, self.chunk_bytes, self.batch_rows
+                )
             else:
-                batches, position = _ascii_batches(self.buffer, position, element)
+                batches, position = _ascii_batches(self.buffer, position, element, self.chunk_bytes)
             plan.append((element, batches))
             if element.name in self.indices:
                 for batch in batches:
@@ -232,7 +265,11 @@ class _Body:
             name: np.full(self.sink.triangles, np.nan)  # NaN on strips' triangles
             for name in kept_properties(scalars)
         }
-        self.sink = _Sink(self.vertex.count, np.empty((self.sink.triangles, 3), dtype=np.int64))
+        self.sink = _Sink(
+            self.vertex.count,
+            np.empty((self.sink.triangles, 3), dtype=np.int64),
+            self.sink.strip_items,
+        )
         for element, batches in plan:
             needed = element is self.vertex or element.name in self.indices
             if not needed and self.order:
@@ -279,10 +316,11 @@ class _Body:
 
 class _Sink:
     """Where the triangle elements' rows go: counted (``out`` None) or written to ``out``
-    ((m, 3) int), ``triangles`` so far."""
+    ((m, 3) int), ``triangles`` so far; strips ``strip_items`` items at a time."""
 
-    def __init__(self, n_vertices: int, out: np.ndarray | None = None) -> None:
+    def __init__(self, n_vertices: int, out: np.ndarray | None, strip_items: int) -> None:
         self.n_vertices, self.out, self.triangles = n_vertices, out, 0
+        self.strip_items = strip_items
         self.strip = _Strip()
 
     def faces(self, items: np.ndarray, corners: np.ndarray, row: int) -> None:
@@ -313,8 +351,8 @@ class _Sink:
         """Triangles of triangle strips, rows from ``row`` (module docstring): each row ends
         its strips. Read a piece of the items at a time, so a long row costs no more."""
         ends = np.cumsum(sizes)  # where each row's items end
-        for start in range(0, len(items), _STRIP_ITEMS):
-            piece = _strip_ids(items[start : start + _STRIP_ITEMS])
+        for start in range(0, len(items), self.strip_items):
+            piece = _strip_ids(items[start : start + self.strip_items])
             stop = start + len(piece)
             bad = _not_whole(piece)
             if bad < 0 and self.out is not None:
@@ -471,8 +509,16 @@ def _prop(words: list[str]) -> _Property:
 _STRUCT = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I"}
 
 
-def _binary_batches(buffer: np.ndarray, position: int, element: _Element, order: str):
-    """The batches of an element's rows from ``position``, and where the element ends."""
+def _binary_batches(
+    buffer: np.ndarray,
+    position: int,
+    element: _Element,
+    order: str,
+    chunk_bytes: int,
+    batch_rows: int,
+):
+    """The batches of an element's rows from ``position``, each at most ``batch_rows`` rows
+    in about ``chunk_bytes``, and where the element ends."""
     if element.count == 0:
         return [], position
     if element.fixed:
@@ -480,7 +526,7 @@ def _binary_batches(buffer: np.ndarray, position: int, element: _Element, order:
         end = position + size * element.count
         if end > len(buffer):
             raise _short(element, len(buffer) - position, end - position)
-        per = max(1, min(_BATCH_ROWS, text.CHUNK_BYTES // max(size, 1)))
+        per = max(1, min(batch_rows, chunk_bytes // max(size, 1)))
         rows = [(row, min(per, element.count - row)) for row in range(0, element.count, per)]
         begin = position
         return [
@@ -490,7 +536,7 @@ def _binary_batches(buffer: np.ndarray, position: int, element: _Element, order:
     smallest = sum(np.dtype(p.count_type or p.type).itemsize for p in element.properties)
     if position + smallest * element.count > len(buffer):
         raise _short(element, len(buffer) - position, smallest * element.count)
-    return _Walker(buffer, element, order, position).batches()
+    return _Walker(buffer, element, order, position, chunk_bytes, batch_rows).batches()
 
 
 class _Walker:
@@ -498,8 +544,17 @@ class _Walker:
     is checked in one numpy pass; rows of mixed shapes are walked one by one, reading only
     their list sizes."""
 
-    def __init__(self, buffer: np.ndarray, element: _Element, order: str, start: int) -> None:
+    def __init__(
+        self,
+        buffer: np.ndarray,
+        element: _Element,
+        order: str,
+        start: int,
+        chunk_bytes: int,
+        batch_rows: int,
+    ) -> None:
         self.buffer, self.element, self.order, self.start = buffer, element, order, start
+        self.chunk_bytes, self.batch_rows = chunk_bytes, batch_rows
         self.view = memoryview(buffer)
         self.plan = [
             (p, np.dtype(p.type).itemsize, None)
@@ -515,13 +570,13 @@ class _Walker:
             counts, stop = self.walk(position, row, 1, 0)
             shape, size, left = tuple(c[0] for c in counts), stop - position, element.count - row
             run = self.run(
-                position, shape, size, max(1, min(_BATCH_ROWS, left, text.CHUNK_BYTES // size))
+                position, shape, size, max(1, min(self.batch_rows, left, self.chunk_bytes // size))
             )
             if run >= min(_MIN_RUN, left):
                 out.append(_Batch(row, run, position, position + run * size, shape=shape))
                 row, position = row + run, position + run * size
                 continue
-            counts, stop = self.walk(position, row, min(_BATCH_ROWS, left), text.CHUNK_BYTES)
+            counts, stop = self.walk(position, row, min(self.batch_rows, left), self.chunk_bytes)
             sizes = tuple(
                 np.frombuffer(c, dtype=np.uint8) if isinstance(c, bytearray) else np.asarray(c, t)
                 for c, t in zip(counts, self.count_types, strict=True)
@@ -701,13 +756,13 @@ def _short(element: _Element, have: int, need: int) -> MeshFormatError:
 # -- ASCII ----------------------------------------------------------------------------------
 
 
-def _ascii_batches(buffer: np.ndarray, position: int, element: _Element):
-    """The batches of an element's rows (one a line) from ``position``, and where the
-    element ends."""
+def _ascii_batches(buffer: np.ndarray, position: int, element: _Element, chunk_bytes: int):
+    """The batches of an element's rows (one a line, about ``chunk_bytes`` a batch) from
+    ``position``, and where the element ends."""
     if element.count == 0:
         return [], position
     batches, row, begin = [], 0, position
-    for end in chunks(buffer, position, whole_lines=True):
+    for end in chunks(buffer, position, whole_lines=True, chunk_bytes=chunk_bytes):
         chunk = buffer[begin:end]
         lines = count_lines(chunk)
         if row + lines >= element.count:

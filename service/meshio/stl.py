@@ -27,6 +27,7 @@ import numpy as np
 
 from .mesh import Limits, Mesh, MeshFormatError, check_counts, checked_vertices
 from .text import (
+    CHUNK_BYTES,
     ChunkWalk,
     Lines,
     Tokens,
@@ -42,8 +43,9 @@ from .text import (
 _FACET = np.dtype([("normal", "<f4", (3,)), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
 
 
-def read_stl(data: bytes | memoryview, limits: Limits) -> Mesh:
-    """An STL file (module docstring).
+def read_stl(data: bytes | memoryview, limits: Limits, *, chunk_bytes: int = CHUNK_BYTES) -> Mesh:
+    """An STL file (module docstring); an ASCII one read ``chunk_bytes`` of text at a time
+    (:data:`text.CHUNK_BYTES`; tests make it small to put lines on the chunks' edges).
 
     Raises
     ------
@@ -62,7 +64,7 @@ def read_stl(data: bytes | memoryview, limits: Limits) -> Mesh:
             "triangle) nor ASCII ('solid ...')"
         )
     buffer = as_bytes_array(data)
-    counted = _Pass(buffer).run()
+    counted = _Pass(buffer, chunk_bytes=chunk_bytes).run()
     corners = counted.vertices
     check_counts(corners, corners // 3, limits)
     if corners == 0:
@@ -78,7 +80,7 @@ def read_stl(data: bytes | memoryview, limits: Limits) -> Mesh:
             "cut short?"
         )
     vertices = np.empty((corners, 3), dtype=np.float64)
-    _Pass(buffer, vertices).run()
+    _Pass(buffer, vertices, chunk_bytes).run()
     return _mesh(vertices)
 
 
@@ -105,14 +107,16 @@ class _Pass(ChunkWalk):
     vertex and endsolid lines begin (-1: none). A line longer than a chunk is read in pieces
     cut between tokens: ``open`` is what its pieces gave so far."""
 
-    def __init__(self, buffer: np.ndarray, out: np.ndarray | None = None) -> None:
-        self.buffer, self.out = buffer, out
+    def __init__(
+        self, buffer: np.ndarray, out: np.ndarray | None = None, chunk_bytes: int = CHUNK_BYTES
+    ) -> None:
+        self.buffer, self.out, self.chunk_bytes = buffer, out, chunk_bytes
         self.line = self.vertices = 0
         self.last_vertex = self.ended = -1
         self.open: _Open | None = None
 
     def run(self) -> _Pass:
-        self.walk(self.buffer, chunks(self.buffer))
+        self.walk(self.buffer, chunks(self.buffer, chunk_bytes=self.chunk_bytes))
         return self
 
     def whole(self, begin: int, end: int) -> None:

@@ -17,7 +17,8 @@ SPACE, TAB, CR, LF = 32, 9, 13, 10
 #: longer than this, after a blank), and every per-line or per-token array of a pass is at
 #: most a chunk's length, so this bounds a reader's working memory whatever the file holds:
 #: at worst some 35 bytes a byte of a chunk (lines of one short token, ``g a``), 9 MiB.
-#: Larger chunks read no faster. Tests make it small to put lines on the edges.
+#: Larger chunks read no faster. Tests make it small (the readers' ``chunk_bytes``) to put
+#: lines on the edges.
 CHUNK_BYTES = 1 << 18
 
 
@@ -43,24 +44,31 @@ _ENDS = (SPACE, TAB, CR, LF)
 
 
 def chunks(
-    buffer: np.ndarray, start: int = 0, stop: int | None = None, whole_lines: bool = False
+    buffer: np.ndarray,
+    start: int = 0,
+    stop: int | None = None,
+    whole_lines: bool = False,
+    chunk_bytes: int = CHUNK_BYTES,
 ) -> Iterator[int]:
     """The ends of consecutive chunks covering ``buffer[start:stop]``, each about
-    :data:`CHUNK_BYTES` long: a chunk ends just after the last line feed of its window; a
-    window inside a longer line ends just after its last blank (space, tab, carriage return),
-    so a line is cut between tokens, never inside one, and a window that is one token grows
-    to the next blank. With ``whole_lines`` a window inside a line grows to its end."""
+    ``chunk_bytes`` long (:data:`CHUNK_BYTES`; tests make it small to put lines on the
+    edges): a chunk ends just after the last line feed of its window; a window inside a
+    longer line ends just after its last blank (space, tab, carriage return), so a line is cut
+    between tokens, never inside one, and a window that is one token grows to the next blank.
+    With ``whole_lines`` a window inside a line grows to its end."""
     stop = len(buffer) if stop is None else stop
     begin = start
     while begin < stop:
-        end = min(begin + CHUNK_BYTES, stop)
+        end = min(begin + chunk_bytes, stop)
         if end < stop:
-            end = _cut(buffer, begin, end, stop, whole_lines)
+            end = _cut(buffer, begin, end, stop, whole_lines, chunk_bytes)
         yield end
         begin = end
 
 
-def _cut(buffer: np.ndarray, begin: int, end: int, stop: int, whole_lines: bool) -> int:
+def _cut(
+    buffer: np.ndarray, begin: int, end: int, stop: int, whole_lines: bool, chunk_bytes: int
+) -> int:
     """Where a chunk whose window is ``[begin, end)`` ends (see :func:`chunks`)."""
     window = buffer[begin:end]
     for hits in (window == LF,) if whole_lines else (window == LF, blanks(window)):
@@ -70,7 +78,7 @@ def _cut(buffer: np.ndarray, begin: int, end: int, stop: int, whole_lines: bool)
     # The window is inside one token (or line): take it whole, up to the next blank (or
     # line feed).
     while end < stop:
-        window = buffer[end : min(end + CHUNK_BYTES, stop)]
+        window = buffer[end : min(end + chunk_bytes, stop)]
         hits = window == LF if whole_lines else blanks(window)
         if hits.any():
             return end + int(np.argmax(hits)) + 1

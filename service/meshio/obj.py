@@ -55,23 +55,40 @@ from .mesh import (
     out_of_range,
     vertex_error,
 )
+from .objlines import (
+    CORNERS,
+    FACE,
+    GROUP,
+    MATERIAL,
+    OBJECT,
+    TEXCOORD,
+    VERTEX,
+    XYZ,
+    Lazy,
+    face_references,
+    kind_of,
+    line_kinds,
+    refuse_short,
+    resolved_ids,
+    resolved_texcoord_ids,
+    texcoord_rows,
+    texture_references,
+    unreadable,
+    vertex_rows,
+    without_tails,
+)
 from .text import (
     CHUNK_BYTES,
     ChunkWalk,
     Lines,
     Tokens,
     as_bytes_array,
-    blank_spans,
     chunks,
-    numbers_text,
     parse_numbers,
-    parse_spans,
-    positions,
     spans_text,
 )
 
-_HASH, _SLASH = 35, 47
-_OTHER, _VERTEX, _FACE, _TEXCOORD, _GROUP, _OBJECT, _MATERIAL = range(7)
+_HASH = 35  # b"#"
 
 #: Distinct names a file may give its groups: each costs a few hundred bytes of dictionary
 #: however short it is written, so without a bound a file of names alone could cost over
@@ -221,52 +238,52 @@ class _Pass(ChunkWalk):
         lines, kind = self.kept.pop(begin, (None, None)) if self.out is not None else (None, None)
         if lines is None:
             lines = Lines.of(self.buffer[begin:end], self.line, comment=_HASH)
-            kind = _kinds(lines)
+            kind = line_kinds(lines)
             if self.out is None and lines.nbytes + kind.nbytes <= self.room:
                 self.kept[begin] = lines, kind
                 self.room -= lines.nbytes + kind.nbytes
         if not len(lines):
             return
         numbers = lines.numbers
-        vertex_lines, face_lines = kind == _VERTEX, kind == _FACE
+        vertex_lines, face_lines = kind == VERTEX, kind == FACE
         triangles = np.maximum(numbers - 2, 0, where=face_lines, out=np.zeros_like(numbers))
         if self.out is not None:
             self._fill_lines(lines, kind, triangles)
         self.vertices += int(np.count_nonzero(vertex_lines))
         self.coloured += int(np.count_nonzero(vertex_lines & (numbers >= 6)))
-        self.texcoords += int(np.count_nonzero(kind == _TEXCOORD))
+        self.texcoords += int(np.count_nonzero(kind == TEXCOORD))
         self.face_lines += int(np.count_nonzero(face_lines))
         self.triangles += int(triangles.sum())
 
     def _fill_lines(self, lines: Lines, kind: np.ndarray, triangles: np.ndarray) -> None:
         out = self.out
-        vertex_lines = kind == _VERTEX
+        vertex_lines = kind == VERTEX
         if vertex_lines.any():
             at = np.flatnonzero(vertex_lines)
             start = self.vertices
             rows = slice(start, start + len(at))
-            out.vertices[rows] = _vertices(lines, at, out.colors, rows)
+            out.vertices[rows] = vertex_rows(lines, at, out.colors, rows)
             out.check(start, len(at), lambda k: lines.line(at[k]))
-        texcoord_lines = kind == _TEXCOORD
+        texcoord_lines = kind == TEXCOORD
         if out.uv is not None and texcoord_lines.any():
             at = np.flatnonzero(texcoord_lines)
-            out.uv[self.texcoords : self.texcoords + len(at)] = _texcoords(lines, at)
-        at = np.flatnonzero(kind == _FACE)
+            out.uv[self.texcoords : self.texcoords + len(at)] = texcoord_rows(lines, at)
+        at = np.flatnonzero(kind == FACE)
         if at.size:
-            refs, uv_refs = _references(lines, at, out.uv is not None)
-            corners, where = lines.numbers[at], _Lazy(lines, at)
+            refs, uv_refs = face_references(lines, at, out.uv is not None)
+            corners, where = lines.numbers[at], Lazy(lines, at)
             defined = self.vertices + np.cumsum(vertex_lines)[at]  # vertices before each line
-            resolved = _resolve(refs, corners, defined, len(out.vertices), where)
+            resolved = resolved_ids(refs, corners, defined, len(out.vertices), where)
             start, count = self.triangles, int(triangles.sum())
             fan_into(out.faces[start : start + count], resolved, corners)
             if uv_refs is not None:
                 defined = self.texcoords + np.cumsum(texcoord_lines)[at]
-                uv_ids = _resolve_texcoords(uv_refs, corners, defined, len(out.uv), where)
+                uv_ids = resolved_texcoord_ids(uv_refs, corners, defined, len(out.uv), where)
                 fan_into(out.uv_faces[start : start + count], uv_ids, corners)
-        naming = np.flatnonzero(kind >= _GROUP)
+        naming = np.flatnonzero(kind >= GROUP)
         if naming.size:
             before = self.triangles + np.cumsum(triangles) - triangles
-            for code in (_GROUP, _OBJECT, _MATERIAL):
+            for code in (GROUP, OBJECT, MATERIAL):
                 at = naming[kind[naming] == code]
                 if at.size:
                     starts, ends, on = _names(lines, at, code)
@@ -284,28 +301,28 @@ class _Pass(ChunkWalk):
         if state.in_comment:
             starts = ends = starts[:0]
         if state.kind is None and len(starts):
-            state.kind = int(_kind_of(chunk, starts[0], ends[0]))
+            state.kind = int(kind_of(chunk, starts[0], ends[0]))
             starts, ends = starts[1:], ends[1:]
             self._begin_line(state)
         state.in_comment |= bool((chunk == _HASH).any())
-        if state.kind in (_VERTEX, _TEXCOORD):
+        if state.kind in (VERTEX, TEXCOORD):
             self._vertex_piece(state, chunk, starts, ends)
-        elif state.kind == _FACE:
+        elif state.kind == FACE:
             self._face_piece(state, chunk, starts, ends)
-        elif state.kind is not None and state.kind >= _GROUP and self.out is not None:
+        elif state.kind is not None and state.kind >= GROUP and self.out is not None:
             self._name_piece(state, begin, starts, ends)
         if ends_line:
             self._end_line(state)
         self.open = None if ends_line else state
 
     def _begin_line(self, state: _Open) -> None:
-        if state.kind == _VERTEX:
+        if state.kind == VERTEX:
             state.vertex, self.vertices = self.vertices, self.vertices + 1
-        elif state.kind == _TEXCOORD:
+        elif state.kind == TEXCOORD:
             state.vertex, self.texcoords = self.texcoords, self.texcoords + 1
-        elif state.kind == _FACE:
+        elif state.kind == FACE:
             self.face_lines += 1
-        elif state.kind >= _GROUP and self.out is not None:
+        elif state.kind >= GROUP and self.out is not None:
             self.out.names.add(state.kind, self.buffer, np.array([self.triangles]))
 
     def _vertex_piece(self, state: _Open, chunk, starts, ends) -> None:
@@ -314,10 +331,10 @@ class _Pass(ChunkWalk):
             return
         values = parse_numbers(spans_text(chunk, starts, ends), np.float64, len(starts))
         if values is None:
-            raise _unreadable("vertex coordinates", state.line)
+            raise unreadable("vertex coordinates", state.line)
         had = len(state.numbers)
         state.numbers += values[: 6 - had].tolist()
-        if state.kind == _VERTEX and had < 3 <= len(state.numbers):
+        if state.kind == VERTEX and had < 3 <= len(state.numbers):
             self.out.vertices[state.vertex] = state.numbers[:3]
             self.out.check(state.vertex, 1, lambda _: state.line)
 
@@ -331,16 +348,16 @@ class _Pass(ChunkWalk):
             tokens = Tokens(starts, ends, starts > 0)
             uv_refs = None
             if self.out.uv is not None:
-                uv_refs = _texture_references(text, origin, tokens, np.arange(len(starts)))
-            bad = _without_tails(text, origin, tokens)
+                uv_refs = texture_references(text, origin, tokens, np.arange(len(starts)))
+            bad = without_tails(text, origin, tokens)
             refs = None if bad >= 0 else parse_numbers(text, np.int64, len(starts))
             if refs is None:
-                raise _unreadable("face references", state.line)
+                raise unreadable("face references", state.line)
             one = np.array([len(refs)])
-            ids = _resolve(refs, one, self.vertices, len(self.out.vertices), [state.line])
+            ids = resolved_ids(refs, one, self.vertices, len(self.out.vertices), [state.line])
             state.prefix = self._fan(state.prefix, ids, corners, triangles, self.out.faces)
             if uv_refs is not None:
-                ids = _resolve_texcoords(
+                ids = resolved_texcoord_ids(
                     uv_refs, one, self.texcoords, len(self.out.uv), [state.line]
                 )
                 state.uv_prefix = self._fan(
@@ -361,229 +378,36 @@ class _Pass(ChunkWalk):
         if not len(starts):
             return
         at = np.int64(begin)
-        if state.kind == _GROUP:  # each token a name of the line in force
+        if state.kind == GROUP:  # each token a name of the line in force
             on = np.full(len(starts), -1)
-            self.out.names.add(_GROUP, self.buffer, [], on, starts + at, ends + at)
+            self.out.names.add(GROUP, self.buffer, [], on, starts + at, ends + at)
             return
         first = state.text[0] if state.text else int(starts[0] + at)
         state.text = (first, int(ends[-1] + at))  # the name runs on, blanks and all
 
     def _end_line(self, state: _Open) -> None:
         if self.out is None:
-            self.coloured += int(state.kind == _VERTEX and state.count >= 6)
+            self.coloured += int(state.kind == VERTEX and state.count >= 6)
             return
-        if state.kind == _VERTEX:
-            _refuse_short(np.array([state.count]), lambda _: state.line, "vertex", _XYZ)
+        if state.kind == VERTEX:
+            refuse_short(np.array([state.count]), lambda _: state.line, "vertex", XYZ)
             if self.out.colors is not None and len(state.numbers) >= 6:
                 self.out.colors[state.vertex, :3] = state.numbers[3:6]
-        if state.kind == _TEXCOORD and self.out.uv is not None:
+        if state.kind == TEXCOORD and self.out.uv is not None:
             numbers = state.numbers + [0.0] * (2 - len(state.numbers))
             self.out.uv[state.vertex] = numbers[:2]
-        if state.kind == _FACE:
-            _refuse_short(np.array([state.count]), lambda _: state.line, "face", _CORNERS)
-        if state.kind in (_OBJECT, _MATERIAL) and state.text:
+        if state.kind == FACE:
+            refuse_short(np.array([state.count]), lambda _: state.line, "face", CORNERS)
+        if state.kind in (OBJECT, MATERIAL) and state.text:
             (start, end), on = state.text, np.full(1, -1)
             self.out.names.add(state.kind, self.buffer, [], on, [start], [end])
-
-
-_XYZ = "numbers; a vertex needs x, y and z"
-_CORNERS = "corners; a face needs at least 3"
-
-
-#: The kind of a line by its keyword's one letter (0: not one of these).
-_LETTERS = np.zeros(256, dtype=np.int8)
-_LETTERS[[ord("v"), ord("f"), ord("g"), ord("o")]] = _VERTEX, _FACE, _GROUP, _OBJECT
-
-
-def _kinds(lines: Lines) -> np.ndarray:
-    """(lines,) int8: the kind of each line from its keyword."""
-    tokens, key = lines.tokens, lines.key
-    starts = tokens.starts[key]
-    kind = _LETTERS[lines.chunk[starts]]
-    kind[tokens.ends[key] - starts != 1] = _OTHER  # "vt", "vn", "fo", ...
-    kind[lines.keyword(b"vt")] = _TEXCOORD
-    kind[lines.keyword(b"usemtl")] = _MATERIAL
-    return kind
-
-
-def _kind_of(chunk: np.ndarray, start: int, end: int) -> int:
-    """The kind of a line whose keyword is ``chunk[start:end]``."""
-    word = bytes(chunk[start : min(end, start + 7)])  # a keyword is short; a token may not be
-    kinds = {b"v": _VERTEX, b"vt": _TEXCOORD, b"f": _FACE, b"g": _GROUP, b"o": _OBJECT}
-    return {**kinds, b"usemtl": _MATERIAL}.get(word, _OTHER)
-
-
-@dataclass(frozen=True)
-class _Lazy:
-    """The 0-based file lines of lines ``at``, each counted when asked."""
-
-    lines: Lines
-    at: np.ndarray
-
-    def __getitem__(self, k) -> int:
-        return self.lines.line(self.at[int(k)])
-
-
-def _unreadable(what: str, line: int) -> MeshFormatError:
-    return MeshFormatError(
-        f"unreadable {what} on line {line + 1}: every token after the keyword must be a number"
-    )
-
-
-def _refuse_short(counts: np.ndarray, line_of, noun: str, needs: str) -> None:
-    """Refuse the first of some lines with fewer than three numbers after the keyword
-    (``counts`` each; ``line_of(k)`` is the 0-based line of the ``k``-th)."""
-    short = np.flatnonzero(counts < 3)
-    if short.size:
-        line, count = line_of(int(short[0])) + 1, int(counts[short[0]])
-        raise MeshFormatError(f"{noun} on line {line} has {count} {needs}")
-
-
-def _vertices(lines: Lines, at: np.ndarray, colors: np.ndarray | None, rows: slice) -> np.ndarray:
-    """(len(at), 3) float: x, y, z of the vertex lines ``at``; the 4th to 6th numbers of
-    those with six or more, a colour ``r g b``, go to ``colors[rows]`` (when there is one;
-    ``v x y z w`` gives none)."""
-    counts = lines.numbers[at]
-    _refuse_short(counts, lambda k: lines.line(at[k]), "vertex", _XYZ)
-    values, bad = parse_spans(*numbers_text(lines, at), counts, np.float64)
-    if values is None:
-        raise _unreadable("vertex coordinates", lines.line(at[bad]))
-    if np.all(counts == 3):
-        return values.reshape(-1, 3)
-    offsets = np.cumsum(counts) - counts
-    if colors is not None:
-        coloured = np.flatnonzero(counts >= 6)
-        colors[rows][coloured, :3] = values[offsets[coloured, None] + np.arange(3, 6)]
-    return values[offsets[:, None] + np.arange(3)]
-
-
-def _texcoords(lines: Lines, at: np.ndarray) -> np.ndarray:
-    """(len(at), 2) float: u and v of the ``vt`` lines ``at`` (v 0 where a line gives u
-    alone; a w ignored)."""
-    counts = lines.numbers[at]
-    if np.any(counts < 1):
-        raise _unreadable("texture coordinates", lines.line(at[int(np.argmin(counts))]))
-    values, bad = parse_spans(*numbers_text(lines, at), counts, np.float64)
-    if values is None:
-        raise _unreadable("texture coordinates", lines.line(at[bad]))
-    offsets = np.cumsum(counts) - counts
-    uv = np.zeros((len(at), 2))
-    uv[:, 0] = values[offsets]
-    second = counts >= 2
-    uv[second, 1] = values[offsets[second] + 1]
-    return uv
-
-
-def _without_tails(text: np.ndarray, origin: int, tokens: Tokens) -> int:
-    """Blank out, in ``text`` (the chunk's bytes from ``origin`` on), the ``/vt/vn`` tails of
-    the face references among ``tokens``; return the first token that is only a tail (``/2``,
-    no vertex number), or -1."""
-    slashes = positions(text == _SLASH)
-    if not slashes.size:
-        return -1
-    slashes += origin
-    holder = np.searchsorted(tokens.starts, slashes, side="right") - 1
-    holder, first = np.unique(holder, return_index=True)  # each token's first slash
-    tails = slashes[first]
-    blank_spans(text, tails - origin, tokens.ends[holder] - origin)
-    empty = np.flatnonzero(tails == tokens.starts[holder])
-    return int(holder[empty[0]]) if empty.size else -1
-
-
-def _references(
-    lines: Lines, at: np.ndarray, texture: bool
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """(corners,) int64: the vertex references of the face lines ``at``, in order; with
-    ``texture``, their texture references too (0 where a corner has none)."""
-    counts = lines.numbers[at]
-    _refuse_short(counts, lambda k: lines.line(at[k]), "face", _CORNERS)
-    text, starts, ends = numbers_text(lines, at)
-    origin = int(lines.tokens.starts[lines.key[at[0]] + 1])
-    uv_refs = None
-    if texture:
-        corner_tokens = np.repeat(lines.key[at] + 1 - (np.cumsum(counts) - counts), counts)
-        corner_tokens += np.arange(len(corner_tokens))
-        uv_refs = _texture_references(text, origin, lines.tokens, corner_tokens)
-    tail = _without_tails(text, origin, lines.tokens)
-    if tail >= 0:
-        line = np.searchsorted(lines.key, tail, side="right") - 1
-        raise _unreadable("face references", lines.line(line))
-    refs, bad = parse_spans(text, starts, ends, counts, np.int64)
-    if refs is None:
-        raise _unreadable("face references", lines.line(at[bad]))
-    return refs, uv_refs
-
-
-def _texture_references(text, origin: int, tokens: Tokens, corners: np.ndarray) -> np.ndarray:
-    """(len(corners),) int64: the texture part of each face reference ``v/vt/vn`` among the
-    ascending tokens ``corners`` of ``text`` (the chunk's bytes from ``origin`` on),
-    ``_NO_TEXTURE`` where a reference has none (``v`` or ``v//vn``)."""
-    found = np.full(len(corners), _NO_TEXTURE, dtype=np.int64)
-    slashes = positions(text == _SLASH)
-    if not slashes.size:
-        return found
-    slashes += origin
-    holder = np.searchsorted(tokens.starts, slashes, side="right") - 1
-    holders, first, count = np.unique(holder, return_index=True, return_counts=True)
-    begin = slashes[first] + 1
-    token_end = tokens.ends[holders]
-    end = np.where(count > 1, slashes[np.minimum(first + 1, len(slashes) - 1)], token_end)
-    given = np.flatnonzero(end > begin)
-    if not given.size:
-        return found
-    spans = spans_text(text, begin[given] - origin, end[given] - origin)
-    values = parse_numbers(spans, np.int64, len(given))
-    if values is None:
-        raise MeshFormatError("unreadable texture references: a v/vt/vn's vt must be a number")
-    found[np.searchsorted(corners, holders[given])] = values
-    return found
-
-
-#: A face corner without a texture reference (``v`` or ``v//vn``), before resolving.
-_NO_TEXTURE = np.iinfo(np.int64).min
-
-
-def _resolve_texcoords(refs, corners, defined, n_texcoords: int, lines) -> np.ndarray:
-    """As :func:`_resolve` (which refuses 0), for texture references: none becomes -1."""
-    none = refs == _NO_TEXTURE
-    if n_texcoords == 0 and not none.all():
-        raise MeshFormatError("a face refers to a texture coordinate, but the file has no vt lines")
-    refs[none] = 1
-    ids = _resolve(refs, corners, defined, n_texcoords, lines, noun="texture coordinate")
-    ids[none] = -1
-    return ids
-
-
-def _resolve(refs, corners, defined, n_vertices: int, lines, noun: str = "vertex") -> np.ndarray:
-    """(corners.sum(),) int64 0-based vertex ids of 1-based or negative (relative)
-    references ``refs``, in place; ``defined`` vertices precede each polygon (``lines``:
-    their 0-based lines, for the message)."""
-    negative = refs < 0
-    before = None
-    if negative.any():
-        before = np.repeat(defined, corners)
-        bad = (refs == 0) | (refs > n_vertices) | (refs < -before)
-    else:
-        bad = (refs == 0) | (refs > n_vertices)
-    if bad.any():
-        k = int(np.flatnonzero(bad)[0])
-        line = lines[int(np.searchsorted(np.cumsum(corners), k, side="right"))] + 1
-        raise MeshFormatError(
-            f"face on line {line} refers to {noun} {int(refs[k])}, but the file has "
-            f"{n_vertices} {noun.replace('vertex', 'vertice')}s (references count from 1, or "
-            "back from -1)"
-        )
-    refs -= 1
-    if before is not None:
-        refs[negative] += before[negative] + 1
-    return refs
 
 
 def _names(lines: Lines, at: np.ndarray, code: int):
     """The name spans ``(starts, ends)`` of the naming lines ``at`` (all of kind ``code``)
     and the index into ``at`` of each one's line."""
     tokens, counts = lines.tokens, lines.numbers[at]
-    if code == _GROUP:  # each token a name: the tokens after each line's keyword
+    if code == GROUP:  # each token a name: the tokens after each line's keyword
         on = np.repeat(np.arange(len(at), dtype=np.int32), counts)
         mine = np.repeat(lines.key[at] + 1 - (np.cumsum(counts, dtype=np.int32) - counts), counts)
         mine += np.arange(len(mine), dtype=np.int32)
@@ -656,7 +480,7 @@ class _Names:
         for length in np.unique(lengths).tolist():
             mine = np.flatnonzero(lengths == length)
             keys, inverse = _distinct(text, starts[mine], length)
-            kind = b"g" if code == _GROUP else b"n"
+            kind = b"g" if code == GROUP else b"n"
             known = [self.ids.setdefault(kind + key, len(self.ids)) for key in keys]
             if len(self.ids) > MAX_GROUP_NAMES:
                 raise MeshTooLargeError(

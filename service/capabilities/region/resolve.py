@@ -312,17 +312,8 @@ def resolve(
         if fixed.rotation is not None and (fixed.sigma is not None or not warped):
             frame = head if head is not None else frame_of(params, selection.center)
             return chart_of(params), frame, None
-        chosen = default_choice(
-            mesh.vertices,
-            region_faces(mesh, selection),
-            fixed,
-            fit_bounds(params),
-            method=params.method,
-            layout=params.layout,
-            threads=ctx.threads,
-        )
-        return chosen.chart, chosen.frame, chosen
-    fit = fit_region(
+    choose = fit_region if params.auto else default_choice  # a search, or its start alone
+    fit = choose(
         mesh.vertices,
         region_faces(mesh, selection),
         fixed,

@@ -256,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
         # started), they take what it leaves, as clients on other machines would.
         os.nice(10)
         # The warm-up is the first phase's load: the heap (kept, not trimmed: see
-        # service/allocator.py) reaches its working size before the first reading.
+        # service/server/allocator.py) reaches its working size before the first reading.
         warm = Phase("warm-up", capacity, 5 if args.short else 15)
         run_phase(url, mesh, warm, server.pid)
         # Each reading after 2 s without requests (an idle worker returns its free heap

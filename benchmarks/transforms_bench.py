@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     sections = []
     for allocator, title in (
         ("default", "glibc's default allocator settings"),
-        ("service", "the service's allocator settings (service/allocator.py)"),
+        ("service", "the service's allocator settings (service/server/allocator.py)"),
     ):
         child = [sys.executable, "-m", "benchmarks.transforms_bench", "--child", allocator]
         child += ["--subdivisions", str(args.subdivisions), "--runs", str(args.runs)]

@@ -211,13 +211,6 @@ class _Problem:
         """Whether the region has no boundary (no closing planes)."""
         return len(self.planes.normals) == len(self.planes.faces)
 
-    def within_reach(self, center: np.ndarray, slack: bool = False):
-        """Whether ``center`` is within ``_REACH`` region sizes of the region's middle (far
-        away every region looks flat); with ``slack``, by how much (negative: beyond)."""
-        away = float(np.linalg.norm(center - self.planes.middle))
-        room = _REACH * self.planes.size - away
-        return room if slack else room >= 0.0
-
     def chart(self, sigma: float | None) -> Chart:
         if self.method is Method.STANDARD:
             return Chart.standard()

@@ -88,10 +88,10 @@ class Context:
 
     settings: Settings = field(default_factory=Settings)
     budget: Budget = field(default_factory=Unlimited)
-    threads: int = 0
+    threads: int | None = None
 
     def __post_init__(self) -> None:
-        if self.threads < 1:
+        if self.threads is None:  # frozen: set once, here
             object.__setattr__(self, "threads", self.settings.threads)
 
     def charge(self, nbytes: int) -> None:

@@ -54,9 +54,9 @@ from pathlib import Path
 
 import orjson
 
-from .capabilities import MESH_COMMANDS, MESH_FORM, MeshCapability
+from .capabilities import MESH_COMMANDS, MeshCapability
 from .capabilities.context import Context
-from .capabilities.inputs import Upload, parse_params
+from .capabilities.inputs import MeshPart, Upload, parse_params
 from .jsonkeys import repeated_key
 from .meshio import format_of
 from .observability import JsonFormatter
@@ -180,6 +180,14 @@ def parse_line(line: bytes, number: int, folder: Path) -> Scan:
     if command not in MESH_COMMANDS:
         raise Problem(422, f"command: {command!r} is not one of {', '.join(MESH_COMMANDS)}")
     capability = MESH_COMMANDS[command]
+    others = [part.name for part in capability.extra_parts if isinstance(part, MeshPart)]
+    if others:  # a line names one mesh
+        raise Problem(
+            422,
+            f"command: {command} reads a second mesh ({', '.join(others)}), which a manifest "
+            f"line cannot give; run `meshflat {command}` for each pair",
+            field="command",
+        )
     params = entry.get("params", {})
     _check_params(params, capability, Path(mesh).name)
     name = entry.get("name", Path(mesh).stem)
@@ -220,7 +228,7 @@ def _check_params(params, capability: MeshCapability, mesh_name: str) -> None:
             "params.output: the extensions in outputs choose the forms; leave it out",
             field="params.output",
         )
-    with core_errors_as_problems(MESH_FORM):
+    with core_errors_as_problems(capability.places):
         parsed = parse_params(capability.params, orjson.dumps(params))
         format_of(mesh_name, parsed.format)
 
@@ -241,7 +249,7 @@ def _outputs(entry: dict, capability: MeshCapability) -> tuple[tuple[str, Output
             )
     if len(set(names)) != len(names):
         raise Problem(422, "outputs: a file name is given twice", field="outputs")
-    with core_errors_as_problems(MESH_FORM):
+    with core_errors_as_problems(capability.places):
         return tuple((name, capability.output_of_file(name, "outputs")) for name in names)
 
 
@@ -322,7 +330,7 @@ def _compute(scan: Scan, data: bytes, settings: Settings, folder: Path) -> dict[
     timings = Timings()
     written = {}
     ctx = Context(settings)
-    with core_errors_as_problems(MESH_FORM):
+    with core_errors_as_problems(capability.places):
         params = parse_params(capability.params, orjson.dumps(scan.params))
         given = capability.input_of(
             params, {capability.mesh.name: Upload(scan.mesh.name, data)}, ctx

@@ -43,7 +43,7 @@ import orjson
 
 from transforms import Layout
 
-from .capabilities import MESH_COMMANDS, MESH_FORM, MeshCapability
+from .capabilities import MESH_COMMANDS, MeshCapability
 from .capabilities.context import Context
 from .capabilities.inputs import MeshPart, PngPart, Upload, parse_params
 from .capabilities.region.params import CENTERS
@@ -178,13 +178,14 @@ def run(args: argparse.Namespace) -> bytes:
     settings = Settings.from_env()
     work = "fitting" if args.command == "fit" or args.auto else "flattening"
     progress = Progress(["reading", work, "writing"], args.progress or sys.stderr.isatty())
-    with core_errors_as_problems(MESH_FORM):
+    with core_errors_as_problems(capability.places):
         with progress.step("reading"):
             params = parse_params(capability.params, orjson.dumps(params_of(args)))
+            files = _files(args, capability)
             # params.output, when given, names the form; else --out's extension does.
             output = getattr(params, "output", None) or _output(capability, args.out)
             ctx = Context(settings)
-            given = capability.input_of(params, _files(args, capability), ctx)
+            given = capability.input_of(params, files, ctx)
         with progress.step(work):
             answer = capability.answer(given, ctx, output, Timings())
     with progress.step("writing"):

@@ -13,24 +13,39 @@ from dataclasses import dataclass
 
 from transforms.errors import MAX_LISTED
 
+from .meshio import MeshFormatError
+
 
 class InvalidInput(Exception):
     """An input the service cannot use, which only the service can tell is wrong (the file
     lacks what the region asks for, two zones overlap, a registration did not hold).
 
+    The detail reads ``{item} ({name}){about}: {message}``: ``params.zones.2 ('crown'), hole
+    0: a hole must lie inside the outer ring`` for the field ``zones.2.holes.0``.
+
     Attributes
     ----------
     field : str, the parameter (dotted, as in ``zones.1.outer``) or file part at fault
     message : str, what is wrong and what would do, in words
-    name : str or None, the name the client gave the item (a zone's), shown beside the field
+    name : str or None, the name the client gave the item (a zone's), shown beside it
+    item : str, what the detail names first (default ``field``; a zone for its ring)
+    about : str, words after the name (``", outer ring"``)
     indices : tuple of int, the offending vertex, face or point ids, if any
     """
 
     def __init__(
-        self, field: str, message: str, *, name: str | None = None, indices: Sequence[int] = ()
+        self,
+        field: str,
+        message: str,
+        *,
+        name: str | None = None,
+        item: str | None = None,
+        about: str = "",
+        indices: Sequence[int] = (),
     ) -> None:
         super().__init__(f"{field}: {message}")
         self.field, self.message, self.name = field, message, name
+        self.item, self.about = item or field, about
         self.indices = tuple(int(i) for i in indices[:MAX_LISTED])
 
 
@@ -61,12 +76,12 @@ def check_count(count: int, limit: int, field: str, setting: str = "MESHFLAT_MAX
         raise OverLimit(field, count, limit, setting)
 
 
-class UnreadablePart(Exception):
-    """A file part that could not be read: ``error`` is the reader's
+class UnreadableMesh(Exception):
+    """A mesh part that could not be read: ``error`` is the reader's
     (:class:`~service.meshio.MeshFormatError`, a mesh beyond a limit included), ``part`` the
     form's part (or the command line's argument) it came in."""
 
-    def __init__(self, part: str, error: Exception) -> None:
+    def __init__(self, part: str, error: MeshFormatError) -> None:
         super().__init__(f"{part}: {error}")
         self.part, self.error = part, error
 

@@ -12,7 +12,7 @@ import json
 import orjson
 import trimesh
 
-from .capabilities import JSON_CAPABILITIES, MESH_CAPABILITIES, MESH_FORM
+from .capabilities import JSON_CAPABILITIES, MESH_CAPABILITIES
 from .capabilities.context import Context
 from .capabilities.inputs import MeshPart, Upload, parse_params
 from .capabilities.region.params import MESH_PARAMS_EXAMPLE
@@ -129,9 +129,11 @@ def examples() -> dict[tuple[str, str], dict | list]:
     tiny = Settings(max_faces=10).limits
     for capability in (by_path["/v1/flatten"], by_path["/v1/validate"]):
         found[capability.path, "422"] = _problem(
-            lambda c=capability: mesh_answer(c, bad_region, mesh, settings), MESH_FORM
+            lambda c=capability: mesh_answer(c, bad_region, mesh, settings), capability.places
         )
-        found[capability.path, "413"] = _problem(lambda: read_mesh(mesh, "obj", tiny), MESH_FORM)
+        found[capability.path, "413"] = _problem(
+            lambda: read_mesh(mesh, "obj", tiny), capability.places
+        )
     return found
 
 

@@ -40,10 +40,6 @@ class Png:
     alpha: np.ndarray | None
 
 
-def refusal(part: str, words: str) -> InvalidInput:
-    return InvalidInput(part, words)
-
-
 def read_png(
     data: bytes,
     part: str,
@@ -64,18 +60,18 @@ def read_png(
     try:
         image = Image.open(io.BytesIO(data))
         if image.format != "PNG":
-            raise refusal(part, f"a PNG, not {image.format}")
+            raise InvalidInput(part, f"a PNG, not {image.format}")
         width, height = image.size
         if size is not None and image.size != size:  # from the header: nothing decoded yet
-            raise refusal(
+            raise InvalidInput(
                 part,
                 f"{width} x {height} pixels; the PNG answer's framing is params.image_width x "
                 f"image_height, {size[0]} x {size[1]}",
             )
         if max(width, height) > MAX_SIDE:
-            raise refusal(part, f"{width} x {height} pixels; at most {MAX_SIDE} a side")
+            raise InvalidInput(part, f"{width} x {height} pixels; at most {MAX_SIDE} a side")
         if grey_only and image.mode not in ("L", "LA"):
-            raise refusal(
+            raise InvalidInput(
                 part, f"8-bit grey (mode L, or LA: the alpha is left out), not mode {image.mode}"
             )
         charge(BYTES_PER_PIXEL * width * height)
@@ -85,7 +81,7 @@ def read_png(
             return _colour(pyspng.load(data)[..., :channels], 65535.0)
         return _pixels(image, part)
     except (OSError, ValueError, SyntaxError, RuntimeError, Image.DecompressionBombError) as error:
-        raise refusal(part, f"not a readable PNG ({type(error).__name__})") from None
+        raise InvalidInput(part, f"not a readable PNG ({type(error).__name__})") from None
 
 
 def _pixels(image: Image.Image, part: str) -> Png:
@@ -99,7 +95,7 @@ def _pixels(image: Image.Image, part: str) -> Png:
     elif image.mode in ("RGB", "RGBA"):
         return _colour(np.asarray(image), 255.0)
     else:
-        raise refusal(
+        raise InvalidInput(
             part, f"grey, grey and alpha, RGB or RGBA, 8 or 16 bits; not mode {image.mode}"
         )
     if alpha is not None:

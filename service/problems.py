@@ -23,7 +23,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from transforms import EmptyRegionError, TransformInputError
 
-from .errors import JSON_BODY, ErrorPlaces, InvalidInput, OverLimit, UnreadablePart
+from .errors import JSON_BODY, ErrorPlaces, InvalidInput, OverLimit, UnreadableMesh
 from .meshio import MeshFormatError, MeshTooLargeError
 from .observability import REJECTIONS
 
@@ -135,7 +135,7 @@ INPUT_ERRORS = (
     TransformInputError,
     InvalidInput,
     OverLimit,
-    UnreadablePart,
+    UnreadableMesh,
     MeshFormatError,
     ValidationError,
 )
@@ -152,14 +152,16 @@ def problem_of(error: Exception, places: ErrorPlaces = JSON_BODY) -> Problem:
         ``error`` is none of those (a bug: let it become a 500).
     """
     if isinstance(error, InvalidInput):
-        where = places.named(error.field)
-        label = where if error.name is None else f"{where} ({error.name!r})"
-        return Problem(422, f"{label}: {error.message}", "invalid-request", where, error.indices)
+        where, label = places.named(error.field), places.named(error.item)
+        if error.name is not None:
+            label = f"{label} ({error.name!r})"
+        detail = f"{label}{error.about}: {error.message}"
+        return Problem(422, detail, "invalid-request", where, error.indices)
     if isinstance(error, OverLimit):
         where = places.named(error.field)
         detail = f"{where}: {error.count:,} items; the limit is {error.limit:,} ({error.setting})"
         return Problem(413, detail, "too-many-points", where)
-    if isinstance(error, UnreadablePart):
+    if isinstance(error, UnreadableMesh):
         return _unreadable(error.error, error.part)
     if isinstance(error, MeshFormatError):
         return _unreadable(error, places.data or "mesh")

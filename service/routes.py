@@ -7,7 +7,6 @@ its result is answered in the form asked for.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from functools import partial
 from typing import Annotated
 
@@ -19,7 +18,6 @@ from . import document
 from .capabilities import (
     JSON_CAPABILITIES,
     MESH_CAPABILITIES,
-    MESH_FORM,
     Capability,
     JsonCapability,
     MeshCapability,
@@ -155,7 +153,7 @@ def answer_mesh(
     ``params.output`` asks for (CPU-bound: run it off the event loop)."""
     timings = Timings(job.deadline)
     ctx = Context(job.settings, job.ticket)
-    with core_errors_as_problems(replace(MESH_FORM, data=capability.mesh.name)):
+    with core_errors_as_problems(capability.places):
         with timings.measure("parse"):
             given = mesh_form(body, content_type, capability, ctx)
             output = Output.JSON

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from contextlib import contextmanager
 from typing import Protocol
 
 
-class Deadline(Protocol):
+class Checkpoint(Protocol):
+    """A moment a stage may not start after (a served job's deadline)."""
+
     def check(self) -> None:
         """Raise the time-limit problem if the moment has passed."""
 
@@ -21,7 +22,7 @@ class Timings:
     running on unseen. Without one (the command line) stages are only timed.
     """
 
-    def __init__(self, deadline: Deadline | None = None) -> None:
+    def __init__(self, deadline: Checkpoint | None = None) -> None:
         self.durations: dict[str, float] = {}
         self.deadline = deadline
 
@@ -34,10 +35,6 @@ class Timings:
             yield
         finally:
             self.durations[name] = self.durations.get(name, 0.0) + time.perf_counter() - start
-
-    def timed(self, name: str, call: Callable):
-        with self.measure(name):
-            return call()
 
     def header(self) -> str:
         return ", ".join(

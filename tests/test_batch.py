@@ -281,6 +281,8 @@ LINE = {"mesh": "head.ply", "outputs": ["map.json"]}
         ({**LINE, "params": {"output": "png"}}, ["params.output", "extensions"]),
         ({**LINE, "params": [1]}, ["params", "JSON object"]),
         ({**LINE, "command": "serve"}, ["command", "flatten, validate, fit, locate"]),
+        ({**LINE, "command": "register", "params": {"units": "mm"}},
+         ["command", "second mesh (follow_up)"]),
         ({**LINE, "outptus": []}, ["outptus", "not a key"]),
         ('{"mesh": "a.ply", "outputs": ["m.json"], "params": {"sigma": 0.3, "sigma": 0.5}}',
          ["params.sigma", "more than once"]),

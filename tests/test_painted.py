@@ -339,3 +339,25 @@ async def test_texture_coordinates_that_are_not_numbers_leave_their_faces_out(cl
     got = await selected(client, textured_obj(uv), "head.obj", {"texture_mask": {}}, files)
     touched = set(np.flatnonzero((FACES < 50).any(axis=1)))
     assert got and not touched & set(got)
+
+
+async def test_a_part_that_should_not_have_been_sent_is_refused_before_it_is_decoded(client):
+    """Whether a PNG part is wanted is judged before its pixels are decoded or charged: a
+    large mask beside a cone region, a mis-sized image beside values, a density map without
+    its range get the refusal that says so, not a size or memory one."""
+    huge = {"mask": ("mask.png", mask_png(np.zeros((8000, 8000))))}
+    cone = json.dumps({"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 60}}})
+    form = {"mesh": (NAME, SAMPLES[NAME].path.read_bytes())}
+    answer = await client.post("/v1/flatten", files=form | huge, data={"params": cone})
+    assert "region.texture_mask only" in problem(answer, 422, "mask")["detail"]
+    small = {"image": ("map.png", mask_png(np.zeros((20, 10))))}
+    values = json.dumps({"values": [0.0] * len(VERTICES)})
+    answer = await client.post("/v1/transfer", files=form | small, data={"params": values})
+    assert "not both" in problem(answer, 422, "image")["detail"]
+    density = {"density_map": ("d.png", mask_png(np.zeros((20, 10))))}
+    no_range = json.dumps({"density_per_cm2": 5, "units": "mm"})
+    answer = await client.post("/v1/sites", files=form | density, data={"params": no_range})
+    assert "needs params.density_range" in problem(answer, 422, "density_map")["detail"]
+    no_units = json.dumps({"density_range": [0, 10]})
+    answer = await client.post("/v1/sites", files=form | density, data={"params": no_units})
+    assert "length unit" in problem(answer, 422, "params.units")["detail"]

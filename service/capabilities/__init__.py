@@ -11,7 +11,6 @@ context a use-case runs in (:mod:`.context`).
 
 from __future__ import annotations
 
-from ..errors import ErrorPlaces
 from . import fit, flatten, locate, measure, points, register, sites, transfer, validate
 from .rows import Capability, JsonCapability, MeshCapability
 
@@ -23,13 +22,6 @@ CAPABILITIES: tuple[Capability, ...] = tuple(row for module in MODULES for row i
 MESH_CAPABILITIES = tuple(c for c in CAPABILITIES if isinstance(c, MeshCapability))
 JSON_CAPABILITIES = tuple(c for c in CAPABILITIES if isinstance(c, JsonCapability))
 
-#: Where a mesh route's fields lie: the parameters of every mesh route in the ``params``
-#: part; whatever else the core names (vertices, faces, points it derived from them) is the
-#: uploaded mesh's.
-MESH_FORM = ErrorPlaces(
-    "params.", frozenset(name for c in MESH_CAPABILITIES for name in c.params.model_fields), "mesh"
-)
-
 #: The mesh routes by command-line command.
 MESH_COMMANDS = {capability.command: capability for capability in MESH_CAPABILITIES}
 
@@ -38,7 +30,6 @@ __all__ = [
     "JSON_CAPABILITIES",
     "MESH_CAPABILITIES",
     "MESH_COMMANDS",
-    "MESH_FORM",
     "MODULES",
     "Capability",
     "JsonCapability",

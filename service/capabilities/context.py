@@ -5,7 +5,8 @@ A use-case charges what a step will allocate before it allocates it (a picture's
 map's triangles, sites), so that no mix of valid requests takes a worker past its budget.
 In a served request the budget is the job's admission ticket (:mod:`service.server.jobs`),
 whose charge may refuse (503 when the process has no room now, 413 when the job could never
-fit); on the command line nothing is charged.
+fit): that refusal is the server's, and passes through the use-case untouched. On the command
+line nothing is charged.
 """
 
 from __future__ import annotations

@@ -97,8 +97,11 @@ def checked_zone(zone: Zone, number: int) -> Outline:
         hole outside the outer ring, holes that cross or nest (named ``zones.{number}...``).
     """
     field = f"zones.{number}"
-    rings = [_ring(zone.outer, f"{field}.outer", zone.name)]
-    rings += [_ring(hole, f"{field}.holes.{k}", zone.name) for k, hole in enumerate(zone.holes)]
+    rings = [_ring(zone.outer, f"{field}.outer", (field, zone.name, ", outer ring"))]
+    rings += [
+        _ring(hole, f"{field}.holes.{k}", (field, zone.name, f", hole {k}"))
+        for k, hole in enumerate(zone.holes)
+    ]
     polygon = shapely.Polygon(rings[0], rings[1:])
     if not polygon.is_valid:
         hole = next(
@@ -115,23 +118,33 @@ def checked_zone(zone: Zone, number: int) -> Outline:
                 f"{field}.holes.{hole}",
                 f"a hole must lie inside the outer ring{where}",
                 name=zone.name,
+                item=field,
+                about=f", hole {hole}",
             )
         raise InvalidInput(
             f"{field}.holes",
             f"its holes must lie apart from each other and from the outer ring{where}",
             name=zone.name,
+            item=field,
         )
     return Outline(zone.name, tuple(rings), polygon)
 
 
-def _ring(ring: Ring, field: str, zone: str) -> np.ndarray:
+def _ring(ring: Ring, field: str, label: tuple[str, str, str]) -> np.ndarray:
+    """(n, 2) float: the ring's points, checked; ``label``, the zone's field and name and
+    which ring it is, for the refusal."""
+    item, zone, which = label
     points = _distinct_in_turn(ring.x, ring.y)
     if len(points) > 1 and (points[0] == points[-1]).all():
         points = points[:-1]  # closed by repeating the first point
     distinct = len(np.unique(points, axis=0))
     if distinct < 3:
         raise InvalidInput(
-            field, f"a ring needs at least three distinct points; it has {distinct}", name=zone
+            field,
+            f"a ring needs at least three distinct points; it has {distinct}",
+            name=zone,
+            item=item,
+            about=which,
         )
     if not shapely.LinearRing(points).is_simple:
         where = _where(shapely.is_valid_reason(shapely.Polygon(points)))
@@ -139,6 +152,8 @@ def _ring(ring: Ring, field: str, zone: str) -> np.ndarray:
             field,
             f"the ring crosses or touches itself{where}; draw it without crossings",
             name=zone,
+            item=item,
+            about=which,
         )
     return points
 

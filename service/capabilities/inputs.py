@@ -3,7 +3,8 @@ from its file into a mesh or an image, and the params JSON read into the route's
 
 The HTTP form reader (:mod:`service.forms`) and the command line (:mod:`service.cli`) both
 hand a row (:meth:`service.capabilities.rows.MeshCapability.input_of`) the params and the
-files they were given, and get back the typed input its use-case takes: params models hold
+files they were given, and get back the typed input its use-case takes: meshes read, PNGs as
+:class:`PngFile` for the use-case to decode once it knows it wants them. Params models hold
 JSON only, never a file's bytes.
 """
 
@@ -15,7 +16,7 @@ from typing import NamedTuple, TypeVar
 from pydantic import BaseModel, ValidationError
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from ..errors import InvalidInput, UnreadablePart
+from ..errors import InvalidInput, UnreadableMesh
 from ..images import Png, read_png
 from ..jsonkeys import repeated_key
 from ..meshio import READERS, Mesh, MeshFormatError, format_of, read_mesh
@@ -73,22 +74,18 @@ def _formats() -> str:
 
 @dataclass(frozen=True)
 class MeshPart:
-    """A mesh file the route reads.
+    """A mesh file the route reads; a route reads every one of its meshes (a missing one is
+    refused).
 
     Attributes
     ----------
     name : the part's name in the form (the input's field)
     description : what it is, for the OpenAPI document and the command line's help; None for
-        the route's own mesh, whose format may also come from ``params.format``
+        the route's own mesh (its format may also come from ``params.format``)
     """
 
     name: str
     description: str | None = None
-
-    @property
-    def primary(self) -> bool:
-        """Whether this is the route's own mesh (the first; ``params.format`` is its)."""
-        return self.description is None
 
     @property
     def documented(self) -> str:
@@ -100,35 +97,34 @@ class MeshPart:
             "params.format."
         )
 
-    def read(self, upload: Upload | None, params: BaseModel, ctx: Context) -> Mesh:
-        """The mesh in ``upload``, read within the settings' limits; its counts are charged to
-        ``ctx`` before its arrays are built (the route's own mesh by
-        :meth:`Context.charge_mesh`, another on top of it).
+    def missing(self) -> InvalidInput:
+        """The refusal of a request without this part."""
+        return InvalidInput(self.name, f"the form has no '{self.name}' file field")
+
+    def read(self, upload: Upload, ctx: Context, own: bool, declared: str | None = None) -> Mesh:
+        """The mesh in ``upload``, its format from ``declared`` or its file name, read within
+        the settings' limits; its counts are charged to ``ctx`` before its arrays are built:
+        the route's ``own`` mesh by :meth:`Context.charge_mesh`, another on top of it.
 
         Raises
         ------
-        InvalidInput
-            The part is missing.
-        UnreadablePart
+        UnreadableMesh
             Not a readable mesh, or beyond a limit
             (:class:`~service.meshio.MeshTooLargeError`).
         """
-        if upload is None:
-            raise InvalidInput(self.name, f"the form has no '{self.name}' file field")
-        declared = getattr(params, "format", None) if self.primary else None
-        charge = ctx.charge_mesh if self.primary else ctx.charge_other_mesh
+        charge = ctx.charge_mesh if own else ctx.charge_other_mesh
         limits = replace(ctx.settings.limits, on_counts=charge)
         try:
             mesh = read_mesh(upload.data, format_of(upload.filename, declared), limits)
         except MeshFormatError as error:
-            raise UnreadablePart(self.name, error) from None
+            raise UnreadableMesh(self.name, error) from None
         observe_mesh(mesh.format, len(mesh.vertices), len(mesh.faces))
         return mesh
 
 
 @dataclass(frozen=True)
 class PngPart:
-    """A PNG the route may read (:func:`service.images.read_png`).
+    """A PNG the route may read (:func:`service.images.read_png`); it may be left out.
 
     Attributes
     ----------
@@ -148,19 +144,27 @@ class PngPart:
     def documented(self) -> str:
         return self.description
 
-    def read(self, upload: Upload | None, params: BaseModel, ctx: Context) -> Png | None:
-        """The image in ``upload`` (None when it was not sent), its pixels charged to ``ctx``
-        before they are decoded.
+
+@dataclass(frozen=True)
+class PngFile:
+    """A PNG part as sent, decoded only when the use-case reads it (:meth:`read`), after its
+    own checks of whether the part is wanted at all: a refusal for a part that should not
+    have been sent comes before any pixel is decoded or charged."""
+
+    part: PngPart
+    upload: Upload
+
+    def read(self, params: BaseModel, ctx: Context) -> Png:
+        """The image, its pixels charged to ``ctx`` before they are decoded.
 
         Raises
         ------
         InvalidInput
             Not a PNG, another size, another mode (naming the part).
         """
-        if upload is None:
-            return None
-        size = (params.image_width, params.image_height) if self.framed else None
-        return read_png(bytes(upload.data), self.name, ctx.charge, size, self.grey_only)
+        part = self.part
+        size = (params.image_width, params.image_height) if part.framed else None
+        return read_png(bytes(self.upload.data), part.name, ctx.charge, size, part.grey_only)
 
 
 #: The ``mask`` part every mesh route reads for a ``region.texture_mask``.

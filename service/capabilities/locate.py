@@ -109,7 +109,7 @@ def locate_directions(given: MeshInput[LocateParams], ctx: Context) -> Located:
     check_count(len(params.theta), ctx.settings.max_points, "theta")
     if params.via is LocateVia.MAP:
         return _locate_on_map(given, ctx)
-    selection = select_region(given)
+    selection = select_region(given, ctx)
     chart, frame, _ = resolve(mesh, selection, params, ctx)
     directions = chart.inverse(params.theta, params.phi, 1.0)
     faces = region_faces(mesh, selection)

@@ -24,14 +24,13 @@ from transforms.registration import (
 
 from ..encoding import Answer
 from ..errors import InvalidInput
-from ..images import Png
 from ..meshio import Mesh
 from ..outputs import Output
 from ..outputs.picture import Drawn
 from .context import Context
 from .drawn import Outline, Zone, check_names, checked_zone
 from .fields import PictureParams, Strict, choice, output_choice
-from .inputs import MASK, MeshPart
+from .inputs import MeshPart, PngFile
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, Landmarks, MeshParams
 from .region.pictures import map_renderers
@@ -155,13 +154,13 @@ class RegisterInput:
     ----------
     baseline, follow_up : Mesh, as read
     params : RegisterParams
-    mask : Png or None, the baseline's ``region.texture_mask``
+    mask : PngFile or None, the baseline's ``region.texture_mask``
     """
 
     baseline: Mesh
     follow_up: Mesh
     params: RegisterParams
-    mask: Png | None = None
+    mask: PngFile | None = None
 
 
 def register_scans(given: RegisterInput, ctx: Context) -> Registered:
@@ -347,7 +346,8 @@ ROWS = (
         "params.output, the overlay: the baseline's map with both regions' boundaries and "
         "the zones (SVG or PNG).",
         params=RegisterParams,
-        parts=(MeshPart("baseline"), MASK, FOLLOW_UP),
+        mesh=MeshPart("baseline"),
+        extra_parts=(FOLLOW_UP,),
         input=RegisterInput,
         operation=register_scans,
         response=RegisterResponse,

@@ -15,11 +15,11 @@ from typing import ClassVar
 from pydantic import BaseModel
 
 from ..encoding import encode
-from ..errors import InvalidInput
+from ..errors import ErrorPlaces, InvalidInput
 from ..outputs import Output
 from ..timings import Timings
 from .context import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE, Context
-from .inputs import MASK, MeshPart, PngPart, Upload
+from .inputs import MASK, MeshPart, PngFile, PngPart, Upload
 from .region.params import MeshParams
 from .region.pictures import Renderer
 from .region.resolve import MeshInput
@@ -51,26 +51,28 @@ class Capability:
             return encode(self.response.of(result))
 
 
-#: The parts of a route that reads one mesh: the mesh, and the texture mask of a region.
-MESH_PARTS = (MeshPart("mesh"), MASK)
+#: The mesh part of most routes.
+MESH = MeshPart("mesh")
 
 
 @dataclass(frozen=True)
 class MeshCapability(Capability):
-    """A multipart route: its mesh parts, PNG parts and a ``params`` JSON field, read into
-    its typed ``input`` (one field a part, and ``params``); its use-case is
-    ``(input, ctx) -> result``.
+    """A multipart route: its own mesh, the ``mask`` of a ``region.texture_mask``, the parts
+    it reads beyond those, and a ``params`` JSON field, read into its typed ``input`` (a
+    field a part, and ``params``); its use-case is ``(input, ctx) -> result``.
 
     Attributes
     ----------
     params : the model of the ``params`` field
-    parts : the files it reads, its own mesh first
+    mesh : its own mesh part (``params.format`` may name its format)
+    extra_parts : the files it reads beyond its mesh and the mask (a second mesh, an image)
     input : the use-case's input type, built from the params and the parts
     renderers : the other forms of the answer, ``(result, params, ctx) -> bytes`` by Output
     """
 
     params: type[MeshParams]
-    parts: tuple[MeshPart | PngPart, ...] = MESH_PARTS
+    mesh: MeshPart = MESH
+    extra_parts: tuple[MeshPart | PngPart, ...] = ()
     input: type = MeshInput
     renderers: Mapping[Output, Renderer] = field(default_factory=dict)
     #: What parsing the body may take per byte, beside the mesh (charged by the admission).
@@ -88,9 +90,16 @@ class MeshCapability(Capability):
         return self.path.rsplit("/", 1)[-1]
 
     @property
-    def mesh(self) -> MeshPart:
-        """The route's own mesh part."""
-        return self.parts[0]
+    def parts(self) -> tuple[MeshPart | PngPart, ...]:
+        """Every file part the route reads: its mesh, the mask, the others."""
+        return (self.mesh, MASK, *self.extra_parts)
+
+    @property
+    def places(self) -> ErrorPlaces:
+        """Where the fields of a refusal lie in this route's request: its parameters under
+        ``params.``, whatever else the core names (vertices, faces, points derived from them)
+        under the route's own mesh part."""
+        return ErrorPlaces("params.", frozenset(self.params.model_fields), self.mesh.name)
 
     @property
     def outputs(self) -> tuple[Output, ...]:
@@ -115,26 +124,37 @@ class MeshCapability(Capability):
         return found
 
     def input_of(self, params: MeshParams, files: Mapping[str, Upload], ctx: Context):
-        """The use-case's input: ``params`` and each part read from ``files`` (name -> the
-        file as sent), charged to ``ctx``.
+        """The use-case's input: ``params``, each mesh of ``files`` (name -> the file as sent)
+        read and charged to ``ctx``, each PNG as a :class:`~.inputs.PngFile` for the use-case
+        to decode once it knows it wants it (None where not sent).
 
         Raises
         ------
         InvalidInput
-            The route's mesh is missing, or a file is one the route does not read (a misspelt
-            part would be left out unseen).
-        UnreadablePart
+            A mesh is missing, or a file is one the route does not read (a misspelt part would
+            be left out unseen).
+        UnreadableMesh
             A mesh that cannot be read.
         """
         if self.mesh.name not in files:
-            self.mesh.read(None, params, ctx)  # the refusal of a missing mesh
+            raise self.mesh.missing()
         taken = ("params", *(part.name for part in self.parts))
         for name in files:
             if name not in taken:
                 raise InvalidInput(
                     name, f"this route reads no part of that name; it reads {', '.join(taken)}"
                 )
-        read = {part.name: part.read(files.get(part.name), params, ctx) for part in self.parts}
+        read = {}
+        for part in self.parts:
+            upload = files.get(part.name)
+            if isinstance(part, PngPart):
+                read[part.name] = None if upload is None else PngFile(part, upload)
+            elif upload is None:
+                raise part.missing()
+            elif part is self.mesh:
+                read[part.name] = part.read(upload, ctx, own=True, declared=params.format)
+            else:
+                read[part.name] = part.read(upload, ctx, own=False)
         return self.input(params=params, **read)
 
     def answer(self, given, ctx: Context, output: Output, timings: Timings) -> bytes:

@@ -24,13 +24,12 @@ from transforms.sites import (
 
 from ..encoding import Answer
 from ..errors import InvalidInput, check_count
-from ..images import Png
 from ..outputs import Output
 from ..outputs.picture import Drawn
 from .context import SITE_BYTES, Context
 from .drawn import Outline, Zone, check_names, checked_zone, overlaps
 from .fields import PictureParams, PositiveNumber, choice, output_choice
-from .inputs import MASK, MeshPart, PngPart
+from .inputs import PngFile, PngPart
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
 from .region.pictures import glb, map_renderers
@@ -213,7 +212,7 @@ class Placed:
 class SitesInput(MeshInput[SitesParams]):
     """A sites request: the mesh, the params, the mask and the ``density_map`` part."""
 
-    density_map: Png | None = None
+    density_map: PngFile | None = None
 
 
 def place(given: SitesInput, ctx: Context) -> Placed:
@@ -228,7 +227,7 @@ def place(given: SitesInput, ctx: Context) -> Placed:
             "sites per cm² need the mesh's length unit (mm, cm or m) or a known distance",
         )
     outlines = _apart([checked_zone(zone, k) for k, zone in enumerate(params.zones)])
-    image = _density_image(params, given.density_map)
+    image = _density_image(params, given.density_map, ctx)
     region = flatten(given, ctx)
     triangles = map_triangles(region, ctx)
     open_faces = ~flagged_mask(region.flat.validation, len(triangles)) | params.allow_flagged
@@ -271,9 +270,9 @@ def _apart(outlines: list[Outline]) -> list[Outline]:
     for i, j, _ in overlaps(outlines):
         raise InvalidInput(
             f"zones.{j}",
-            f"overlaps params.zones.{i} ({outlines[i].name!r}): a site's density would be "
-            "ambiguous there",
+            "a site's density would be ambiguous there",
             name=outlines[j].name,
+            about=f" overlaps params.zones.{i} ({outlines[i].name!r})",
         )
     return outlines
 
@@ -360,14 +359,17 @@ def _zone_parts(triangles: MapTriangles, params: SitesParams, outlines, open_fac
         yield _Part(core, outline, cover.total(area), asked)
 
 
-def _density_image(params: SitesParams, density_map: Png | None) -> np.ndarray | None:
+def _density_image(
+    params: SitesParams, density_map: PngFile | None, ctx: Context
+) -> np.ndarray | None:
     """(h, w) float: the density_map part's sites per cm² (grey 0-255 to density_range), or
     None without density_range.
 
     Raises
     ------
     InvalidInput
-        A map without density_range, or density_range without a map.
+        A map without density_range, density_range without a map, or a map that is not an
+        8-bit grey PNG of the PNG answer's size.
     """
     if params.density_range is None:
         if density_map is not None:
@@ -381,7 +383,7 @@ def _density_image(params: SitesParams, density_map: Png | None) -> np.ndarray |
             "density_range needs the map: a multipart part 'density_map', a grey PNG",
         )
     low, high = params.density_range
-    return low + (high - low) * density_map.values
+    return low + (high - low) * density_map.read(params, ctx).values
 
 
 def _density_map_part(region: MeshRegion, triangles: MapTriangles, image, open_faces) -> _Part:
@@ -581,7 +583,7 @@ ROWS = (
         "and face ids, the region's GLB with the sites as a POINTS primitive, or the map with "
         "the sites and zones (SVG or PNG).",
         params=SitesParams,
-        parts=(MeshPart("mesh"), MASK, DENSITY_MAP),
+        extra_parts=(DENSITY_MAP,),
         input=SitesInput,
         operation=place,
         response=SitesResponse,

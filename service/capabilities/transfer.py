@@ -24,7 +24,7 @@ from ..outputs import Output
 from ..outputs.lookup import grey_alpha_png16, lookup_bytes
 from .context import Context
 from .fields import Coordinate, FramingParams, output_choice
-from .inputs import MASK, MeshPart, PngPart
+from .inputs import PngFile, PngPart
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
 from .region.resolve import MeshInput, MeshRegion, flatten, lacking
@@ -117,24 +117,24 @@ class Transferred:
 class TransferInput(MeshInput[TransferParams]):
     """A transfer: the mesh, the params, the mask and the ``image`` part."""
 
-    image: Png | None = None
+    image: PngFile | None = None
 
 
 def transfer(given: TransferInput, ctx: Context) -> Transferred:
     """An image painted over the map carried onto the mesh (the ``image`` part), values a
     vertex drawn on the map (``values``), or, for ``output`` face_ids or barycentric, the
     look-up images; on the grid of the PNG answer."""
-    mesh, params, image = given.mesh, given.params, given.image
+    mesh, params, sent = given.mesh, given.params, given.image
     lookup = params.output in (Output.FACE_IDS, Output.BARYCENTRIC)
-    if image is not None and params.values is not None:
+    if sent is not None and params.values is not None:
         raise InvalidInput("image", "send an image part or params.values, not both")
-    if image is not None and lookup:
+    if sent is not None and lookup:
         raise InvalidInput("image", f"output {params.output.value} answers the look-up image alone")
     if params.output is Output.PNG and params.values is None:
         raise TransformInputError(
             "values", "output png draws params.values: send them (an image part answers JSON)"
         )
-    if image is None and params.values is None and not lookup:
+    if sent is None and params.values is None and not lookup:
         raise InvalidInput(
             "image",
             "nothing to carry: send an image part (the map painted over), params.values (to "
@@ -142,6 +142,7 @@ def transfer(given: TransferInput, ctx: Context) -> Transferred:
         )
     width, height = params.image_width, params.image_height
     values = None if params.values is None else _vertex_values(mesh, params.values)
+    image = None if sent is None else sent.read(params, ctx)
     region = flatten(given, ctx)
     ctx.charge(TRANSFER_BYTES_PER_PIXEL * width * height)
     x, y = region.layout
@@ -363,7 +364,7 @@ ROWS = (
         "weights in its corners, little-endian behind a 16-byte header (docs/api.md says "
         "how to read it).",
         params=TransferParams,
-        parts=(MeshPart("mesh"), MASK, IMAGE),
+        extra_parts=(IMAGE,),
         input=TransferInput,
         operation=transfer,
         response=TransferResponse,

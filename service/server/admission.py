@@ -117,10 +117,8 @@ async def read_body(
 
 
 def job_gate(app: FastAPI) -> JobGate:
-    """The process's :class:`JobGate` (one per app: a worker process has one app), made on
-    first use from the app's settings."""
-    if getattr(app.state, "job_gate", None) is None:
-        app.state.job_gate = gate_of(app.state.settings)
+    """The process's :class:`JobGate` (one per app, a worker process has one app), which
+    :func:`service.server.install` made."""
     return app.state.job_gate
 
 

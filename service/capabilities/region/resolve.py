@@ -2,8 +2,8 @@
 (fitted where any is ``"auto"``), flattened (:func:`flatten`). Every mesh route starts here.
 
 The use-cases know nothing of HTTP: bad input surfaces as the core's
-:class:`~transforms.TransformInputError` or as :class:`~..errors.InvalidInput`, both placed in
-the request by :func:`service.problems.problem_of`.
+:class:`~transforms.TransformInputError` or as :class:`service.errors.InvalidInput`, both
+placed in the request by :func:`service.problems.problem_of`.
 """
 
 from __future__ import annotations
@@ -34,11 +34,11 @@ from transforms import (
 from transforms import selection as select
 
 from ...errors import InvalidInput
-from ...images import Png
 from ...meshio import Mesh
 from ..context import MAP_BYTES_PER_FACE, Context
+from ..inputs import PngFile
 from ..units import mm_per_unit
-from .params import DEFAULT_SIGMA, AutoPole, ChartParams, MeshParams, PoleUp, TextureMask
+from .params import DEFAULT_SIGMA, AutoPole, ChartParams, MeshParams, PoleUp
 
 P = TypeVar("P", bound=MeshParams)
 
@@ -52,12 +52,12 @@ class MeshInput(Generic[P]):
     ----------
     mesh : Mesh, as read
     params : MeshParams (the route's model)
-    mask : Png or None
+    mask : PngFile or None, decoded when the region is a texture mask
     """
 
     mesh: Mesh
     params: P
-    mask: Png | None = None
+    mask: PngFile | None = None
 
 
 # -- parameters into the core's objects ---------------------------------------------------
@@ -95,7 +95,7 @@ class Selection:
     region: dict | None
 
 
-def select_region(given: MeshInput) -> Selection:
+def select_region(given: MeshInput, ctx: Context) -> Selection:
     """The faces and the centre of ``params.region`` and ``params.center``
     (:mod:`transforms.selection`); a cone is taken around the centre of the whole mesh.
 
@@ -115,7 +115,7 @@ def select_region(given: MeshInput) -> Selection:
         )
     if region is not None and region.cone is not None:
         return _cone_selection(mesh, params)
-    faces = select.nonempty(_region_faces(given))
+    faces = select.nonempty(_region_faces(given, ctx))
     resolved = None if region is None else region.model_dump(exclude_none=True)
     return Selection(faces, _center(mesh, faces, params.center), resolved)
 
@@ -135,7 +135,7 @@ def _cone_selection(mesh: Mesh, params: MeshParams) -> Selection:
     return Selection(select.nonempty(faces), center, resolved)
 
 
-def _region_faces(given: MeshInput) -> np.ndarray:
+def _region_faces(given: MeshInput, ctx: Context) -> np.ndarray:
     """The file face ids of any region but a cone (all of them for none)."""
     mesh, region, n_faces = given.mesh, given.params.region, len(given.mesh.faces)
     if region is None:
@@ -148,7 +148,7 @@ def _region_faces(given: MeshInput) -> np.ndarray:
     if region.vertex_color is not None or region.feature_id is not None:
         return _painted_faces(mesh, region)
     if region.texture_mask is not None:
-        return _masked_faces(mesh, region.texture_mask, given.mask)
+        return _masked_faces(given, ctx)
     if region.faces is not None:
         return select.faces_listed(region.faces, n_faces)
     if region.vertices is not None:
@@ -181,17 +181,18 @@ def _painted_faces(mesh: Mesh, region) -> np.ndarray:
     raise lacking(mesh, "region.feature_id.attribute", f"attribute {wanted.attribute!r}")
 
 
-def _masked_faces(mesh: Mesh, mask: TextureMask, image: Png | None) -> np.ndarray:
+def _masked_faces(given: MeshInput, ctx: Context) -> np.ndarray:
     """The faces under the form's ``mask`` PNG, read through the mesh's texture coordinates.
 
     Raises
     ------
     InvalidInput
-        No mask part.
+        No mask part, or not a readable PNG.
     TransformInputError
         The file has no texture coordinates (naming what it has), or no face is in.
     """
-    if image is None:
+    mesh, mask = given.mesh, given.params.region.texture_mask
+    if given.mask is None:
         raise InvalidInput(
             "mask",
             "region.texture_mask needs the mask: a multipart part 'mask', a PNG (--mask on "
@@ -202,6 +203,7 @@ def _masked_faces(mesh: Mesh, mask: TextureMask, image: Png | None) -> np.ndarra
         raise lacking(
             mesh, "region.texture_mask", "texture coordinates (glTF TEXCOORD_0, OBJ vt, PLY u v)"
         )
+    image = given.mask.read(given.params, ctx)
     shade = image.values if image.alpha is None else image.values * image.alpha
     return select.faces_by_mask(attributes.uv, attributes.uv_faces, shade, mask.min)
 
@@ -346,7 +348,7 @@ def flatten(given: MeshInput, ctx: Context) -> MeshRegion:
     """The region flattened with the chart and frame :func:`resolve` gives: the use-case of
     /v1/flatten, /v1/validate and /v1/fit, and where every other mesh route starts."""
     mesh, params = given.mesh, given.params
-    selection = select_region(given)
+    selection = select_region(given, ctx)
     chart, frame, fit = resolve(mesh, selection, params, ctx)
     if fit is not None:
         flat = fit.region

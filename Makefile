@@ -23,10 +23,14 @@ $(VENV)/.installed-run: pyproject.toml | $(BIN)/python
 serve: $(VENV)/.installed-run
 	$(BIN)/meshflat serve --host $(HOST) --port $(PORT)
 
+# `make test`: ruff, then pytest on every core (pytest-xdist; `--dist loadgroup` keeps each
+# xdist_group, such as the tests that start real servers, on one worker). PYTEST_ARGS adds
+# arguments (a file, -k, -x, ...).
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	@status=0; $(BIN)/python -m pytest || status=$$?; \
+	@status=0; $(BIN)/python -m pytest -n logical --dist loadgroup $(PYTEST_ARGS) \
+		|| status=$$?; \
 	if [ $$status -eq 5 ]; then echo "pytest collected no tests: check tests/ and pyproject.toml" >&2; fi; \
 	exit $$status
 

@@ -22,7 +22,10 @@ import pytest
 
 from fixtures.meshes import subdivided_ply
 
+from .conftest import real_servers
 from .test_operations import families, sample
+
+pytestmark = real_servers
 
 KEY = "serve-test-key"
 REGION = {"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}}

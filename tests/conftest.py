@@ -31,6 +31,9 @@ settings.register_profile("ci", deadline=None, derandomize=True, max_examples=30
 settings.register_profile("long", deadline=None, max_examples=5000)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
 
+#: A case that takes over about 4 s alone on a core: `make test` leaves it out, `make test`
+#: with MESHFLAT_ALL_TESTS=1 (CI) runs it (the marker is registered in pyproject.toml).
+slow = pytest.mark.slow
 #: Tests that start real servers (``meshflat serve``, and Chromium against one) and time
 #: them: `make test` (pytest-xdist, ``--dist loadgroup``) runs them one after another on one
 #: worker, so that no two servers share the machine's cores and a module's server is

@@ -23,12 +23,26 @@ $(VENV)/.installed-run: pyproject.toml | $(BIN)/python
 serve: $(VENV)/.installed-run
 	$(BIN)/meshflat serve --host $(HOST) --port $(PORT)
 
+# `make test`: ruff, then pytest on every core (pytest-xdist; `--dist loadgroup` keeps each
+# xdist_group, such as the tests that start real servers, on one worker). The cases marked
+# slow (over about 4 s each: pyproject.toml's markers) are left out unless MESHFLAT_ALL_TESTS=1,
+# which CI (.ci/run) sets: `MESHFLAT_ALL_TESTS=1 make test` runs every test. PYTEST_ARGS adds
+# arguments (a file, -k, -x, ...).
+ifeq ($(MESHFLAT_ALL_TESTS),1)
+TEST_SELECTION :=
+LEFT_OUT := true
+else
+TEST_SELECTION := -m "not slow"
+LEFT_OUT := echo "make test: the tests marked slow were left out (MESHFLAT_ALL_TESTS=1 runs them)"
+endif
+
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	@status=0; $(BIN)/python -m pytest || status=$$?; \
+	@status=0; $(BIN)/python -m pytest -n logical --dist loadgroup $(TEST_SELECTION) $(PYTEST_ARGS) \
+		|| status=$$?; \
 	if [ $$status -eq 5 ]; then echo "pytest collected no tests: check tests/ and pyproject.toml" >&2; fi; \
-	exit $$status
+	$(LEFT_OUT); exit $$status
 
 bench: $(VENV)/.installed-bench
 	$(BIN)/python -m benchmarks.transforms_bench $(BENCH_ARGS)

@@ -1,10 +1,12 @@
-"""Shared fixtures: the bundled sample meshes and small constructed meshes."""
+"""Shared fixtures: the bundled sample meshes and small constructed meshes; the marks that
+`make test` selects and distributes by."""
 
 from __future__ import annotations
 
 import io
 import math
 import os
+from collections import Counter
 from fractions import Fraction
 from functools import cache
 
@@ -28,6 +30,34 @@ settings.register_profile("ci", deadline=None, derandomize=True, max_examples=30
 #: A longer search, run by hand: HYPOTHESIS_PROFILE=long pytest tests/test_gltf_fuzz.py
 settings.register_profile("long", deadline=None, max_examples=5000)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "dev"))
+
+#: A case that takes over about 4 s alone on a core: `make test` leaves it out, `make test`
+#: with MESHFLAT_ALL_TESTS=1 (CI) runs it (the marker is registered in pyproject.toml).
+slow = pytest.mark.slow
+#: Tests that start real servers (``meshflat serve``, and Chromium against one) and time
+#: them: `make test` (pytest-xdist, ``--dist loadgroup``) runs them one after another on one
+#: worker, so that no two servers share the machine's cores and a module's server is
+#: started once.
+real_servers = pytest.mark.xdist_group("real-servers")
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """On a pytest-xdist worker, refuse a collection that the workers would share out wrongly
+    without a word: the scheduler keys tests by node id (a repeated id runs once), and with
+    ``--dist loadgroup`` it groups by the ``@group`` suffix that xdist adds to the ids of
+    xdist_group tests (a pytest whose node ids it cannot change loses the groups)."""
+    if not hasattr(config, "workerinput"):
+        return
+    repeated = sorted(nodeid for nodeid, n in Counter(i.nodeid for i in items).items() if n > 1)
+    if repeated:
+        raise pytest.UsageError(f"tests share node ids, so xdist would run them once: {repeated}")
+    if config.getvalue("loadgroup"):
+        lost = [
+            i.nodeid for i in items if i.get_closest_marker("xdist_group") and "@" not in i.nodeid
+        ]
+        if lost:
+            raise pytest.UsageError(f"xdist_group is not applied to {lost[:3]} ...: check pytest")
 
 
 @cache

@@ -20,8 +20,11 @@ import pytest
 from fixtures.meshes import subdivided_ply
 from service.samples import SAMPLES
 
+from .conftest import real_servers, slow
 from .test_serve import running
 from .tools import require
+
+pytestmark = [slow, real_servers]
 
 CHROMIUM = os.environ.get("MESHFLAT_CHROMIUM", "/usr/bin/chromium")
 ARTIFACTS = Path(__file__).parent.parent / "artifacts"

@@ -18,8 +18,11 @@ import pytest
 from service.cli import WORKER_SILENCE_S
 from service.samples import SAMPLES
 
+from .conftest import real_servers
 from .test_operations import families, sample
 from .test_serve import HEAD, REGION, SLOW_FIT, running
+
+pytestmark = real_servers
 
 
 @pytest.fixture

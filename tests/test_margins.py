@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from transforms import PoleCap, arcs_to_point, arcs_to_seam
 
-from .conftest import directions
+from .conftest import directions, slow
 
 
 def sample_arc(a, b, n=4001):
@@ -44,6 +44,7 @@ def seam_points(cap: PoleCap, n=4001):
     return cap.seam_arc(n)
 
 
+@slow
 @settings(max_examples=25, deadline=None)
 @given(directions, directions, st.floats(0.05, 5.0))
 def test_arc_to_seam_matches_sampling(a, b, sigma):

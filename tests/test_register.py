@@ -17,7 +17,7 @@ from service.cli import main
 from service.samples import SAMPLES
 from transforms import registration
 
-from .conftest import load_sample
+from .conftest import load_sample, slow
 from .test_api import flatten, obj_of, problem
 from .test_landmarks import on_head
 from .test_measure import NAME
@@ -131,6 +131,7 @@ def test_similarity_registers_follow_ups_of_other_scales(scale):
     assert errors(found.matrix, truth, moved)[0] < 0.5
 
 
+@slow
 @pytest.mark.parametrize(("crop", "scale"), [(0.5, 1.0), (0.4, 1.2), (0.5, 10.0)])
 async def test_a_half_scan_of_another_scale_registers_or_says_it_could_not(client, crop, scale):
     """Without landmarks, half a head at an unknown scale may fit in more than one place;
@@ -163,6 +164,7 @@ async def test_a_follow_up_in_other_units_is_told_so_in_rigid_mode(client):
     assert errors(answer["transform"], truth, moved)[0] < 0.5
 
 
+@slow
 async def test_a_scan_of_something_else_is_refused(client):
     """A box of the head's size: no alignment puts half of it within 2 mm of the head."""
     box = trimesh.creation.box(extents=[150, 180, 200]).subdivide().subdivide().subdivide()
@@ -189,6 +191,7 @@ async def test_bad_register_requests_name_the_part_or_field(client):
     assert body["field"] == "params.landmarks.follow_up.nasion"
 
 
+@slow
 async def test_the_command_line_registers_two_files(client, tmp_path):
     data, _, _, _ = follow_up()
     follow = tmp_path / "follow.obj"
@@ -226,6 +229,7 @@ async def test_a_follow_up_cropped_in_front_is_not_turned_round(client):
     assert distance < 0.5 and angle < 0.2, (distance, angle)
 
 
+@slow
 async def test_a_scaled_follow_up_in_rigid_mode_is_refused_not_misaligned(client):
     data, _, _, _ = follow_up(scale=1.05)
     body = problem(await register(client, {}, data), 422, "follow_up")

@@ -21,6 +21,12 @@ from service.app import create_app
 from service.samples import SAMPLES
 from service.settings import Settings
 
+from .conftest import slow
+
+# test_ci_sends_enough_generated_requests counts what the fuzzing sent in its process: under
+# pytest-xdist the module's tests run on one worker, in order.
+pytestmark = [slow, pytest.mark.xdist_group("schema-fuzz")]
+
 #: The service as deployed: with keys, so that the document's security is checked too (a
 #: request without the key must get a 401).
 KEY = "fuzz-key"

@@ -22,7 +22,10 @@ import pytest
 
 from fixtures.meshes import subdivided_ply
 
+from .conftest import real_servers
 from .test_operations import families, sample
+
+pytestmark = real_servers
 
 KEY = "serve-test-key"
 REGION = {"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}}
@@ -43,25 +46,31 @@ def free_port() -> int:
 
 
 class Server:
-    """``meshflat serve`` in a child process; its stderr (the JSON log) kept in a file."""
+    """``meshflat serve`` in a child process; its stderr (the JSON log) kept in a file.
+
+    The server's processes append to the file (O_APPEND) and :meth:`lines` reads it through
+    a file of its own: reading through the descriptor they share would move their offset, and
+    a line written meanwhile would land over others."""
 
     def __init__(self, **env: str) -> None:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
-        self.log = tempfile.TemporaryFile(mode="w+")
+        self.logs = tempfile.TemporaryDirectory()  # kept after stop(), unlike TMPDIR
+        self.log = Path(self.logs.name) / "serve.log"
         self.tmp = tempfile.TemporaryDirectory()
         environ = {k: v for k, v in os.environ.items() if not k.startswith("MESHFLAT_")}
         environ.pop("PROMETHEUS_MULTIPROC_DIR", None)
         environ |= {"MESHFLAT_PORT": str(self.port), "TMPDIR": self.tmp.name, **env}
         self.workers = int(environ.get("MESHFLAT_WORKERS", "1"))
         # Its own process group: the workers go with the supervisor when a test kills both.
-        self.process = subprocess.Popen(
-            [sys.executable, "-m", "service.cli", "serve"],
-            env=environ,
-            stdout=self.log,
-            stderr=self.log,
-            start_new_session=True,
-        )
+        with open(self.log, "ab") as log:
+            self.process = subprocess.Popen(
+                [sys.executable, "-m", "service.cli", "serve"],
+                env=environ,
+                stdout=log,
+                stderr=log,
+                start_new_session=True,
+            )
 
     def wait_ready(self, seconds: float = 60) -> None:
         """Until every worker has started (its log says so) and /readyz answers 200."""
@@ -79,8 +88,10 @@ class Server:
         raise AssertionError("not ready in time")
 
     def lines(self) -> list[dict]:
-        self.log.seek(0)
-        return [json.loads(line) for line in self.log if line.startswith("{")]
+        with open(self.log) as log:  # a line still being written is left for the next read
+            return [
+                json.loads(line) for line in log if line.startswith("{") and line.endswith("\n")
+            ]
 
     def stop(self) -> int:
         if self.process.poll() is None:

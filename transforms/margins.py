@@ -15,6 +15,18 @@ import numpy as np
 
 from .cap import PoleCap
 
+#: An arc end with ``x`` at most this counts as on the seam's side (``x <= 0``), so that an
+#: end on ``x = 0`` is not lost to rounding. Measuring a point with ``0 < x <= _SIDE_SLACK``
+#: from the whole circle rather than from the seam is off by about its ``x``, far below the
+#: validation's touch tolerance (``1e-12``).
+_SIDE_SLACK = 1e-14
+#: An arc whose ends' cross product is shorter than this is measured from its ends. Below it
+#: the squares that give the product's length turn subnormal, and the "unit" normal is not
+#: (ends 1e-162 apart once put a point 7 degrees too near). Such an arc is shorter than this,
+#: so no point of it is nearer than its ends by more (or its ends are as good as antipodal,
+#: and it is no one minor arc).
+_POINT_ARC = 1e-150
+
 
 def arcs_to_point(a: np.ndarray, b: np.ndarray, point: np.ndarray) -> np.ndarray:
     """Distance from a unit ``point`` (3,) to each minor arc ``a -> b``.
@@ -87,36 +99,43 @@ def _arcs_to_point(a, b, point) -> np.ndarray:
     normal = _cross(a, b)
     length = _norm(normal)
     ends = np.minimum(_angle(a, point), _angle(b, point))
-    # Where a and b are parallel (length 0) the arc is a point: only ``ends`` counts, and a
-    # stand-in length keeps the unused arithmetic finite.
-    safe_length = np.where(length > 0, length, 1.0)
+    # Where a and b are parallel (or as good as: ``_POINT_ARC``) the arc is a point: only
+    # ``ends`` counts, and a stand-in length keeps the unused arithmetic finite.
+    arc = length > _POINT_ARC
+    safe_length = np.where(arc, length, 1.0)
     unit_normal = tuple(c / safe_length for c in normal)
     off_plane = _dot(unit_normal, point)  # sine of the distance to the whole great circle
     in_plane = tuple(p - off_plane * n for p, n in zip(point, unit_normal, strict=True))
     # The foot of the perpendicular lies on the arc when it is between a and b.
-    between = (
-        (length > 0) & (_dot(_cross(a, point), normal) >= 0) & (_dot(_cross(point, b), normal) >= 0)
-    )
+    between = arc & (_dot(_cross(a, point), normal) >= 0) & (_dot(_cross(point, b), normal) >= 0)
     to_circle = np.arctan2(np.abs(off_plane), _norm(in_plane))
     return np.where(between, np.minimum(to_circle, ends), ends)
 
 
 def _circle_part_distance(a, b, rho: float) -> np.ndarray:
     """(k,) float: least ``|angle(u, +Y) - rho|`` over the points of arc ``a -> b`` with
-    ``x <= 0`` (inf where there are none)."""
+    ``x <= 0`` (inf where there are none).
+
+    That part of the arc is one arc; the angle from ``+Y`` is continuous on it, so its range
+    is spanned by the values at the part's two ends (arc ends, or points where the great
+    circle meets ``x = 0``) and where it is extreme along the great circle. Both ends of the
+    part must be among the candidates: with one missing, a part that crosses the circle can
+    look as if it stays on one side of it. The arc ends are taken as given, not recomputed,
+    and count as on the seam's side within ``_SIDE_SLACK`` of ``x = 0``: a meeting with
+    ``x = 0`` at an end of the arc may be found just past that end, and the end is then the
+    part's end.
+    """
     span = _angle(a, b)
     # u(t) = a cos t + e sin t, 0 <= t <= span, with e the unit tangent at a towards b.
     along = _dot(a, b)
     e = tuple(q - along * p for p, q in zip(a, b, strict=True))
     e_norm = _norm(e)
     with np.errstate(divide="ignore", invalid="ignore"):
-        e = tuple(np.where(e_norm > 0, c / e_norm, 0.0) for c in e)
+        e = tuple(np.where(e_norm > _POINT_ARC, c / e_norm, 0.0) for c in e)
     x_peak = np.arctan2(e[0], a[0])
     y_peak = np.arctan2(e[1], a[1])
     t = np.stack(
         [
-            np.zeros_like(span),
-            span,
             y_peak,
             y_peak + math.pi,
             x_peak + 0.5 * math.pi,  # x(t) = 0 here
@@ -124,15 +143,19 @@ def _circle_part_distance(a, b, rho: float) -> np.ndarray:
         ],
         axis=1,
     ) % (2.0 * math.pi)
-    on_arc = t <= span[:, None]
     cos_t, sin_t = np.cos(t), np.sin(t)
     u = [p[:, None] * cos_t + q[:, None] * sin_t for p, q in zip(a, e, strict=True)]
-    on_seam_side = u[0] <= 0.0
-    on_seam_side[:, 4:] = True  # rounding may leave x slightly positive where it is zero
-    usable = on_arc & on_seam_side
-    polar = np.arctan2(np.sqrt(u[0] * u[0] + u[2] * u[2]), u[1])  # angle from +Y
+    usable = t <= span[:, None]
+    usable[:, :2] &= u[0][:, :2] <= 0.0  # x = 0 at the other two: on the side
+    usable = np.column_stack([a[0] <= _SIDE_SLACK, b[0] <= _SIDE_SLACK, usable])
+    polar = np.column_stack([_polar(a), _polar(b), _polar(u)])
     low = np.where(usable, polar, np.inf).min(axis=1)
     high = np.where(usable, polar, -np.inf).max(axis=1)
     crosses = (low <= rho) & (high >= rho)
     nearest = np.where(usable, np.abs(polar - rho), np.inf).min(axis=1)
     return np.where(crosses, 0.0, nearest)
+
+
+def _polar(u) -> np.ndarray:
+    """The angle of rows ``u`` from ``+Y``."""
+    return np.arctan2(np.sqrt(u[0] * u[0] + u[2] * u[2]), u[1])

@@ -60,7 +60,8 @@ class OverLimit(Exception):
     """
 
     def __init__(self, field: str, count: int, limit: int, setting: str) -> None:
-        super().__init__(f"{field}: {count:,} items; the limit is {limit:,} ({setting})")
+        self.message = f"{count:,} items; the limit is {limit:,} ({setting})"
+        super().__init__(f"{field}: {self.message}")
         self.field, self.count, self.limit, self.setting = field, count, limit, setting
 
 
@@ -106,16 +107,16 @@ class ErrorPlaces:
         """Where a core error's field lies: a parameter, or else the uploaded data (the core
         names its arguments, and a mesh's arrays are the data's)."""
         name = _NESTED.get(name, name)
-        if self.parameters is None or name.partition(".")[0] in self.parameters:
-            return f"{self.prefix}{name}"
-        return self.data
+        return f"{self.prefix}{name}" if self._parameter(name) else self.data
 
     def named(self, name: str) -> str:
         """Where a use-case's field lies: a parameter, or else what it names itself (a file
         part, the answer's sites)."""
-        if self.parameters is None or name.partition(".")[0] in self.parameters:
-            return f"{self.prefix}{name}"
-        return name
+        return f"{self.prefix}{name}" if self._parameter(name) else name
+
+    def _parameter(self, name: str) -> bool:
+        """Whether ``name`` (dotted: its first part counts) is a parameter."""
+        return self.parameters is None or name.partition(".")[0] in self.parameters
 
 
 #: The core's arguments that are parts of a request field: the pole and up of a rotation.

@@ -159,8 +159,7 @@ def problem_of(error: Exception, places: ErrorPlaces = JSON_BODY) -> Problem:
         return Problem(422, detail, "invalid-request", where, error.indices)
     if isinstance(error, OverLimit):
         where = places.named(error.field)
-        detail = f"{where}: {error.count:,} items; the limit is {error.limit:,} ({error.setting})"
-        return Problem(413, detail, "too-many-points", where)
+        return Problem(413, f"{where}: {error.message}", "too-many-points", where)
     if isinstance(error, UnreadableMesh):
         return _unreadable(error.error, error.part)
     if isinstance(error, MeshFormatError):

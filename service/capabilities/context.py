@@ -84,16 +84,15 @@ class Context:
     ----------
     settings : Settings, the limits the use-case enforces (MESHFLAT_MAX_POINTS, ...)
     budget : Budget, what the use-case charges its allocations to
-    threads : int, threads the core may use (default ``settings.threads``)
     """
 
     settings: Settings = field(default_factory=Settings)
     budget: Budget = field(default_factory=Unlimited)
-    threads: int | None = None
 
-    def __post_init__(self) -> None:
-        if self.threads is None:  # frozen: set once, here
-            object.__setattr__(self, "threads", self.settings.threads)
+    @property
+    def threads(self) -> int:
+        """Threads the core may use (MESHFLAT_THREADS)."""
+        return self.settings.threads
 
     def charge(self, nbytes: int) -> None:
         """Charge ``nbytes`` to the budget before they are allocated."""

@@ -235,7 +235,7 @@ def place(given: SitesInput, ctx: Context) -> Placed:
         found = [_density_map_part(region, triangles, image, open_faces)]
     else:
         found = list(_zone_parts(triangles, params, outlines, open_faces))
-    unit_area = scale**2 / 100.0  # cm² per mesh unit²
+    unit_area = in_cm2(1.0, scale)  # cm² per mesh unit²
     expected = [float(np.dot(part.core.area, part.core.density)) * unit_area for part in found]
     total = params.count if params.count is not None else sum(expected)
     check_count(round(total), ctx.settings.max_sites, "sites", "MESHFLAT_MAX_SITES")

@@ -85,7 +85,7 @@ def area_text(area: float, mm_per_unit: float | None) -> str:
     """An area as a picture labels it: cm² with units, mesh units² without."""
     if mm_per_unit is None:
         return f"{area:.4g} units²"
-    return f"{area * mm_per_unit**2 / 100.0:.2f} cm²"
+    return f"{in_cm2(area, mm_per_unit):.2f} cm²"
 
 
 def length_text(length: float, mm_per_unit: float | None) -> str:

@@ -18,7 +18,7 @@ cd "$(dirname "$0")/.."
 
 IMAGE=${SMOKE_IMAGE:-localhost/meshflat:smoke}
 PORT=${SMOKE_PORT:-18080}
-MEMORY=${SMOKE_MEMORY:-1536m}
+MEMORY=${SMOKE_MEMORY:-3g}
 NAME=meshflat-smoke-$$
 KEY=smoke-$(od -An -N12 -tx1 /dev/urandom | tr -d ' \n')
 BASE=$(sed -n 's/^ARG PYTHON_IMAGE=//p' Dockerfile)
@@ -131,38 +131,41 @@ step "HEALTHCHECK of the image"
 "${podman[@]}" healthcheck run "$NAME" 2>/dev/null || fail "the image's health check failed"
 echo "healthy"
 
-step "stop with SIGTERM while a fit is computing"
+step "stop with SIGTERM while a job is computing"
 # podman says it cannot schedule the health check without systemd; `healthcheck run` above
-# ran it directly. The slowest fit of a bundled sample, the separable method's on the whole
-# Nefertiti bust (70,000 faces, an estimated 136 MiB: within a worker's budget of 1536m
-# shared by two), computes for most of a second: long enough to stop the container while
-# it does.
+# ran it directly. uvicorn's supervisor looks at its signals every half second and then asks
+# each worker to stop, so the job must compute for well over that: 300,000 graft sites on the
+# Nefertiti bust compute for about 3 s (an estimated 739 MiB: within a worker's budget in a
+# container of 3g shared by two). A fit of a sample computes for less than 0.4 s, and once
+# ended before the supervisor had seen SIGTERM.
 check "GET /v1/samples/nefertiti-lowres.obj" 200 -H "X-API-Key: $KEY" \
   "$url/v1/samples/nefertiti-lowres.obj"
 cp "$work/body" "$work/bust.obj"
-# The container's first process, found before the fit starts: `podman inspect` takes a good
-# part of the fit's time, which then might end before SIGTERM arrives.
+# The container's first process, found before the job starts: `podman inspect` takes a good
+# part of a second.
 init_pid=$("${podman[@]}" inspect --format '{{.State.Pid}}' "$NAME")
-curl -s -o "$work/fit" -w '%{http_code}' -H "X-API-Key: $KEY" -F "mesh=@$work/bust.obj" \
-  -F 'params={"method": "separable"}' "$url/v1/fit" > "$work/fit-status" &
-fitting=$!
+curl -s -o "$work/sites" -w '%{http_code}' -H "X-API-Key: $KEY" -F "mesh=@$work/bust.obj" \
+  -F 'params={"units": "mm", "density_per_cm2": 50, "count": 300000, "output": "ply"}' \
+  "$url/v1/sites" > "$work/job-status" &
+job=$!
 computing=no
-for _ in $(seq 200); do  # until the fit is computing
+for _ in $(seq 300); do  # until the job is computing
   if curl -s "$url/metrics" | grep -q '^meshflat_jobs_computing 1.0'; then computing=yes; break; fi
   sleep 0.01
 done
-[ "$computing" = yes ] || fail "the fit was not seen computing"
+[ "$computing" = yes ] || fail "the job was not seen computing: $(cat "$work/job-status" 2>/dev/null)"
 # SIGTERM goes straight to the container's first process: `podman stop` can take longer to
-# deliver it than the fit takes to finish, and then nothing would be in progress to drain.
+# deliver it than the job takes to finish, and then nothing would be in progress to drain.
 started=$(date +%s%N)
 kill -TERM "$init_pid"
 timeout 30 "${podman[@]}" wait "$NAME" >/dev/null || fail "no exit within 30 s of SIGTERM"
-wait "$fitting" || true
+wait "$job" || true
 code=$("${podman[@]}" inspect --format '{{.State.ExitCode}}' "$NAME")
 [ "$code" = 0 ] || fail "exit status $code after SIGTERM"
-[ "$(cat "$work/fit-status")" = 200 ] || fail "the fit in progress got $(cat "$work/fit-status")"
-echo "the fit in progress was answered 200; exited 0 after" \
-  "$((($(date +%s%N) - started) / 1000000)) ms"
+[ "$(cat "$work/job-status")" = 200 ] || fail "the job in progress got $(cat "$work/job-status")"
+head -c 3 "$work/sites" | grep -q '^ply' || fail "the job's answer is not a PLY file"
+echo "the job in progress was answered 200 ($(wc -c < "$work/sites") bytes of PLY);" \
+  "exited 0 after $((($(date +%s%N) - started) / 1000000)) ms"
 mkdir -p artifacts
 "${podman[@]}" logs "$NAME" 2>&1 | grep "^{" > artifacts/container-smoke.log
 limit_bytes=$("${podman[@]}" inspect --format '{{.HostConfig.Memory}}' "$NAME")
@@ -180,10 +183,10 @@ assert any(e["message"].startswith("Finished server process") for e in entries)
 budgets = [e["message"] for e in entries if e["message"].startswith("memory budget")]
 limit = int(sys.argv[3]) // 2**20
 assert len(budgets) >= 2 and all(f"container limit of {limit} MiB" in b for b in budgets), budgets
-# The fit was answered after the server had received SIGTERM: a graceful stop.
+# The job was answered after the server had received SIGTERM: a graceful stop.
 sigterm = next(e["time"] for e in entries if e["message"].startswith("Received SIGTERM"))
-fit = next(e for e in requests if e["route"] == "/v1/fit")
-assert fit["status"] == 200 and fit["time"] > sigterm, (fit, sigterm)
+job = next(e for e in requests if e["route"] == "/v1/sites")
+assert job["status"] == 200 and job["time"] > sigterm, (job, sigterm)
 print(f"  {len(entries)} JSON log lines, {len(requests)} request lines, no key, no upload name;")
 for e in requests[-3:]:
     print("  ", json.dumps(e))

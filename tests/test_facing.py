@@ -5,6 +5,7 @@ cannot fix the roll, or contradicts a rotation given, is a 422 naming ``params.f
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -21,15 +22,45 @@ from .test_api import flatten, obj_of, problem
 
 pytestmark = pytest.mark.anyio
 
-NAME = "fsaverage-head.ply"
-VERTICES, FACES = load_sample(NAME)
-#: Where the face looks, from the mesh alone: from the vertices' mean to the nose's tip (the
-#: vertex furthest along +y, fsaverage's front).
-NOSE_TIP = VERTICES[np.argmax(VERTICES[:, 1])]
-FACING = NOSE_TIP - VERTICES.mean(axis=0)
-#: The top of the head and more, seen from the box centre: forehead, crown and back.
-APEX = (VERTICES.min(axis=0) + VERTICES.max(axis=0)) / 2
-UP = np.array([0.0, 0.0, 1.0])
+
+@dataclass(frozen=True)
+class Head:
+    """A bundled head, where its face looks and a cone over its top (forehead, crown and
+    back), from the mesh alone."""
+
+    name: str
+    top: np.ndarray  # the cone's axis
+    front: int  # the axis along which the face looks: the nose's tip is furthest along it
+    apex: tuple[float, float, float] | None  # None: the box centre
+
+    @property
+    def mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        return load_sample(self.name)
+
+    @property
+    def facing(self) -> np.ndarray:
+        """From the vertices' mean to the nose's tip."""
+        vertices = self.mesh[0]
+        return vertices[np.argmax(vertices[:, self.front])] - vertices.mean(axis=0)
+
+    @property
+    def cone_apex(self) -> np.ndarray:
+        vertices = self.mesh[0]
+        box = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+        return box if self.apex is None else np.asarray(self.apex)
+
+
+HEADS = {
+    "fsaverage-head.ply": Head("fsaverage-head.ply", np.array([0.0, 0.0, 1.0]), 1, None),
+    # Y up, the face towards +Z; its box holds the shoulders, so the cone starts in the head.
+    "lee-perry-smith.obj": Head("lee-perry-smith.obj", np.array([0.0, 1.0, 0.0]), 2,
+                                (0.0, 1.5, 0.0)),
+}  # fmt: skip
+HEAD = HEADS["fsaverage-head.ply"]
+NAME = HEAD.name
+VERTICES, FACES = HEAD.mesh
+FACING = HEAD.facing
+APEX = HEAD.cone_apex
 
 TURN = Rotation.from_rotvec([0.7, -1.9, 0.4])
 SHIFT = np.array([40.0, -300.0, 17.0])
@@ -40,22 +71,23 @@ POSES = {
 }
 
 
-def posed(pose: str, extra: dict) -> tuple[dict, bytes, str]:
+def posed(pose: str, extra: dict, head: Head = HEAD) -> tuple[dict, bytes, str]:
     """The request of a cone over the head with ``facing``, and the mesh, in ``pose``: the
     mesh, the cone and facing all turned (and the points moved) together."""
     turn, shift = POSES[pose]
-    cone = {"axis": (turn @ UP).tolist(), "half_angle_deg": 75.0,
-            "apex": (turn @ APEX + shift).tolist()}  # fmt: skip
+    cone = {"axis": (turn @ head.top).tolist(), "half_angle_deg": 75.0,
+            "apex": (turn @ head.cone_apex + shift).tolist()}  # fmt: skip
     params = {"region": {"cone": cone}, "center": "centroid",
-              "facing": (turn @ FACING).tolist(), **extra}  # fmt: skip
+              "facing": (turn @ head.facing).tolist(), **extra}  # fmt: skip
     if pose == "as scanned":
-        return params, SAMPLES[NAME].path.read_bytes(), NAME
-    return params, obj_of(VERTICES @ turn.T + shift, FACES), "turned.obj"
+        return params, SAMPLES[head.name].path.read_bytes(), head.name
+    vertices, faces = head.mesh
+    return params, obj_of(vertices @ turn.T + shift, faces), "turned.obj"
 
 
-def forehead(ids: np.ndarray, k: int = 12) -> np.ndarray:
+def forehead(ids: np.ndarray, head: Head = HEAD, k: int = 12) -> np.ndarray:
     """Positions in ``ids`` of the ``k`` region vertices furthest along facing: the forehead."""
-    return np.argsort(VERTICES[ids] @ FACING)[-k:]
+    return np.argsort(head.mesh[0][ids] @ head.facing)[-k:]
 
 
 def expected_up(answer: dict) -> np.ndarray:
@@ -66,6 +98,7 @@ def expected_up(answer: dict) -> np.ndarray:
     return across / np.linalg.norm(across)
 
 
+@pytest.mark.parametrize("name", HEADS)
 @pytest.mark.parametrize(
     "extra",
     [
@@ -75,11 +108,13 @@ def expected_up(answer: dict) -> np.ndarray:
     ],
     ids=["default", "mercator", "fit"],
 )
-async def test_facing_puts_the_forehead_at_the_top_in_any_pose(client, extra):
+async def test_facing_puts_the_forehead_at_the_top_in_any_pose(client, extra, name):
+    head = HEADS[name]
+    vertices = head.mesh[0]
     answers = {}
     for pose in POSES:
-        params, data, name = posed(pose, extra)
-        answer = (await flatten(client, name, params, data=data)).json()
+        params, data, filename = posed(pose, extra, head)
+        answer = (await flatten(client, filename, params, data=data)).json()
         answers[pose] = answer
         assert answer["validation"]["seam_free"]
         # The roll: local +Z is facing's part across the pole.
@@ -89,16 +124,16 @@ async def test_facing_puts_the_forehead_at_the_top_in_any_pose(client, extra):
         ids = np.asarray(answer["vertices"]["ids"])
         # The pictures' rows grow with theta (both layouts): the forehead in the top half.
         middle = (theta.min() + theta.max()) / 2
-        assert (theta[forehead(ids)] < middle).all()
+        assert (theta[forehead(ids, head)] < middle).all()
         # Exactly the vertices on the face's side of the plane through the centre and the
         # pole lie above theta = pi/2 (the warp keeps the sign of local z).
         turn, shift = POSES[pose]
-        points = (VERTICES[ids] @ turn.T + shift) - answer["params"]["center"]
+        points = (vertices[ids] @ turn.T + shift) - answer["params"]["center"]
         ahead = points @ expected_up(answer)
         clear = np.abs(ahead) > 1e-9 * np.abs(points).max()
         assert ((theta[clear] < np.pi / 2) == (ahead[clear] > 0)).all()
     here, there = answers["as scanned"], answers["turned and moved"]
-    np.testing.assert_allclose(here["params"]["facing"], FACING / np.linalg.norm(FACING))
+    np.testing.assert_allclose(here["params"]["facing"], head.facing / np.linalg.norm(head.facing))
     assert here["vertices"]["ids"] == there["vertices"]["ids"]
     for coordinate in ("x", "y"):
         np.testing.assert_allclose(there["vertices"][coordinate], here["vertices"][coordinate],

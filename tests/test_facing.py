@@ -15,6 +15,7 @@ from fixtures.landmarks import NEAR
 from service.outputs.lookup import read_lookup
 from service.samples import SAMPLES
 from transforms import Chart, FitFixed, Frame, PoleCap, default_choice, fit_region, flatten_region
+from transforms.fit.refine import _rotation_slopes, _rotations_from_pole_up
 from transforms.frames import facing_across
 
 from .conftest import load_sample, scalp
@@ -271,3 +272,19 @@ def test_the_fit_keeps_the_roll_facing_fixes_as_the_pole_tilts():
                                atol=1e-12)  # fmt: skip
     np.testing.assert_allclose(facing_across(pole, FACING), across / np.linalg.norm(across),
                                atol=1e-15)  # fmt: skip
+
+
+def test_the_rolls_slope_holds_for_a_facing_not_square_to_the_pole():
+    """The refinement's gradient turns the frame by (18.1) with facing as it is, slanted to
+    the pole: its closed form against central differences of the rotations themselves."""
+    pole = np.array([0.1, -0.2, -1.0])
+    turns = np.array([[1.0, 0.3, 0.0], [0.0, 0.2, 1.0]])
+    slopes = _rotation_slopes(pole, FACING, turns)
+    step = 1e-6
+    for turn, slope in zip(turns, slopes, strict=True):
+        ahead = _rotations_from_pole_up((pole + step * turn)[None], FACING)[0]
+        behind = _rotations_from_pole_up((pole - step * turn)[None], FACING)[0]
+        np.testing.assert_allclose(slope, (ahead - behind) / (2 * step), atol=1e-8)
+    # And at the pole itself the batch is (18.1).
+    rotation = _rotations_from_pole_up(pole[None], FACING)[0]
+    np.testing.assert_allclose(rotation[2], facing_across(pole, FACING), atol=1e-15)

@@ -81,16 +81,25 @@ def params_of(args: argparse.Namespace) -> dict:
     if args.center:
         named = args.center in CENTERS
         params["center"] = args.center if named else _vector(args.center, "--center")
-    if args.pole or args.up:
-        if not (args.pole and args.up):
-            raise Problem(422, "--pole, --up: give both", field="--pole")
-        params["rotation"] = {"pole": _vector(args.pole, "--pole"), "up": _vector(args.up, "--up")}
+    params.update(_roll(args))
     if getattr(args, "zones", None):
         params.update(_drawn(args.zones))
     for option, name in (("density", "density_per_cm2"), ("units", "units")):
         if getattr(args, option, None) is not None:
             params[name] = getattr(args, option)
     return params
+
+
+def _roll(args: argparse.Namespace) -> dict:
+    """``rotation`` from ``--pole`` and ``--up``, and ``facing`` from ``--facing``, as given."""
+    given = {}
+    if args.pole or args.up:
+        if not (args.pole and args.up):
+            raise Problem(422, "--pole, --up: give both", field="--pole")
+        given["rotation"] = {"pole": _vector(args.pole, "--pole"), "up": _vector(args.up, "--up")}
+    if args.facing:
+        given["facing"] = _vector(args.facing, "--facing")
+    return given
 
 
 def _files(args: argparse.Namespace, capability: MeshCapability) -> dict[str, Upload]:
@@ -232,6 +241,9 @@ def parser() -> argparse.ArgumentParser:
             "--pole", metavar="X,Y,Z", help="world direction of local +Y (default: chosen)"
         )
         command.add_argument("--up", metavar="X,Y,Z", help="world direction towards local +Z")
+        command.add_argument(
+            "--facing", metavar="X,Y,Z", help="where the face looks: the front at the top"
+        )
         command.add_argument("--layout", choices=[layout.value for layout in Layout])
         command.add_argument("--params", metavar="JSON", help="any of the API's params")
         if "zones" in capability.params.model_fields:

@@ -51,6 +51,14 @@ async def test_validate_and_fit_print_the_api_json(client, capsys, command):
     assert ("explain" in printed) == (command == "fit")
 
 
+async def test_facing_on_the_command_line_is_the_api_facing(client, capsys):
+    assert cli("fit", SAMPLES[NAME].path, "--region-cone", "0,0,1:70", "--facing", "0,1,0") == 0
+    printed = json.loads(capsys.readouterr().out)
+    params = {"region": PARAMS["region"], "facing": [0, 1, 0]}
+    assert printed == (await flatten(client, NAME, params, endpoint="/v1/fit")).json()
+    assert printed["params"]["facing"] == [0.0, 1.0, 0.0]
+
+
 async def test_errors_are_the_api_messages_with_exit_status_2(client, capsys):
     assert cli("flatten", SAMPLES[NAME].path, "--region-cone", "0,0,1:70", "--sigma", "-1") == 2
     said = capsys.readouterr().err

@@ -2,10 +2,13 @@
 
 ``c`` is the centre the region is star-shaped from; ``R`` is a proper rotation whose rows
 are the local axes written in world coordinates. Local ``+Y`` is the warp's fixed pole, the
-centre of the forbidden cap.
+centre of the forbidden cap. Where the face looks (``facing``) fixes the roll about the pole
+(:func:`facing_across`, :func:`facing_disagreement_deg`; docs/math.md, section 18).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -17,6 +20,15 @@ ROTATION_TOLERANCE = 1e-9
 
 #: Smallest sine of the angle between ``pole`` and ``up`` that still fixes the roll.
 MIN_POLE_UP_SINE = 1e-9
+
+#: Least angle, degrees, between ``facing`` and the pole or its opposite: nearer, the front
+#: lies in the middle of the cap or of the map, where no roll moves it, and the roll would
+#: swing with the least change of the pole (docs/math.md, section 18).
+MIN_FACING_DEG = 1.0
+
+#: Largest angle, degrees, between a given rotation's local ``+Z`` and ``facing``'s part
+#: across its pole for the two to agree (an answer's params, sent back, agree to rounding).
+FACING_AGREEMENT_DEG = 1e-6
 
 
 class Frame:
@@ -206,3 +218,56 @@ def check_rotation(rotation) -> np.ndarray:
             f"has determinant {determinant:.6g}, not +1: a reflection, not a rotation",
         )
     return matrix
+
+
+def facing_across(pole, facing) -> np.ndarray:
+    """The local ``+Z`` that puts the front at the top of the map (docs/math.md, section
+    18): the part of ``facing`` orthogonal to ``pole``, made unit.
+
+    Parameters
+    ----------
+    pole : (3,) float, non-zero world direction (local ``+Y``)
+    facing : (3,) float, non-zero world direction: where the face looks
+
+    Returns
+    -------
+    (3,) float, unit, orthogonal to ``pole``
+
+    Raises
+    ------
+    TransformInputError
+        ``facing`` zero, or within ``MIN_FACING_DEG`` of ``pole`` or of its opposite.
+    """
+    y_axis, front = as_direction(pole, "pole"), as_direction(facing, "facing")
+    along = float(np.dot(front, y_axis))
+    across = front - along * y_axis
+    sine = float(np.linalg.norm(across))
+    angle = math.degrees(math.atan2(sine, abs(along)))
+    if not angle >= MIN_FACING_DEG:
+        side = "the pole" if along > 0 else "the pole's opposite"
+        raise TransformInputError(
+            "facing",
+            f"lies {angle:.3g} degrees from {side} (at least {MIN_FACING_DEG:g} needed): the "
+            "front is then in the middle of the cap or of the map, and no roll puts it at the "
+            "top; give a rotation whose pole is further from where the face looks",
+        )
+    across /= sine
+    across -= np.dot(across, y_axis) * y_axis  # a second pass, as Frame.from_pole_up does
+    return across / np.linalg.norm(across)
+
+
+def facing_disagreement_deg(rotation: np.ndarray, facing) -> float:
+    """Degrees between the local ``+Z`` of ``rotation`` (3, 3) (rows: local axes) and the
+    one :func:`facing_across` gives for its pole: 0 when the rotation puts the front at the
+    top (docs/math.md, section 18).
+
+    Raises
+    ------
+    TransformInputError
+        As :func:`facing_across`.
+    """
+    wanted = facing_across(rotation[1], facing)
+    z_axis = np.asarray(rotation[2], dtype=np.float64)
+    return math.degrees(
+        math.atan2(float(np.linalg.norm(np.cross(z_axis, wanted))), float(np.dot(z_axis, wanted)))
+    )

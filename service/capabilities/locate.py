@@ -22,6 +22,7 @@ from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
 from .region.resolve import (
     MeshInput,
     Selection,
+    facing_of,
     flatten,
     map_triangles,
     region_faces,
@@ -86,6 +87,7 @@ class Located:
     layout : Layout, of the params (for the answer's params)
     format : str, the format the mesh was read as
     untangle : bool, whether the map was untangled (``via`` map) or the params asked for it
+    facing : (3,) float or None, where the face looks (for the answer's params)
     """
 
     chart: Chart
@@ -95,6 +97,7 @@ class Located:
     layout: Layout
     format: str
     untangle: bool
+    facing: np.ndarray | None = None
 
     @property
     def found(self) -> np.ndarray:
@@ -122,7 +125,10 @@ def locate_directions(given: MeshInput[LocateParams], ctx: Context) -> Located:
     rotation = frame.rotation
     hits = locate(mesh.vertices - frame.center, faces, directions @ rotation)
     hits = Hits(hits.faces, hits.barycentric, hits.points @ rotation.T)
-    return Located(chart, frame, selection, hits, params.layout, mesh.format, params.untangle)
+    facing = facing_of(params)
+    return Located(
+        chart, frame, selection, hits, params.layout, mesh.format, params.untangle, facing
+    )
 
 
 def _locate_on_map(given: MeshInput[LocateParams], ctx: Context) -> Located:
@@ -149,6 +155,7 @@ def _locate_on_map(given: MeshInput[LocateParams], ctx: Context) -> Located:
         params.layout,
         given.mesh.format,
         untangled,
+        region.facing,
     )
 
 
@@ -178,6 +185,7 @@ class LocateResponse(Answer):
             located.selection,
             format=located.format,
             untangle=located.untangle,
+            facing=None if located.facing is None else located.facing.tolist(),
         )
         return cls.build(params=params, hits=answers)
 

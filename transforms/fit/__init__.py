@@ -147,7 +147,15 @@ def fit_region(
     # energy swamps the rest: refining would chase them. Keep the explainable start.
     refine = any(search.free) and not search.kernel.empty
     if refine:
-        start = refined(problem, start, search.free, search.kernel, search.min_depth, search.margin)
+        start = refined(
+            problem,
+            start,
+            search.free,
+            search.kernel,
+            search.min_depth,
+            search.margin,
+            fixed.up,
+        )
     seen = _Seen.of(problem, search, start)
     # The kernel's planes and the region's own vertices are let go before the answer is
     # flattened: the fit's peak is then its answer's flatten's.

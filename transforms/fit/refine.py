@@ -16,12 +16,13 @@ import math
 import numpy as np
 from scipy.optimize import minimize
 
-from ..arrays import cross_rows
+from ..arrays import as_direction, cross_rows
 from ..chart import Method
 from ..sampling import area_sample
 from .kernel import Kernel
 from .objective import Candidates, Motion
 from .problem import _REACH, SAMPLE_FACES, SIGMA_SEARCH, _Candidate, _Problem, _sigma_or_one
+from .start import _PARALLEL
 
 #: Planes nearest the start whose depth the refinement watches (besides the sampled ones).
 _NEAR_PLANES = 4096
@@ -47,16 +48,18 @@ def refined(
     kernel: Kernel,
     min_depth: float,
     margin: float | None,
+    up: np.ndarray | None = None,
 ) -> _Candidate:
     """``start`` refined: quasi-Newton steps (L-BFGS-B) over the free parameters
-    (:class:`_Coordinates`; ``free``: whether the centre, the rotation and sigma move) on
+    (:class:`_Coordinates`; ``free``: whether the centre, the rotation and sigma move; ``up``:
+    the caller's up hint or facing, which keeps the roll as the pole tilts) on
     ``problem``'s sample, each gradient in closed form (by forward differences in one batch
     for the separable method: :meth:`_RefinementCost.value_and_gradient`). The bounds are
     quadratic penalties, smooth where they start to bind; what they let slip is taken back
     on every face after (the margin by :func:`.explain._keep_margin`, the depth here).
     ``start`` itself when no step lowers the cost."""
     unit = max(kernel.inscribed_radius, 1e-3 * problem.planes.size)
-    coordinates = _Coordinates(start, free, unit)
+    coordinates = _Coordinates(start, free, unit, up)
     cost = _RefinementCost(problem, coordinates, min_depth, margin, unit)
     x0 = coordinates.start()
     found = minimize(
@@ -193,11 +196,20 @@ class _RefinementCost:
 class _Coordinates:
     """The refinement's coordinates, in the start's frame: the centre's offset (in units of
     the inscribed radius, along the start's axes), the pole's tilt (radians, towards the
-    start's local X and Z) and log sigma, each only when free."""
+    start's local X and Z) and log sigma, each only when free. As the pole tilts, local
+    ``+Z`` stays the part across it of ``roll``: the caller's up hint (or facing) when the
+    start followed it, else the start's own local Z (docs/math.md, sections 9 and 18)."""
 
-    def __init__(self, start: _Candidate, free: list[bool], unit: float) -> None:
+    def __init__(
+        self, start: _Candidate, free: list[bool], unit: float, up: np.ndarray | None = None
+    ) -> None:
         self.start_candidate, self.unit = start, unit
         self.move_center, self.turn_pole, self.change_sigma = free
+        self.roll = start.rotation[2]
+        if up is not None:
+            up = as_direction(up, "up")
+            if np.linalg.norm(np.cross(up, start.rotation[1])) >= _PARALLEL:  # the start's rule
+                self.roll = up
 
     def start(self) -> np.ndarray:
         """The start's coordinates."""
@@ -227,7 +239,7 @@ class _Coordinates:
         if self.turn_pole:
             tilt = x[:, column : column + 2]
             poles = axes[1] + tilt[:, :1] * axes[0] + tilt[:, 1:] * axes[2]
-            rotations = _rotations_from_pole_up(poles, axes[2])
+            rotations = _rotations_from_pole_up(poles, self.roll)
             column += 2
         sigmas = np.full(k, _sigma_or_one(start.sigma))
         if self.change_sigma:
@@ -248,7 +260,7 @@ class _Coordinates:
         if self.turn_pole:
             tilt = x[column : column + 2]
             pole = axes[1] + tilt[0] * axes[0] + tilt[1] * axes[2]
-            motion.rotation[column : column + 2] = _rotation_slopes(pole, axes[2], axes[[0, 2]])
+            motion.rotation[column : column + 2] = _rotation_slopes(pole, self.roll, axes[[0, 2]])
             column += 2
         if self.change_sigma:
             low, high = SIGMA_SEARCH
@@ -265,8 +277,9 @@ class _Coordinates:
 def _rotations_from_pole_up(poles: np.ndarray, up: np.ndarray) -> np.ndarray:
     """(k, 3, 3) world-to-local rotations with local ``+Y`` along ``poles`` (k, 3) and the
     part of ``up`` (3,) orthogonal to it as local ``+Z``:
-    :meth:`transforms.Frame.from_pole_up` for a batch (``up`` is the start's local Z, far
-    from parallel to a slightly tilted pole)."""
+    :meth:`transforms.Frame.from_pole_up` for a batch (``up`` is the start's local Z or the
+    up hint it followed, not parallel to its pole, so far from parallel to a slightly tilted
+    one)."""
     y_axes = poles / np.linalg.norm(poles, axis=1, keepdims=True)
     x_axes = cross_rows(y_axes, up)
     x_axes /= np.linalg.norm(x_axes, axis=1, keepdims=True)

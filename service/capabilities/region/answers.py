@@ -26,6 +26,13 @@ class ResolvedParams(Answer):
     )
     center: list[float] = Field(description="The centre used, world coordinates.")
     rotation: list[list[float]] = Field(description="The world-to-local rotation used (rows).")
+    facing: list[float] | None = Field(
+        None,
+        description="Where the face looks, a unit world direction, when the map puts the "
+        "front at the top (mesh answers): the facing given, or the landmarks' forward "
+        "direction (a landmark frame's, a region.scalp's); the rotation's local +Z is its "
+        "part across the pole. null: no front was named.",
+    )
     layout: choice(Layout) | None = Field(None, description="The 2D layout of a mesh answer.")
     region: Region | None = Field(
         None,
@@ -46,7 +53,7 @@ class ResolvedParams(Answer):
     ) -> ResolvedParams:
         """Everything as it was used, so that it can be sent back as it is (``standard``
         has no cap: its sigma and pole angle are null); for mesh answers ``layout``, the
-        ``selection``'s region and ``mesh`` (``format``, ``untangle``)."""
+        ``selection``'s region and ``mesh`` (``format``, ``untangle``, ``facing``)."""
         standard = chart.method is Method.STANDARD
         values = {
             "method": chart.method,
@@ -70,6 +77,7 @@ class ResolvedParams(Answer):
             region.selection,
             format=region.mesh.format,
             untangle=region.untangled is not None,
+            facing=None if region.facing is None else region.facing.tolist(),
         )
 
 

@@ -300,6 +300,19 @@ class MeshParams(ChartParams):
         "direction in which the region spreads most about it (the sign from the third "
         "moment); the answer's params give the matrix.",
     )
+    facing: Vector3 | None = Field(
+        None,
+        description="Where the face looks, a world direction (towards the nose, say): the map "
+        "is rolled about the pole so that the front of the head is at the top of the "
+        "pictures, the same way on every scan and in every pose (local +Z becomes facing's "
+        "part across the pole; docs/math.md, section 18). The pole and sigma are still "
+        "chosen as asked, the roll kept. Refused within 1 degree of the pole or its "
+        'opposite. With a rotation that fixes the roll (a matrix, {pole, up}, "identity") '
+        'the two must agree, as an answer\'s params do; not with {"pole": "auto", '
+        '"up"} nor with frame (whose landmarks put the nasion at the top). Default: '
+        "none; with a region.scalp and a rotation chosen by meshflat, its landmarks' "
+        "forward direction.",
+    )
     layout: choice(Layout) = Field(
         Layout.THETA_PHI,
         description="The 2D layout: theta_phi, the paper's (phi, theta); or mercator, x = phi, "

@@ -32,6 +32,8 @@ from transforms import (
     untangle,
 )
 from transforms import selection as select
+from transforms.arrays import as_direction
+from transforms.frames import FACING_AGREEMENT_DEG, facing_disagreement_deg
 
 from ...errors import InvalidInput
 from ...meshio import Mesh
@@ -233,19 +235,36 @@ def _center(mesh: Mesh, face_ids: np.ndarray | None, center) -> np.ndarray:
     return select.named_center(mesh.vertices, faces, name)
 
 
-def fixed_choices(params: MeshParams, center: np.ndarray, head: Frame | None = None) -> FitFixed:
+def fixed_choices(
+    params: MeshParams,
+    center: np.ndarray,
+    head: Frame | None = None,
+    facing: np.ndarray | None = None,
+) -> FitFixed:
     """What the caller fixed for :func:`transforms.fit_region` and
     :func:`transforms.default_choice` (None: choose it; no rotation or no cap given counts
-    as chosen); the ``head``'s frame (from landmarks) fixes the centre and the rotation."""
+    as chosen); the ``head``'s frame (from landmarks) fixes the centre and the rotation;
+    ``facing`` (:func:`facing_of`) the roll of a rotation chosen, and a rotation given must
+    agree with it (docs/math.md, section 18).
+
+    Raises
+    ------
+    InvalidInput
+        A rotation given whose roll disagrees with ``facing``.
+    TransformInputError
+        ``facing`` within ``MIN_FACING_DEG`` of the pole given.
+    """
     rotation, up = params.rotation, None
     if head is not None:
         center, rotation = head.center, Frame.from_matrix(head.rotation)
     elif rotation is None or rotation == "auto":
-        rotation = None
+        rotation, up = None, facing
     elif isinstance(rotation, AutoPole):
-        rotation, up = None, rotation.up
+        rotation, up = None, rotation.up if rotation.up is not None else facing
     else:
         rotation = frame_of(params, np.zeros(3))
+        if facing is not None:
+            check_facing(rotation.rotation, facing, "the rotation given")
     sigma = None
     given = params.sigma is not None or params.pole_angle_deg is not None
     if given and params.sigma != "auto" and params.method is not Method.STANDARD:
@@ -278,6 +297,8 @@ class MeshRegion:
     flat : FlatRegion, positions in ``faces`` and ``flat.vertex_ids``
     fit : Fit or None
     untangled : Untangled or None, the layout made fold-free (``params.untangle``)
+    facing : (3,) float or None, where the face looks (:func:`facing_of`; for a landmark
+        frame its forward direction)
     """
 
     mesh: Mesh
@@ -287,6 +308,7 @@ class MeshRegion:
     flat: FlatRegion
     fit: Fit | None
     untangled: Untangled | None = None
+    facing: np.ndarray | None = None
 
     @property
     def layout(self) -> tuple[np.ndarray, np.ndarray]:
@@ -308,7 +330,9 @@ def resolve(
     (and always for /v1/fit's params, whose ``auto`` is always true); the rotation and sigma not
     given chosen by :func:`transforms.default_choice` (no search) otherwise."""
     head = head_frame(mesh, params)
-    fixed = fixed_choices(params, selection.center, head)
+    facing = facing_of(params)
+    # A head's frame has its own roll (facing is then its forward direction).
+    fixed = fixed_choices(params, selection.center, head, None if head is not None else facing)
     if not params.auto:
         warped = params.method is not Method.STANDARD
         if fixed.rotation is not None and (fixed.sigma is not None or not warped):
@@ -324,7 +348,75 @@ def resolve(
         layout=params.layout,
         threads=ctx.threads,
     )
+    if facing is not None and fixed.rotation is None:
+        check_facing(fit.frame.rotation, facing, "the rotation chosen")
     return fit.chart, fit.frame, fit
+
+
+def facing_of(params: MeshParams) -> np.ndarray | None:
+    """(3,) unit or None: where the face looks, as the request says (docs/math.md, section
+    18): ``params.facing``; else the forward direction (14.1) of the landmarks of
+    ``frame`` (whose local ``+Z`` it is) or, when meshflat chooses the roll, of a
+    ``region.scalp``; else None (the roll as before). Landmarks given are read as checked
+    already (by :func:`head_frame` or the region's selection).
+
+    Raises
+    ------
+    InvalidInput
+        ``facing`` with ``frame``, or with the ``up`` of ``{"pole": "auto"}``.
+    TransformInputError
+        ``facing`` zero.
+    """
+    if params.facing is not None:
+        if params.frame is not None:
+            raise InvalidInput(
+                "facing",
+                "frame's landmarks fix the roll already (local +Z towards the nasion: the "
+                "front at the top); leave out facing",
+            )
+        if isinstance(params.rotation, AutoPole) and params.rotation.up is not None:
+            raise InvalidInput(
+                "facing", "rotation.up and facing both set the roll about the pole; give one"
+            )
+        return as_direction(params.facing, "facing")
+    if params.frame is not None:
+        landmarks, field = params.frame.landmarks, "frame.landmarks"
+    elif params.region is not None and params.region.scalp is not None and _roll_free(params):
+        landmarks, field = params.region.scalp.landmarks, "region.scalp.landmarks"
+    else:
+        return None
+    _, forward, _ = Landmarks.of(landmarks.model_dump(exclude_none=True), field=field).axes()
+    return forward
+
+
+def _roll_free(params: MeshParams) -> bool:
+    """Whether meshflat chooses the roll: no rotation, ``"auto"``, or ``{"pole": "auto"}``
+    without ``up``."""
+    rotation = params.rotation
+    if isinstance(rotation, AutoPole):
+        return rotation.up is None
+    return rotation is None or rotation == "auto"
+
+
+def check_facing(rotation: np.ndarray, facing: np.ndarray, what: str) -> None:
+    """Refuse a ``rotation`` (3, 3) whose local ``+Z`` is not ``facing``'s part across its
+    pole (:func:`transforms.frames.facing_disagreement_deg`).
+
+    Raises
+    ------
+    InvalidInput
+        They disagree by more than ``FACING_AGREEMENT_DEG``.
+    TransformInputError
+        ``facing`` within ``MIN_FACING_DEG`` of the rotation's pole or its opposite.
+    """
+    off = facing_disagreement_deg(rotation, facing)
+    if off > FACING_AGREEMENT_DEG:
+        raise InvalidInput(
+            "facing",
+            f"{what} puts local +Z {off:.6g} degrees from facing's part across its pole (at "
+            f"most {FACING_AGREEMENT_DEG:g}): the rotation fixes the roll; give one of "
+            "them, or two that agree (as an answer's params do)",
+        )
 
 
 def head_frame(mesh: Mesh, params: MeshParams) -> Frame | None:
@@ -358,7 +450,7 @@ def flatten(given: MeshInput, ctx: Context) -> MeshRegion:
             mesh.vertices, faces, frame, chart, threads=ctx.threads, layout=params.layout
         )
     untangled = untangle_layout(mesh, flat) if params.untangle else None
-    return MeshRegion(mesh, selection, chart, frame, flat, fit, untangled)
+    return MeshRegion(mesh, selection, chart, frame, flat, fit, untangled, facing_of(params))
 
 
 def untangle_layout(mesh: Mesh, flat: FlatRegion) -> Untangled:

@@ -21,14 +21,17 @@ from service.cli import main
 from service.samples import SAMPLES
 from service.settings import Settings
 from transforms import Framing, Layout
+from transforms.arrays import triangle_areas
 from transforms.sites import (
     JAMMING,
     MAX_TRIES_PER_SITE,
+    SIZING_BITS,
     SitePart,
     SitesDoNotFit,
     default_spacing,
     minimum_distance,
     place_sites,
+    settled,
     site_normals,
     vertex_normals,
 )
@@ -151,17 +154,47 @@ def test_the_same_seed_gives_the_same_sites_and_another_seed_others():
     assert not np.array_equal(first.weights, other.weights)
 
 
-def test_moving_and_turning_the_surface_keeps_the_sites_on_the_same_faces():
-    """Sites are drawn as faces and weights and kept by their 3D distances, which a rigid
-    motion keeps: the same faces and weights come back."""
-    triangles = jittered_mesh(n=12, seed=2)
-    turn = Rotation.from_euler("xyz", [0.3, -1.1, 2.0])
-    moved = turn.apply(triangles.surface_points) + np.array([120.0, -40.0, 7.5])
-    part = whole(triangles, 400)
-    here = place_sites(triangles.surface_points, triangles.faces, [part], np.random.default_rng(5))
-    there = place_sites(moved, triangles.faces, [part], np.random.default_rng(5))
-    np.testing.assert_array_equal(here.triangles, there.triangles)
-    np.testing.assert_array_equal(here.weights, there.weights)
+def test_moving_turning_and_scaling_the_surface_keeps_the_sites_on_the_same_faces():
+    """Sites are drawn as faces and weights and kept by their 3D distances, which a
+    similarity keeps when the spacing is scaled with the surface: the same faces and weights
+    come back, the points moved. The part has a density per triangle, as the service's have:
+    its yield (areas times densities over their sum) is then 1 only to its last bit, which
+    sized the batches differently in 2 of these 6 poses before the sizes were rounded to a
+    few bits (:func:`transforms.sites.settled`)."""
+    triangles = jittered_mesh(n=24, seed=2)
+    points, faces = triangles.surface_points, triangles.faces
+
+    def sites_of(points, seed):
+        area = triangle_areas(points, faces)
+        spacing = default_spacing(3000 / area.sum())
+        part = SitePart(np.arange(len(area)), area, 3000, spacing, np.full(len(area), 7.0))
+        return place_sites(points, faces, [part], np.random.default_rng(seed))
+
+    rng = np.random.default_rng(100)
+    for seed in range(6):
+        turn, scale = Rotation.random(random_state=rng), float(np.exp(rng.uniform(-7, 3)))
+        shift = rng.normal(size=3) * 100
+        here = sites_of(points, seed)
+        there = sites_of(scale * turn.apply(points) + shift, seed)
+        np.testing.assert_array_equal(here.triangles, there.triangles)
+        np.testing.assert_array_equal(here.weights, there.weights)
+        np.testing.assert_allclose(
+            scale * turn.apply(here.points) + shift,
+            there.points,
+            rtol=0,
+            atol=1e-12 * (scale + 100),
+        )
+
+
+def test_the_measures_that_size_batches_are_settled_to_a_few_bits():
+    """A part's yield and capacity, the same in exact arithmetic in every pose, are the same
+    numbers when they differ in their last bits; far apart, they stay apart."""
+    assert settled(1.0) == settled(np.nextafter(1.0, 0.0)) == settled(1.0 + 2e-16) == 1.0
+    assert settled(0.0) == 0.0
+    x = 24767.042631948134
+    assert settled(x) == settled(x * (1 + 1e-15)) == settled(x * (1 - 1e-15))
+    assert settled(x) == pytest.approx(x, rel=2.0**-SIZING_BITS)
+    assert settled(0.5) != settled(0.5 * (1 + 2.0 ** (1 - SIZING_BITS)))
 
 
 def test_a_part_too_full_for_its_spacing_says_how_many_fit():
@@ -306,40 +339,79 @@ async def test_the_same_seed_gives_the_same_sites(client):
     assert first["sites"]["face"] != other["sites"]["face"]
 
 
-async def test_a_moved_and_turned_mesh_gets_the_same_faces_and_weights(client):
-    """Move and rotate the mesh with its params (the cone's axis and apex, the centre, the
-    pole and up): the same faces and barycentric weights come back."""
-    vertices, faces = load_sample(NAME)
+async def test_a_mesh_moved_turned_and_scaled_with_its_params_gets_the_same_sites(client):
+    """Move, turn and scale the mesh with its params (the cone's axis and apex, the centre,
+    the pole and up) and its units (the same head in cm, in m, and from a known distance):
+    the same faces and barycentric weights, the positions moved, the normals turned, the
+    same map; each pose's least distance, measured by a k-d tree of its own, is the
+    answer's min_distance_mm and keeps the spacing; the same seed, the same sites again.
+    (Before the batches' sizes were settled, each of these poses gave other faces.)"""
+    vertices, faces = (np.array(array) for array in load_sample(NAME))
     centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
-    turn = Rotation.from_euler("zyx", [0.7, -0.4, 1.9])
-    shift = np.array([250.0, -80.0, 33.0])
+    known = vertices[[0, 100]]  # two vertices, their distance in mm
 
-    def params_in(pose):
-        rotate = turn.apply if pose else (lambda v: np.asarray(v, dtype=float))
-        move = (lambda p: turn.apply(p) + shift) if pose else (lambda p: np.asarray(p, float))
+    def params_in(turn, scale, shift, units):
+        def move(point):
+            return (scale * turn.apply(np.asarray(point, float)) + shift).tolist()
+
+        if units is None:
+            units = {
+                "between": [move(p) for p in known],
+                "mm": float(np.linalg.norm(known[1] - known[0])),
+            }
         return {
             "region": {
                 "cone": {
-                    "axis": rotate([0, 0, 1]).tolist(),
+                    "axis": turn.apply([0, 0, 1]).tolist(),
                     "half_angle_deg": 70,
-                    "apex": move(centre).tolist(),
+                    "apex": move(centre),
                 }
             },
-            "center": move(centre).tolist(),
-            "rotation": {"pole": rotate([0, 0, -1]).tolist(), "up": rotate([0, 1, 0]).tolist()},
-            "density_per_cm2": 10,
-            "seed": 3,
+            "center": move(centre),
+            "rotation": {
+                "pole": turn.apply([0, 0, -1]).tolist(),
+                "up": turn.apply([0, 1, 0]).tolist(),
+            },
+            "units": units,
+            "density_per_cm2": 5,
+            "seed": 4,
         }
 
-    here = (await sites(client, params_in(False))).json()
-    moved = obj_of(turn.apply(np.array(vertices)) + shift, faces)
-    there = await sites(client, params_in(True), name="moved.obj", data=moved)
-    there = there.json()
-    assert here["sites"]["face"] == there["sites"]["face"]
-    np.testing.assert_allclose(here["sites"]["barycentric"], there["sites"]["barycentric"])
-    np.testing.assert_allclose(
-        turn.apply(here["sites"]["normal"]), there["sites"]["normal"], atol=1e-9
-    )
+    def measured_mm(answer):
+        distance, _ = cKDTree(answer["sites"]["position"]).query(answer["sites"]["position"], k=2)
+        return distance[:, 1].min() * answer["units"]["mm_per_unit"]
+
+    here = (await sites(client, params_in(Rotation.identity(), 1.0, np.zeros(3), "mm"))).json()
+    found = here["sites"]
+    assert here["count"] == 2904
+    rng = np.random.default_rng(31)
+    for scale, units in ((0.1, "cm"), (0.001, "m"), (3.7, None)):
+        turn, shift = Rotation.random(random_state=rng), rng.normal(size=3) * 500 * scale
+        params = params_in(turn, scale, shift, units)
+        moved = obj_of(scale * turn.apply(vertices) + shift, faces)
+        response = await sites(client, params, name="moved.obj", data=moved)
+        assert response.status_code == 200, response.text
+        there = response.json()
+        assert there["count"] == here["count"]
+        assert there["sites"]["face"] == found["face"]
+        np.testing.assert_allclose(
+            there["sites"]["barycentric"], found["barycentric"], rtol=0, atol=1e-9
+        )
+        np.testing.assert_allclose(
+            there["sites"]["position"],
+            scale * turn.apply(found["position"]) + shift,
+            rtol=0,
+            atol=1e-9 * scale * np.abs(vertices).max(),
+        )
+        np.testing.assert_allclose(there["sites"]["normal"], turn.apply(found["normal"]), atol=1e-9)
+        for key in ("x", "y", "theta", "phi"):
+            np.testing.assert_allclose(there["sites"][key], found[key], rtol=0, atol=1e-9)
+        for answer in (here, there):
+            assert measured_mm(answer) == pytest.approx(answer["min_distance_mm"], rel=1e-9)
+            assert answer["min_distance_mm"] >= answer["zones"][0]["spacing_mm"] * (1 - 1e-12)
+        assert there["min_distance_mm"] == pytest.approx(here["min_distance_mm"], rel=1e-9)
+    again = (await sites(client, params, name="moved.obj", data=moved)).json()
+    assert again["sites"] == there["sites"]
 
 
 async def test_no_site_goes_on_a_flagged_face_unless_allowed(client):

@@ -223,6 +223,25 @@ def test_a_part_too_full_for_its_spacing_says_how_many_fit():
     assert far.placed < 20
 
 
+def test_a_triangle_of_density_zero_neither_gets_sites_nor_sets_the_least_spacing():
+    """A triangle of density 0 (a black pixel of a density map) has a spacing that means
+    nothing (the service gives it 1 mesh unit, a length that depends on the unit; here a
+    tiny one): it is not the part's least spacing, which orders the parts and is reported
+    when a part is too full."""
+    triangles = jittered_mesh(n=8, seed=4)
+    area = triangles.surface_area
+    density = np.where(np.arange(len(area)) % 2 == 0, 0.0, 1.0)
+    spacing = np.where(density > 0, 0.05, 1e-6)
+    part = SitePart(np.arange(len(area)), area, 40, spacing, density)
+    assert part.least_spacing == 0.05
+    sites = place_sites(triangles.surface_points, triangles.faces, [part], np.random.default_rng(8))
+    assert len(sites.triangles) == 40 and (density[sites.triangles] > 0).all()
+    too_many = SitePart(np.arange(len(area)), area, 4000, spacing, density)
+    with pytest.raises(SitesDoNotFit) as caught:
+        place_sites(triangles.surface_points, triangles.faces, [too_many], np.random.default_rng(8))
+    assert caught.value.spacing == 0.05
+
+
 def test_vertex_normals_of_a_sphere_point_outwards_and_site_normals_follow():
     vertices, faces = sphere_mesh(24, 48)
     normals = vertex_normals(vertices, faces)

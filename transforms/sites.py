@@ -102,7 +102,12 @@ class SitePart:
 
     @property
     def least_spacing(self) -> float:
-        return float(np.min(self.spacing)) if np.size(self.spacing) else 0.0
+        """The least spacing of the triangles sites may go on (a triangle of density 0 gets
+        none, whatever spacing it was given); 0 for none."""
+        spacing = np.broadcast_to(self.spacing, self.triangles.shape)
+        if self.density is not None:
+            spacing = spacing[self.density > 0]
+        return float(spacing.min()) if spacing.size else 0.0
 
     def draw_weight(self) -> np.ndarray:
         """(j,) float: how often candidates fall on each triangle (whole triangles where

@@ -358,79 +358,112 @@ async def test_the_same_seed_gives_the_same_sites(client):
     assert first["sites"]["face"] != other["sites"]["face"]
 
 
-async def test_a_mesh_moved_turned_and_scaled_with_its_params_gets_the_same_sites(client):
-    """Move, turn and scale the mesh with its params (the cone's axis and apex, the centre,
-    the pole and up) and its units (the same head in cm, in m, and from a known distance):
-    the same faces and barycentric weights, the positions moved, the normals turned, the
-    same map; each pose's least distance, measured by a k-d tree of its own, is the
-    answer's min_distance_mm and keeps the spacing; the same seed, the same sites again.
-    (Before the batches' sizes were settled, each of these poses gave other faces.)"""
+def posed(turn: Rotation, scale: float, shift: np.ndarray, units) -> tuple[bytes, dict]:
+    """The sample head moved to ``scale * turn(p) + shift`` as an OBJ file, and the scalp's
+    params moved with it: the cone's axis and apex, the centre, the pole and up, and the
+    units (``None``: from a known distance between two of its vertices)."""
     vertices, faces = (np.array(array) for array in load_sample(NAME))
     centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
-    known = vertices[[0, 100]]  # two vertices, their distance in mm
+    known = vertices[[0, 100]]
 
-    def params_in(turn, scale, shift, units):
-        def move(point):
-            return (scale * turn.apply(np.asarray(point, float)) + shift).tolist()
+    def move(point):
+        return (scale * turn.apply(np.asarray(point, float)) + shift).tolist()
 
-        if units is None:
-            units = {
-                "between": [move(p) for p in known],
-                "mm": float(np.linalg.norm(known[1] - known[0])),
-            }
-        return {
-            "region": {
-                "cone": {
-                    "axis": turn.apply([0, 0, 1]).tolist(),
-                    "half_angle_deg": 70,
-                    "apex": move(centre),
-                }
-            },
-            "center": move(centre),
-            "rotation": {
-                "pole": turn.apply([0, 0, -1]).tolist(),
-                "up": turn.apply([0, 1, 0]).tolist(),
-            },
-            "units": units,
-            "density_per_cm2": 5,
-            "seed": 4,
+    if units is None:
+        units = {
+            "between": [move(p) for p in known],
+            "mm": float(np.linalg.norm(known[1] - known[0])),
         }
+    params = {
+        "region": {
+            "cone": {
+                "axis": turn.apply([0, 0, 1]).tolist(),
+                "half_angle_deg": 70,
+                "apex": move(centre),
+            }
+        },
+        "center": move(centre),
+        "rotation": {"pole": turn.apply([0, 0, -1]).tolist(), "up": turn.apply([0, 1, 0]).tolist()},
+        "units": units,
+    }
+    return obj_of(scale * turn.apply(vertices) + shift, faces), params
 
-    def measured_mm(answer):
-        distance, _ = cKDTree(answer["sites"]["position"]).query(answer["sites"]["position"], k=2)
-        return distance[:, 1].min() * answer["units"]["mm_per_unit"]
 
-    here = (await sites(client, params_in(Rotation.identity(), 1.0, np.zeros(3), "mm"))).json()
+#: Three similarities of the head and the units that keep it the same head.
+POSES = ((0.1, "cm"), (0.001, "m"), (3.7, None))
+
+
+def measured_mm(answer: dict) -> float:
+    """The least distance between two of the answer's sites, by a k-d tree, in mm."""
+    points = answer["sites"]["position"]
+    distance, _ = cKDTree(points).query(points, k=2)
+    return distance[:, 1].min() * answer["units"]["mm_per_unit"]
+
+
+def check_the_same_sites(here: dict, there: dict, turn: Rotation, scale: float, shift) -> None:
+    """``there`` is ``here``'s answer for the head moved: the same faces and weights, the
+    positions moved, the normals turned, the same map; the measured least distance is the
+    answer's and keeps every zone's spacing."""
     found = here["sites"]
+    assert there["count"] == here["count"]
+    assert [zone["sites"] for zone in there["zones"]] == [zone["sites"] for zone in here["zones"]]
+    assert there["sites"]["face"] == found["face"]
+    np.testing.assert_allclose(
+        there["sites"]["barycentric"], found["barycentric"], rtol=0, atol=1e-9
+    )
+    size = scale * np.abs(load_sample(NAME)[0]).max()
+    moved = scale * turn.apply(found["position"]) + shift
+    np.testing.assert_allclose(there["sites"]["position"], moved, rtol=0, atol=1e-9 * size)
+    np.testing.assert_allclose(there["sites"]["normal"], turn.apply(found["normal"]), atol=1e-9)
+    for key in ("x", "y", "theta", "phi"):
+        np.testing.assert_allclose(there["sites"][key], found[key], rtol=0, atol=1e-9)
+    for answer in (here, there):
+        assert measured_mm(answer) == pytest.approx(answer["min_distance_mm"], rel=1e-9)
+        spacing = min(zone["spacing_mm"] for zone in answer["zones"] if zone["sites"])
+        assert answer["min_distance_mm"] >= spacing * (1 - 1e-12)
+    assert there["min_distance_mm"] == pytest.approx(here["min_distance_mm"], rel=1e-9)
+
+
+async def test_a_mesh_moved_turned_and_scaled_with_its_params_gets_the_same_sites(client):
+    """Move, turn and scale the mesh with its params and its units (the same head in cm, in
+    m, and from a known distance): the same sites (:func:`check_the_same_sites`); the same
+    seed, the same sites again. (Before the batches' sizes were settled, each of these poses
+    gave other faces.)"""
+    density = {"density_per_cm2": 5, "seed": 4}
+    _, params = posed(Rotation.identity(), 1.0, np.zeros(3), "mm")
+    here = (await sites(client, params | density)).json()
     assert here["count"] == 2904
     rng = np.random.default_rng(31)
-    for scale, units in ((0.1, "cm"), (0.001, "m"), (3.7, None)):
+    for scale, units in POSES:
         turn, shift = Rotation.random(random_state=rng), rng.normal(size=3) * 500 * scale
-        params = params_in(turn, scale, shift, units)
-        moved = obj_of(scale * turn.apply(vertices) + shift, faces)
-        response = await sites(client, params, name="moved.obj", data=moved)
+        moved, params = posed(turn, scale, shift, units)
+        response = await sites(client, params | density, name="moved.obj", data=moved)
         assert response.status_code == 200, response.text
-        there = response.json()
-        assert there["count"] == here["count"]
-        assert there["sites"]["face"] == found["face"]
-        np.testing.assert_allclose(
-            there["sites"]["barycentric"], found["barycentric"], rtol=0, atol=1e-9
-        )
-        np.testing.assert_allclose(
-            there["sites"]["position"],
-            scale * turn.apply(found["position"]) + shift,
-            rtol=0,
-            atol=1e-9 * scale * np.abs(vertices).max(),
-        )
-        np.testing.assert_allclose(there["sites"]["normal"], turn.apply(found["normal"]), atol=1e-9)
-        for key in ("x", "y", "theta", "phi"):
-            np.testing.assert_allclose(there["sites"][key], found[key], rtol=0, atol=1e-9)
-        for answer in (here, there):
-            assert measured_mm(answer) == pytest.approx(answer["min_distance_mm"], rel=1e-9)
-            assert answer["min_distance_mm"] >= answer["zones"][0]["spacing_mm"] * (1 - 1e-12)
-        assert there["min_distance_mm"] == pytest.approx(here["min_distance_mm"], rel=1e-9)
-    again = (await sites(client, params, name="moved.obj", data=moved)).json()
-    assert again["sites"] == there["sites"]
+        check_the_same_sites(here, response.json(), turn, scale, shift)
+    again = (await sites(client, params | density, name="moved.obj", data=moved)).json()
+    assert again["sites"] == response.json()["sites"]
+
+
+async def test_zones_and_a_count_get_the_same_sites_in_every_pose(client):
+    """Zones drawn on the map cut triangles (candidates there kept by the zone's winding at
+    their map point) and share an exact count by their areas times densities: the same sites
+    for the head moved, turned and scaled with its params and units."""
+    _, params = posed(Rotation.identity(), 1.0, np.zeros(3), "mm")
+    plain = (await sites(client, params | {"density_per_cm2": 1})).json()["sites"]
+    cx, cy = np.mean(plain["x"]), np.mean(plain["y"])
+    zones = [
+        rectangle("crown", cx - 0.3, cx, cy - 0.25, cy + 0.25, 12),
+        rectangle("temple", cx + 0.05, cx + 0.3, cy - 0.25, cy + 0.1, 4),
+    ]
+    asked = {"zones": zones, "count": 1500, "seed": 6}
+    here = (await sites(client, params | asked)).json()
+    assert here["count"] == 1500 and all(zone["sites"] > 100 for zone in here["zones"])
+    rng = np.random.default_rng(32)
+    for scale, units in POSES[::2]:
+        turn, shift = Rotation.random(random_state=rng), rng.normal(size=3) * 500 * scale
+        moved, params = posed(turn, scale, shift, units)
+        there = (await sites(client, params | asked, name="moved.obj", data=moved)).json()
+        check_the_same_sites(here, there, turn, scale, shift)
 
 
 async def test_no_site_goes_on_a_flagged_face_unless_allowed(client):

@@ -466,6 +466,32 @@ async def test_zones_and_a_count_get_the_same_sites_in_every_pose(client):
         check_the_same_sites(here, there, turn, scale, shift)
 
 
+async def test_a_density_map_gets_the_same_sites_in_every_pose(client):
+    """A density map (a ramp from 0 to 40 sites per cm² across the map, a black stripe
+    where triangles get no site): each triangle takes its own density and spacing from the
+    pixel under its centroid on the map, the same map in every pose: the same sites for the
+    head moved, turned and scaled with its params and units."""
+    ramp = np.tile(np.linspace(0, 255, 480), (360, 1))
+    ramp[:, 200:260] = 0
+    picture = {"image_width": 480, "image_height": 360, "density_range": [0, 40], "seed": 2}
+
+    async def placed(data: bytes | None, params: dict) -> dict:
+        files = {"mesh": ("moved.obj", data) if data else (NAME, SAMPLES[NAME].path.read_bytes())}
+        files["density_map"] = ("density.png", grey_png(ramp))
+        body = {"params": json.dumps({**PARAMS, **params, **picture})}
+        response = await client.post("/v1/sites", files=files, data=body)
+        assert response.status_code == 200, response.text
+        return response.json()
+
+    here = await placed(None, posed(Rotation.identity(), 1.0, np.zeros(3), "mm")[1])
+    assert here["count"] > 1000
+    rng = np.random.default_rng(33)
+    for scale, units in POSES[::2]:
+        turn, shift = Rotation.random(random_state=rng), rng.normal(size=3) * 500 * scale
+        moved, params = posed(turn, scale, shift, units)
+        check_the_same_sites(here, await placed(moved, params), turn, scale, shift)
+
+
 async def test_no_site_goes_on_a_flagged_face_unless_allowed(client):
     """The whole head: a closed mesh, so some triangles cross the seam or hold a singular
     point; sites avoid them, unless allow_flagged."""

@@ -62,7 +62,7 @@ def settled(value: float) -> float:
     of its areas) but differs in its last bits is then the same number, unless it lies within
     those bits of a midpoint between two such numbers: about ``2 * 1e-15 * 2**8``, 5e-13, of
     the time for a ratio of sums of areas (a yield of exactly 1, a whole region's, is never
-    near one). Unsettled, a yield of 1 - 2e-16 truncated a batch of ``need * factor / yield``
+    near one). Unsettled, a yield of 1 + 2e-16 truncated a batch of ``need * factor / yield``
     candidates one shorter than a yield of 1 did, and every site after it moved."""
     mantissa, exponent = math.frexp(float(value))
     steps = 1 << SIZING_BITS

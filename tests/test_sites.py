@@ -21,14 +21,17 @@ from service.cli import main
 from service.samples import SAMPLES
 from service.settings import Settings
 from transforms import Framing, Layout
+from transforms.arrays import triangle_areas
 from transforms.sites import (
     JAMMING,
     MAX_TRIES_PER_SITE,
+    SIZING_BITS,
     SitePart,
     SitesDoNotFit,
     default_spacing,
     minimum_distance,
     place_sites,
+    settled,
     site_normals,
     vertex_normals,
 )
@@ -151,17 +154,47 @@ def test_the_same_seed_gives_the_same_sites_and_another_seed_others():
     assert not np.array_equal(first.weights, other.weights)
 
 
-def test_moving_and_turning_the_surface_keeps_the_sites_on_the_same_faces():
-    """Sites are drawn as faces and weights and kept by their 3D distances, which a rigid
-    motion keeps: the same faces and weights come back."""
-    triangles = jittered_mesh(n=12, seed=2)
-    turn = Rotation.from_euler("xyz", [0.3, -1.1, 2.0])
-    moved = turn.apply(triangles.surface_points) + np.array([120.0, -40.0, 7.5])
-    part = whole(triangles, 400)
-    here = place_sites(triangles.surface_points, triangles.faces, [part], np.random.default_rng(5))
-    there = place_sites(moved, triangles.faces, [part], np.random.default_rng(5))
-    np.testing.assert_array_equal(here.triangles, there.triangles)
-    np.testing.assert_array_equal(here.weights, there.weights)
+def test_moving_turning_and_scaling_the_surface_keeps_the_sites_on_the_same_faces():
+    """Sites are drawn as faces and weights and kept by their 3D distances, which a
+    similarity keeps when the spacing is scaled with the surface: the same faces and weights
+    come back, the points moved. The part has a density per triangle, as the service's have:
+    its yield (areas times densities over their sum) is then 1 only to its last bit, which
+    sized the batches differently in 2 of these 6 poses before the sizes were rounded to a
+    few bits (:func:`transforms.sites.settled`)."""
+    triangles = jittered_mesh(n=24, seed=2)
+    points, faces = triangles.surface_points, triangles.faces
+
+    def sites_of(points, seed):
+        area = triangle_areas(points, faces)
+        spacing = default_spacing(3000 / area.sum())
+        part = SitePart(np.arange(len(area)), area, 3000, spacing, np.full(len(area), 7.0))
+        return place_sites(points, faces, [part], np.random.default_rng(seed))
+
+    rng = np.random.default_rng(100)
+    for seed in range(6):
+        turn, scale = Rotation.random(random_state=rng), float(np.exp(rng.uniform(-7, 3)))
+        shift = rng.normal(size=3) * 100
+        here = sites_of(points, seed)
+        there = sites_of(scale * turn.apply(points) + shift, seed)
+        np.testing.assert_array_equal(here.triangles, there.triangles)
+        np.testing.assert_array_equal(here.weights, there.weights)
+        np.testing.assert_allclose(
+            scale * turn.apply(here.points) + shift,
+            there.points,
+            rtol=0,
+            atol=1e-12 * (scale + 100),
+        )
+
+
+def test_the_measures_that_size_batches_are_settled_to_a_few_bits():
+    """A part's yield and capacity, the same in exact arithmetic in every pose, are the same
+    numbers when they differ in their last bits; far apart, they stay apart."""
+    assert settled(1.0) == settled(np.nextafter(1.0, 0.0)) == settled(1.0 + 2e-16) == 1.0
+    assert settled(0.0) == 0.0
+    x = 24767.042631948134
+    assert settled(x) == settled(x * (1 + 1e-15)) == settled(x * (1 - 1e-15))
+    assert settled(x) == pytest.approx(x, rel=2.0**-SIZING_BITS)
+    assert settled(0.5) != settled(0.5 * (1 + 2.0 ** (1 - SIZING_BITS)))
 
 
 def test_a_part_too_full_for_its_spacing_says_how_many_fit():
@@ -188,6 +221,25 @@ def test_a_part_too_full_for_its_spacing_says_how_many_fit():
     assert f"of 400 sites were placed within {MAX_TRIES_PER_SITE} candidates a site" in str(near)
     far = give_up(100.0)  # room for 4
     assert far.placed < 20
+
+
+def test_a_triangle_of_density_zero_neither_gets_sites_nor_sets_the_least_spacing():
+    """A triangle of density 0 (a black pixel of a density map) has a spacing that means
+    nothing (the service gives it 1 mesh unit, a length that depends on the unit; here a
+    tiny one): it is not the part's least spacing, which orders the parts and is reported
+    when a part is too full."""
+    triangles = jittered_mesh(n=8, seed=4)
+    area = triangles.surface_area
+    density = np.where(np.arange(len(area)) % 2 == 0, 0.0, 1.0)
+    spacing = np.where(density > 0, 0.05, 1e-6)
+    part = SitePart(np.arange(len(area)), area, 40, spacing, density)
+    assert part.least_spacing == 0.05
+    sites = place_sites(triangles.surface_points, triangles.faces, [part], np.random.default_rng(8))
+    assert len(sites.triangles) == 40 and (density[sites.triangles] > 0).all()
+    too_many = SitePart(np.arange(len(area)), area, 4000, spacing, density)
+    with pytest.raises(SitesDoNotFit) as caught:
+        place_sites(triangles.surface_points, triangles.faces, [too_many], np.random.default_rng(8))
+    assert caught.value.spacing == 0.05
 
 
 def test_vertex_normals_of_a_sphere_point_outwards_and_site_normals_follow():
@@ -306,40 +358,138 @@ async def test_the_same_seed_gives_the_same_sites(client):
     assert first["sites"]["face"] != other["sites"]["face"]
 
 
-async def test_a_moved_and_turned_mesh_gets_the_same_faces_and_weights(client):
-    """Move and rotate the mesh with its params (the cone's axis and apex, the centre, the
-    pole and up): the same faces and barycentric weights come back."""
-    vertices, faces = load_sample(NAME)
+def posed(turn: Rotation, scale: float, shift: np.ndarray, units) -> tuple[bytes, dict]:
+    """The sample head moved to ``scale * turn(p) + shift`` as an OBJ file, and the scalp's
+    params moved with it: the cone's axis and apex, the centre, the pole and up, and the
+    units (``None``: from a known distance between two of its vertices)."""
+    vertices, faces = (np.array(array) for array in load_sample(NAME))
     centre = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
-    turn = Rotation.from_euler("zyx", [0.7, -0.4, 1.9])
-    shift = np.array([250.0, -80.0, 33.0])
+    known = vertices[[0, 100]]
 
-    def params_in(pose):
-        rotate = turn.apply if pose else (lambda v: np.asarray(v, dtype=float))
-        move = (lambda p: turn.apply(p) + shift) if pose else (lambda p: np.asarray(p, float))
-        return {
-            "region": {
-                "cone": {
-                    "axis": rotate([0, 0, 1]).tolist(),
-                    "half_angle_deg": 70,
-                    "apex": move(centre).tolist(),
-                }
-            },
-            "center": move(centre).tolist(),
-            "rotation": {"pole": rotate([0, 0, -1]).tolist(), "up": rotate([0, 1, 0]).tolist()},
-            "density_per_cm2": 10,
-            "seed": 3,
+    def move(point):
+        return (scale * turn.apply(np.asarray(point, float)) + shift).tolist()
+
+    if units is None:
+        units = {
+            "between": [move(p) for p in known],
+            "mm": float(np.linalg.norm(known[1] - known[0])),
         }
+    params = {
+        "region": {
+            "cone": {
+                "axis": turn.apply([0, 0, 1]).tolist(),
+                "half_angle_deg": 70,
+                "apex": move(centre),
+            }
+        },
+        "center": move(centre),
+        "rotation": {"pole": turn.apply([0, 0, -1]).tolist(), "up": turn.apply([0, 1, 0]).tolist()},
+        "units": units,
+    }
+    return obj_of(scale * turn.apply(vertices) + shift, faces), params
 
-    here = (await sites(client, params_in(False))).json()
-    moved = obj_of(turn.apply(np.array(vertices)) + shift, faces)
-    there = await sites(client, params_in(True), name="moved.obj", data=moved)
-    there = there.json()
-    assert here["sites"]["face"] == there["sites"]["face"]
-    np.testing.assert_allclose(here["sites"]["barycentric"], there["sites"]["barycentric"])
+
+#: Three similarities of the head and the units that keep it the same head.
+POSES = ((0.1, "cm"), (0.001, "m"), (3.7, None))
+
+
+def measured_mm(answer: dict) -> float:
+    """The least distance between two of the answer's sites, by a k-d tree, in mm."""
+    points = answer["sites"]["position"]
+    distance, _ = cKDTree(points).query(points, k=2)
+    return distance[:, 1].min() * answer["units"]["mm_per_unit"]
+
+
+def check_the_same_sites(here: dict, there: dict, turn: Rotation, scale: float, shift) -> None:
+    """``there`` is ``here``'s answer for the head moved: the same faces and weights, the
+    positions moved, the normals turned, the same map; the measured least distance is the
+    answer's and keeps every zone's spacing."""
+    found = here["sites"]
+    assert there["count"] == here["count"]
+    assert [zone["sites"] for zone in there["zones"]] == [zone["sites"] for zone in here["zones"]]
+    assert there["sites"]["face"] == found["face"]
     np.testing.assert_allclose(
-        turn.apply(here["sites"]["normal"]), there["sites"]["normal"], atol=1e-9
+        there["sites"]["barycentric"], found["barycentric"], rtol=0, atol=1e-9
     )
+    size = scale * np.abs(load_sample(NAME)[0]).max()
+    moved = scale * turn.apply(found["position"]) + shift
+    np.testing.assert_allclose(there["sites"]["position"], moved, rtol=0, atol=1e-9 * size)
+    np.testing.assert_allclose(there["sites"]["normal"], turn.apply(found["normal"]), atol=1e-9)
+    for key in ("x", "y", "theta", "phi"):
+        np.testing.assert_allclose(there["sites"][key], found[key], rtol=0, atol=1e-9)
+    for answer in (here, there):
+        assert measured_mm(answer) == pytest.approx(answer["min_distance_mm"], rel=1e-9)
+        spacing = min(zone["spacing_mm"] for zone in answer["zones"] if zone["sites"])
+        assert answer["min_distance_mm"] >= spacing * (1 - 1e-12)
+    assert there["min_distance_mm"] == pytest.approx(here["min_distance_mm"], rel=1e-9)
+
+
+async def test_a_mesh_moved_turned_and_scaled_with_its_params_gets_the_same_sites(client):
+    """Move, turn and scale the mesh with its params and its units (the same head in cm, in
+    m, and from a known distance): the same sites (:func:`check_the_same_sites`); the same
+    seed, the same sites again. (Before the batches' sizes were settled, each of these poses
+    gave other faces.)"""
+    density = {"density_per_cm2": 5, "seed": 4}
+    _, params = posed(Rotation.identity(), 1.0, np.zeros(3), "mm")
+    here = (await sites(client, params | density)).json()
+    assert here["count"] == 2904
+    rng = np.random.default_rng(31)
+    for scale, units in POSES:
+        turn, shift = Rotation.random(random_state=rng), rng.normal(size=3) * 500 * scale
+        moved, params = posed(turn, scale, shift, units)
+        response = await sites(client, params | density, name="moved.obj", data=moved)
+        assert response.status_code == 200, response.text
+        check_the_same_sites(here, response.json(), turn, scale, shift)
+    again = (await sites(client, params | density, name="moved.obj", data=moved)).json()
+    assert again["sites"] == response.json()["sites"]
+
+
+async def test_zones_and_a_count_get_the_same_sites_in_every_pose(client):
+    """Zones drawn on the map cut triangles (candidates there kept by the zone's winding at
+    their map point) and share an exact count by their areas times densities: the same sites
+    for the head moved, turned and scaled with its params and units."""
+    _, params = posed(Rotation.identity(), 1.0, np.zeros(3), "mm")
+    plain = (await sites(client, params | {"density_per_cm2": 1})).json()["sites"]
+    cx, cy = np.mean(plain["x"]), np.mean(plain["y"])
+    zones = [
+        rectangle("crown", cx - 0.3, cx, cy - 0.25, cy + 0.25, 12),
+        rectangle("temple", cx + 0.05, cx + 0.3, cy - 0.25, cy + 0.1, 4),
+    ]
+    asked = {"zones": zones, "count": 1500, "seed": 6}
+    here = (await sites(client, params | asked)).json()
+    assert here["count"] == 1500 and all(zone["sites"] > 100 for zone in here["zones"])
+    rng = np.random.default_rng(32)
+    for scale, units in POSES[::2]:
+        turn, shift = Rotation.random(random_state=rng), rng.normal(size=3) * 500 * scale
+        moved, params = posed(turn, scale, shift, units)
+        there = (await sites(client, params | asked, name="moved.obj", data=moved)).json()
+        check_the_same_sites(here, there, turn, scale, shift)
+
+
+async def test_a_density_map_gets_the_same_sites_in_every_pose(client):
+    """A density map (a ramp from 0 to 40 sites per cm² across the map, a black stripe
+    where triangles get no site): each triangle takes its own density and spacing from the
+    pixel under its centroid on the map, the same map in every pose: the same sites for the
+    head moved, turned and scaled with its params and units."""
+    ramp = np.tile(np.linspace(0, 255, 480), (360, 1))
+    ramp[:, 200:260] = 0
+    picture = {"image_width": 480, "image_height": 360, "density_range": [0, 40], "seed": 2}
+
+    async def placed(data: bytes | None, params: dict) -> dict:
+        files = {"mesh": ("moved.obj", data) if data else (NAME, SAMPLES[NAME].path.read_bytes())}
+        files["density_map"] = ("density.png", grey_png(ramp))
+        body = {"params": json.dumps({**PARAMS, **params, **picture})}
+        response = await client.post("/v1/sites", files=files, data=body)
+        assert response.status_code == 200, response.text
+        return response.json()
+
+    here = await placed(None, posed(Rotation.identity(), 1.0, np.zeros(3), "mm")[1])
+    assert here["count"] > 1000
+    rng = np.random.default_rng(33)
+    for scale, units in POSES[::2]:
+        turn, shift = Rotation.random(random_state=rng), rng.normal(size=3) * 500 * scale
+        moved, params = posed(turn, scale, shift, units)
+        check_the_same_sites(here, await placed(moved, params), turn, scale, shift)
 
 
 async def test_no_site_goes_on_a_flagged_face_unless_allowed(client):

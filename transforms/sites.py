@@ -7,6 +7,12 @@ reached. Kept sites are spaced by construction; as every candidate is uniform an
 sites are counted, not thinned, the density is the quota's over the area. The candidates
 come in batches, each checked against the sites kept in earlier batches (a k-d tree) and
 against those of its own batch that come before it.
+
+The sites depend on the surface's triangles (their order, areas and 3D distances) and the
+random stream only, never on the pose or the unit the mesh is stored in: the sizes of the
+batches, which decide which candidates are checked together, are computed from counts and
+from area ratios rounded to a few bits (:data:`SIZING_BITS`), so that the last bits a move,
+a turn or a change of unit leaves in the areas cannot change them.
 """
 
 from __future__ import annotations
@@ -38,11 +44,29 @@ BATCH_PER_CAPACITY = 4.0
 MIN_YIELD = 1e-3
 #: The most candidates drawn at once (memory: about 100 bytes each).
 MAX_BATCH = 1 << 20
+#: Significant bits kept of the measures that size the batches (a part's yield and capacity,
+#: ratios of areas): the same surface moved, turned or scaled gives areas that differ in their
+#: last bits, and a batch one candidate longer changes every site after it.
+SIZING_BITS = 8
 
 
 def default_spacing(density: float) -> float:
     """The spacing of sites at ``density`` (sites per unit area, > 0) by the default rule."""
     return SPACING_RULE / math.sqrt(density)
+
+
+def settled(value: float) -> float:
+    """``value`` (finite, >= 0) rounded to :data:`SIZING_BITS` significant bits.
+
+    A measure that is the same in exact arithmetic for the same surface in any pose (a ratio
+    of its areas) but differs in its last bits is then the same number, unless it lies within
+    those bits of a midpoint between two such numbers: about ``2 * 1e-15 * 2**8``, 5e-13, of
+    the time for a ratio of sums of areas (a yield of exactly 1, a whole region's, is never
+    near one). Unsettled, a yield of 1 + 2e-16 truncated a batch of ``need * factor / yield``
+    candidates one shorter than a yield of 1 did, and every site after it moved."""
+    mantissa, exponent = math.frexp(float(value))
+    steps = 1 << SIZING_BITS
+    return math.ldexp(round(mantissa * steps) / steps, exponent)
 
 
 @dataclass(frozen=True)
@@ -78,7 +102,12 @@ class SitePart:
 
     @property
     def least_spacing(self) -> float:
-        return float(np.min(self.spacing)) if np.size(self.spacing) else 0.0
+        """The least spacing of the triangles sites may go on (a triangle of density 0 gets
+        none, whatever spacing it was given); 0 for none."""
+        spacing = np.broadcast_to(self.spacing, self.triangles.shape)
+        if self.density is not None:
+            spacing = spacing[self.density > 0]
+        return float(spacing.min()) if spacing.size else 0.0
 
     def draw_weight(self) -> np.ndarray:
         """(j,) float: how often candidates fall on each triangle (whole triangles where
@@ -87,18 +116,19 @@ class SitePart:
         return area if self.density is None else area * self.density
 
     def expected_yield(self) -> float:
-        """The share of drawn candidates that fall inside the part."""
+        """The share of drawn candidates that fall inside the part, to :data:`SIZING_BITS`
+        bits (the same in every pose and unit: it sizes the batches)."""
         drawn = self.draw_weight().sum()
         inside = self.area.sum() if self.density is None else np.dot(self.area, self.density)
-        return float(inside / drawn) if drawn > 0 else 0.0
+        return settled(inside / drawn) if drawn > 0 else 0.0
 
     def capacity(self) -> float:
         """About the most sites the part holds at its spacing: its area over the jamming
         area a site takes, ``s^2 / JAMMING``, summed over its triangles (more fit along a
-        border: this sizes the batches, it bounds nothing)."""
+        border: this sizes the batches, it bounds nothing), to :data:`SIZING_BITS` bits."""
         spacing = np.broadcast_to(self.spacing, self.triangles.shape)
         held = self.area if self.density is None else self.area * (self.density > 0)
-        return float(np.sum(held * JAMMING / spacing**2))
+        return settled(np.sum(held * JAMMING / spacing**2))
 
 
 @dataclass(frozen=True)

@@ -194,8 +194,10 @@ class _Scan:
     inside: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
 
     def add(self, values: np.ndarray, weights: np.ndarray) -> None:
-        self.below += float(np.dot(weights, values < self.low))
-        keep = (values >= self.low) & (values <= self.high)
+        below = values < self.low
+        self.below += float(weights[below].sum())  # a dot with the mask casts it: 6x slower
+        keep = values <= self.high
+        keep &= ~below
         self.inside.append((values[keep], weights[keep]))
 
     def settle(self, total: float, otherwise: Callable[[], float]) -> float:

@@ -374,7 +374,8 @@ def _caption(flat: FlatRegion, params: dict, face_count: int) -> tuple[str, ...]
     )
     return (
         f"meshflat: {method}; layout {flat.layout.value}; {face_count:,} triangles",
-        f"{', '.join(status)}; {margins}; {energy_text(flat)}",
+        f"{', '.join(status)}; {margins}",
+        energy_text(flat),
     )
 
 

@@ -237,6 +237,22 @@ async def test_the_pictures_axes_read_in_the_layouts_coordinates(client, layout,
         tolerance = 0.15 / abs(slope)  # the SVG writes pixels to 0.1
         assert read.min() == pytest.approx(values.min(), abs=tolerance)
         assert read.max() == pytest.approx(values.max(), abs=tolerance)
+    # The point at the ticks nearest the map's middle, sent to /v1/locate (which takes theta
+    # and phi: y is theta, or Mercator's ln tan((pi - theta) / 2)), is found in a triangle
+    # whose corners, weighted as the hit says, are that very point of the layout.
+    at_x = min((v for _, v in x_ticks), key=lambda v: abs(v - x.mean()))
+    at_y = min((v for _, v in y_ticks), key=lambda v: abs(v - y.mean()))
+    theta = at_y if layout == "theta_phi" else np.pi - 2.0 * np.arctan(np.exp(at_y))
+    query = {**params, "theta": [theta], "phi": [at_x], "via": "map"}
+    located = await flatten(client, name, query, endpoint="/v1/locate")
+    assert located.status_code == 200, located.text
+    (hit,) = located.json()["hits"]
+    position = {v: k for k, v in enumerate(answer["vertices"]["ids"])}
+    row = answer["faces"]["ids"].index(hit["face"])
+    corners = [position[v] for v in answer["faces"]["vertices"][row]]
+    weights = np.asarray(hit["barycentric"])
+    assert weights @ x[corners] == pytest.approx(at_x, abs=1e-9)
+    assert weights @ y[corners] == pytest.approx(at_y, abs=1e-9)
     # A zone drawn between the middle ticks, as read off the picture: it has area.
     (x0, x1), (y0, y1) = (sorted(v for _, v in t)[1:3] for t in (x_ticks, y_ticks))
     zone = {"name": "read", "outer": {"x": [x0, x1, x1, x0], "y": [y0, y0, y1, y1]}}

@@ -496,7 +496,7 @@ function clearPresets() {
 // (a mean is dominated by a few stretched slivers) and how many faces are flagged.
 function energy(trusted, v) {
   const stretched = v.stretched_faces ? `, ${v.stretched_faces} of them stretched` : '';
-  if (!trusted) return `isometric energy: no trusted face${stretched ? ` (${stretched.slice(2)})` : ''}`;
+  if (!trusted) return 'isometric energy: no trusted face (every face is flagged)';
   const e = trusted.isometric;
   return `isometric energy p50 ${e.p50.toFixed(3)}, p95 ${e.p95.toFixed(3)} on the trusted faces (${trusted.flagged_faces} flagged${stretched})`;
 }

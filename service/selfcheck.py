@@ -14,6 +14,7 @@ from .capabilities.region.params import MeshParams
 from .capabilities.region.resolve import MeshInput, flatten
 from .encoding import Answer
 from .meshio import format_of, read_mesh
+from .outputs.picture import energy_text
 from .samples import SAMPLES
 from .settings import Settings
 
@@ -35,21 +36,21 @@ class SelfCheck:
     faces: int
     seam_free: bool
     margin_deg: float
-    isometric_mean: float
+    isometric_p50: float
+    isometric_p95: float
     seconds: float
-    flagged: int = 0
+    energy: str = ""
 
     @property
     def ok(self) -> bool:
-        return self.seam_free and np.isfinite(self.isometric_mean)
+        return self.seam_free and bool(np.isfinite([self.isometric_p50, self.isometric_p95]).all())
 
     def __str__(self) -> str:
         verdict = "seam-free" if self.seam_free else "NOT seam-free"
         return (
             f"self-check: scalp of {self.sample} ({self.faces:,} faces) flattened {verdict} "
             f"in {self.seconds * 1e3:.0f} ms, margin {self.margin_deg:.1f} deg, "
-            f"isometric distortion {self.isometric_mean:.3f} on the trusted faces "
-            f"({self.flagged:,} flagged)"
+            f"{self.energy}"
         )
 
 
@@ -69,9 +70,10 @@ def run_self_check() -> SelfCheck:
         faces=len(region.faces),
         seam_free=v.seam_free,
         margin_deg=min(v.margin_deg_seam, v.margin_deg_north, v.margin_deg_south),
-        isometric_mean=(flat.trusted or flat.distortion).isometric.mean,
+        isometric_p50=(flat.trusted or flat.distortion).isometric.p50,
+        isometric_p95=(flat.trusted or flat.distortion).isometric.p95,
         seconds=time.perf_counter() - start,
-        flagged=flat.flagged_faces,
+        energy=energy_text(flat),
     )
 
 

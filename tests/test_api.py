@@ -910,17 +910,19 @@ async def test_trusted_metrics_leave_the_flagged_faces_out(client):
     flagged = set()
     for key in ("singular_point_faces", "seam_faces", "folded_faces", "backfacing_faces"):
         flagged |= set(v[key])
-    flagged |= set(v["degenerate_faces"])
+    flagged |= set(v["degenerate_faces"]) | set(v["stretched_faces"])
     trusted = metrics["trusted"]
     assert trusted["flagged_faces"] == len(flagged) > 1000
     assert trusted["faces"] + len(flagged) == 70_000
     assert trusted["isometric"]["mean"] < metrics["isometric"]["mean"]
     assert trusted["isometric"]["max"] <= metrics["isometric"]["max"]
     svg = await post(client, "/v1/flatten", {**params, "output": "svg"}, "nefertiti-lowres.obj")
-    mean = trusted["isometric"]["mean"]
-    assert f"isometric energy {mean:.4f} on the trusted faces ({len(flagged):,} flagged)" in (
-        svg.text
-    )
+    energy, stretched = trusted["isometric"], len(v["stretched_faces"])
+    assert 0 < stretched < len(flagged)
+    assert (
+        f"isometric energy p50 {energy['p50']:.3f}, p95 {energy['p95']:.3f} on the trusted "
+        f"faces ({len(flagged):,} flagged, {stretched:,} of them stretched)"
+    ) in svg.text
 
 
 async def test_a_star_shaped_region_trusts_every_face(client):

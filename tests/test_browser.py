@@ -128,7 +128,15 @@ def test_demo_page_flattens_a_sample_and_shows_map_and_textured_mesh(server):
         # The 3D view: the GLB loaded by three.js, with the region's vertex count.
         assert page.locator("body").get_attribute("data-vertices") == str(vertex_count)
         assert page.locator("#vertices").inner_text() == f"{vertex_count:,}"
-        assert "seam-free, star-shaped" in page.locator("#summary").inner_text()
+        summary = page.locator("#summary").inner_text()
+        assert "seam-free, star-shaped" in summary
+        # The energy as the captions quote it: the trusted median and p95, the flagged count.
+        trusted = expected["metrics"]["trusted"]
+        energy = trusted["isometric"]
+        assert (
+            f"isometric energy p50 {energy['p50']:.3f}, p95 {energy['p95']:.3f} on the trusted "
+            f"faces ({trusted['flagged_faces']} flagged"
+        ) in summary, summary
         # The canvas shows something besides the background.
         drawn = page.evaluate(NOT_BACKGROUND)
         assert drawn > 0.02, drawn

@@ -368,6 +368,7 @@ async def test_the_flagged_part_of_a_zone_is_the_area_on_flagged_faces(client):
     for key in ("singular_point_faces", "seam_faces", "folded_faces", "backfacing_faces"):
         flagged.update(validation[key])
     flagged.update(validation["degenerate_faces"])
+    flagged.update(validation["stretched_faces"])
     assert flagged
     vertices, faces = _sample_vertices()
     p = vertices[faces[sorted(flagged)]]

@@ -39,6 +39,7 @@ def test_affine_layout_has_the_distortion_of_its_singular_values(a, b):
         (d.isometric, (ratio + 1.0 / ratio) / 2.0),
     ):
         assert summary.mean == pytest.approx(value, abs=1e-12)
+        assert summary.p50 == pytest.approx(value, abs=1e-12)
         assert summary.p95 == pytest.approx(value, abs=1e-12)
         assert summary.max == pytest.approx(value, abs=1e-12)
     assert d.layout_scale == pytest.approx(1.0 / np.sqrt(a * b))
@@ -61,7 +62,7 @@ def test_rigid_motion_and_scale_of_the_mesh_change_nothing():
     moved = 37.0 * vertices @ rotation.T + [5.0, -2.0, 1.0]
     again = distortion(measure_faces(moved, faces, theta, phi, cap))
     for name in ("conformal", "area", "isometric"):
-        for stat in ("mean", "p95", "max"):
+        for stat in ("mean", "p50", "p95", "max"):
             assert getattr(getattr(again, name), stat) == pytest.approx(
                 getattr(getattr(reference, name), stat), abs=1e-12
             )
@@ -154,6 +155,7 @@ def test_summaries_agree_with_the_per_face_measures(degenerate):
         assert got.mean == pytest.approx(np.average(values, weights=per_face.weights), rel=1e-12)
         assert got.max == values.max()
         assert got.p95 == weighted_quantile(values, per_face.weights, 0.95)
+        assert got.p50 == reference_quantile(values, per_face.weights, 0.5)
 
 
 def test_a_misleading_sample_falls_back_to_the_exact_quantile():
@@ -161,3 +163,4 @@ def test_a_misleading_sample_falls_back_to_the_exact_quantile():
     per_face = face_distortion(measures)
     got = distortion(measures, bracket=lambda sample, weights, q: (-2.0, -1.0))
     assert got.isometric.p95 == weighted_quantile(per_face.isometric, per_face.weights, 0.95)
+    assert got.isometric.p50 == reference_quantile(per_face.isometric, per_face.weights, 0.5)

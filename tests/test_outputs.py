@@ -119,12 +119,12 @@ async def test_svg_is_a_well_formed_map_with_a_legend(client, name):
     assert root.tag == f"{SVG}svg" and root.get("width") == "1200" and root.get("height") == "800"
     text = " ".join(t.text or "" for t in root.iter(f"{SVG}text"))
     faces = len(as_json["faces"]["ids"])
-    assert f"region: {faces:,} triangles" in text and "phi (degrees)" in text
+    assert f"region: {faces:,} triangles" in text and "x = phi (layout units, rad)" in text
     assert "sigma 0.3" in text  # the caption
     backfacing = len(as_json["validation"]["backfacing_faces"])
     if backfacing:
         assert f"back-facing: {backfacing:,}" in text
-        assert root.find(f".//{SVG}path[@class='marks label-4']") is not None
+        assert root.find(f".//{SVG}path[@class='marks label-5']") is not None
         # A triangle both back-facing and folded is drawn as folded, and the legend says so.
         v = as_json["validation"]
         doubly = len(set(v["backfacing_faces"]) & set(v["folded_faces"]))

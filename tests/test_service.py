@@ -65,6 +65,10 @@ def test_self_check_result():
 
     check = run_self_check()
     assert check.ok and check.faces > 1000 and check.margin_deg > 10.0
+    # It quotes the trusted median and p95 (a mean is set by a few slivers) and the flagged.
+    quoted = f"isometric energy p50 {check.isometric_p50:.3f}, p95 {check.isometric_p95:.3f}"
+    assert quoted in str(check) and "flagged)" in str(check)
+    assert 1.0 <= check.isometric_p50 <= check.isometric_p95 < 2.0
 
 
 def test_allocator_keeps_large_blocks_on_glibc():

@@ -42,7 +42,7 @@ from .separable import separable_forward, separable_inverse, separable_residual
 from .spherical import cartesian_to_spherical, spherical_to_cartesian
 from .topology import RegionEdges, region_edges
 from .untangle import Untangled, untangle
-from .validation import RegionValidation, validate
+from .validation import STRETCHED_ENERGY, RegionValidation, validate
 from .warp import distorted_forward, distorted_inverse, pole_warp
 from .zones import Polyline, ZoneCover, cover_zone, lift_curve
 
@@ -55,6 +55,7 @@ __all__ = [
     "RHO_MIN",
     "SIGMA_MAX",
     "SIGMA_MIN",
+    "STRETCHED_ENERGY",
     "Chart",
     "Distortion",
     "EmptyRegionError",

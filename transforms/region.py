@@ -33,7 +33,8 @@ class FlatRegion:
     validation : RegionValidation, face lists by position in the region's face list
     distortion : Distortion, over every measured face
     trusted : Distortion or None, over the trusted faces only: neither flagged by the
-        validation nor degenerate (the same per-face values; None when no face is trusted)
+        validation (stretched faces included) nor degenerate (the same per-face values;
+        None when no face is trusted)
     flagged_faces : int, how many faces the validation flags (any reason, each face once)
     """
 
@@ -178,8 +179,13 @@ def region_face_distortion(
     return face_distortion(measures)
 
 
-def flagged_mask(validation: RegionValidation, n_faces: int) -> np.ndarray:
-    """(m,) bool: the faces any of the validation's lists holds."""
+def flagged_mask(
+    validation: RegionValidation, n_faces: int, *, stretched: bool = True
+) -> np.ndarray:
+    """(m,) bool: the faces any of the validation's lists holds; with ``stretched`` False,
+    the stretched faces only where another list holds them too (docs/math.md, section 6:
+    a stretched face's map is one to one, so what lies on it, sites, still is where the
+    map says)."""
     flagged = np.zeros(n_faces, dtype=bool)
     for listed in (
         validation.singular_point_faces,
@@ -187,6 +193,7 @@ def flagged_mask(validation: RegionValidation, n_faces: int) -> np.ndarray:
         validation.folded_faces,
         validation.backfacing_faces,
         validation.degenerate_faces,
+        validation.stretched_faces if stretched else np.empty(0, dtype=np.intp),
     ):
         flagged[listed] = True
     return flagged

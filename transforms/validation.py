@@ -19,7 +19,11 @@ For each face, by its position in the region's face list (the measurements come 
   (large triangles next to the cap);
 * **back-facing**: ``dot(centroid - c, outward normal) <= 0``, exactly;
 * **degenerate**: zero area in 3D or in the layout (relative to its edges,
-  :data:`.faces.DEGENERATE_RTOL`).
+  :data:`.faces.DEGENERATE_RTOL`);
+* **stretched**: not degenerate, and its isometric energy (docs/math.md, section 7, the
+  layout scaled to the region's area) is above :data:`STRETCHED_ENERGY`: the map is one to
+  one there, but stretches the triangle so far that its picture misleads and a mean over
+  the region is dominated by it (section 6, "stretched").
 
 "Outward" is the file's winding, unless the region as a whole winds the other way round the
 centre (its signed solid angle is negative), in which case every normal is flipped and
@@ -41,8 +45,14 @@ from .errors import TransformInputError
 from .faces import FaceMeasures
 from .layouts import LAYOUT_ORIENTATION
 from .margins import arcs_to_point, arcs_to_seam
+from .metrics import stretched_faces
 from .parallel import run_all
 from .topology import region_edges
+
+#: A triangle whose isometric energy is above this is stretched (docs/math.md, section 6):
+#: 10 is a triangle drawn about 6.2 times too long in one direction (``s1 = 6.2``,
+#: ``s2 = 1``), or about 4.5 times too large in both (``s1 = s2 = 4.5``).
+STRETCHED_ENERGY = 10.0
 
 #: An edge that comes within this angle (radians) of the seam counts as meeting it.
 _SEAM_TOUCH = 1e-12
@@ -61,8 +71,8 @@ class RegionValidation:
 
     Attributes
     ----------
-    singular_point_faces, seam_faces, folded_faces, backfacing_faces, degenerate_faces :
-        (j,) int arrays
+    singular_point_faces, seam_faces, folded_faces, backfacing_faces, degenerate_faces,
+    stretched_faces : (j,) int arrays
     margin_deg_seam, margin_deg_north, margin_deg_south : float, degrees in [0, 180]
     boundary_loops : int
     boundary_edges : (k, 2) int, vertex pairs (indices as in the measured faces) of the edges
@@ -75,6 +85,7 @@ class RegionValidation:
     folded_faces: np.ndarray
     backfacing_faces: np.ndarray
     degenerate_faces: np.ndarray
+    stretched_faces: np.ndarray
     margin_deg_seam: float
     margin_deg_north: float
     margin_deg_south: float
@@ -103,7 +114,7 @@ class RegionValidation:
 
     @property
     def star_shaped(self) -> bool:
-        """No face is folded or back-facing."""
+        """No face is folded or back-facing (a stretched face may be: it is not flipped)."""
         return len(self.folded_faces) == 0 and len(self.backfacing_faces) == 0
 
 
@@ -160,6 +171,7 @@ def validate(
         folded_faces=np.flatnonzero(folded),
         backfacing_faces=np.flatnonzero(backfacing),
         degenerate_faces=np.flatnonzero(measures.degenerate),
+        stretched_faces=stretched_faces(measures, STRETCHED_ENERGY),
         margin_deg_seam=0.0 if touches_seam else math.degrees(seam_distance),
         margin_deg_north=0.0 if contains_north else math.degrees(north),
         margin_deg_south=0.0 if contains_south else math.degrees(south),

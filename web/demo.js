@@ -492,6 +492,15 @@ function clearPresets() {
   for (const id of ['pole', 'up', 'sigma']) $(id).value = '';
 }
 
+// The isometric energy as the pictures' captions say it: the trusted faces' median and p95
+// (a mean is dominated by a few stretched slivers) and how many faces are flagged.
+function energy(trusted, v) {
+  const stretched = v.stretched_faces ? `, ${v.stretched_faces} of them stretched` : '';
+  if (!trusted) return 'isometric energy: no trusted face (every face is flagged)';
+  const e = trusted.isometric;
+  return `isometric energy p50 ${e.p50.toFixed(3)}, p95 ${e.p95.toFixed(3)} on the trusted faces (${trusted.flagged_faces} flagged${stretched})`;
+}
+
 function summary(extras) {
   const v = extras.validation;
   const m = v.margin_deg;
@@ -503,8 +512,8 @@ function summary(extras) {
     `${v.seam_free ? 'seam-free' : 'NOT seam-free'}, ${v.star_shaped ? 'star-shaped' : 'NOT star-shaped'}`,
     `${p.method}, ${cap}, layout ${p.layout}`,
     `margins: seam ${m.seam.toFixed(1)}°, north ${m.north.toFixed(1)}°, south ${m.south.toFixed(1)}°`,
-    `isometric energy ${extras.metrics.isometric.mean.toFixed(4)}`,
-    `flagged faces: back-facing ${v.backfacing_faces}, folded ${v.folded_faces}, seam ${v.seam_faces}, singular ${v.singular_point_faces}`,
+    energy(extras.metrics.trusted, v),
+    `flagged faces: back-facing ${v.backfacing_faces}, folded ${v.folded_faces}, seam ${v.seam_faces}, singular ${v.singular_point_faces}, stretched ${v.stretched_faces}`,
     ...untangled,
   ].join('\n');
 }

@@ -170,7 +170,7 @@ class ZoneMeasure(Answer):
     area_cm2: float | None = Field(description="The same in cm² (with params.units; else null).")
     area_flagged: float = Field(
         description="The part of area on triangles the validation flags (seam, singular point, "
-        "folded, back-facing, degenerate), mesh units²."
+        "folded, back-facing, degenerate, stretched), mesh units²."
     )
     area_outside_region: float = Field(
         description="The outline's map area (layout units²) that no region triangle covers "

@@ -89,7 +89,9 @@ class SitesParams(MeshParams, PictureParams):
     )  # fmt: skip
     seed: int = Field(0, ge=0, le=2**63 - 1, description="Same inputs and seed: same sites.")
     allow_flagged: bool = Field(
-        False, description="Whether sites may go on triangles the validation flags."
+        False,
+        description="Whether sites may go on triangles the validation flags (stretched "
+        "triangles are open either way: the map is one to one there).",
     )
     output: output_choice(
         (Output.JSON, Output.PLY, Output.GLB, Output.SVG, Output.PNG),
@@ -230,7 +232,9 @@ def place(given: SitesInput, ctx: Context) -> Placed:
     image = _density_image(params, given.density_map, ctx)
     region = flatten(given, ctx)
     triangles = map_triangles(region, ctx)
-    open_faces = ~flagged_mask(region.flat.validation, len(triangles)) | params.allow_flagged
+    # Stretched faces stay open: their map is one to one, sites on them are where it says.
+    flagged = flagged_mask(region.flat.validation, len(triangles), stretched=False)
+    open_faces = ~flagged | params.allow_flagged
     if image is not None:
         found = [_density_map_part(region, triangles, image, open_faces)]
     else:
@@ -444,7 +448,7 @@ class ZoneSites(Answer):
     area_cm2: float = Field(description="The zone's surface area, cm² (as /v1/measure's).")
     open_area_cm2: float = Field(
         description="The part of it sites may go on: without the triangles the validation "
-        "flags, unless allow_flagged."
+        "flags (other than stretched), unless allow_flagged."
     )
     density_per_cm2: float = Field(description="The density asked for.")
     sites: int = Field(description="Sites placed in the zone.")

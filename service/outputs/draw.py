@@ -212,7 +212,7 @@ def _svg_frame(p: Picture) -> list[str]:
             f'<text x="{left - 8}" y="{row + 4:.1f}" text-anchor="end" {text}>{label}</text>'
         )
     parts.append(
-        f'<text x="{(left + right) / 2:.1f}" y="{bottom + 36}" text-anchor="middle" {text}>'
+        f'<text x="{(left + right) / 2:.1f}" y="{bottom + 33}" text-anchor="middle" {text}>'
         f"{p.x_title}</text>"
         f'<text x="{left}" y="{top - 10}" text-anchor="start" {text}>{p.y_title}</text>'
     )
@@ -244,10 +244,19 @@ def _svg_frame(p: Picture) -> list[str]:
         parts += _svg_colour_bar(p)
     for i, line in enumerate(p.caption):
         parts.append(
-            f'<text class="caption" x="{p.plot[0]}" y="{p.height - 34 + 18 * i}" {text}>'
+            f'<text class="caption" x="{p.plot[0]}" y="{caption_row(p, i)}" {text}>'
             f"{escape(line)}</text>"
         )
     return parts
+
+
+#: The caption's lines: this far apart, the last this far above the canvas's bottom (pixels).
+CAPTION_LEADING, CAPTION_BOTTOM = 15, 12
+
+
+def caption_row(p: Picture, i: int) -> int:
+    """The baseline of the caption's ``i``-th line: the lines end at the canvas's foot."""
+    return p.height - CAPTION_BOTTOM - CAPTION_LEADING * (len(p.caption) - 1 - i)
 
 
 def _rows(values: np.ndarray, fmt: str) -> str:
@@ -282,13 +291,13 @@ def to_png(picture: Picture) -> bytes:
     for row, label in p.y_ticks:
         draw.line((left - 5, row, left, row), fill="#444444")
         draw.text((left - 8, row), label, fill="#222222", font=font, anchor="rm")
-    draw.text(((left + right) / 2, bottom + 28), p.x_title, fill="#222222", font=font, anchor="mt")
+    draw.text(((left + right) / 2, bottom + 24), p.x_title, fill="#222222", font=font, anchor="mt")
     draw.text((left, top - 8), p.y_title, fill="#222222", font=font, anchor="ls")
     _png_legend(draw, p, font)
     if p.colour_bar is not None:
         _png_colour_bar(canvas, draw, p, font)
     for i, line in enumerate(p.caption):
-        draw.text((left, p.height - 34 + 18 * i), line, fill="#222222", font=font, anchor="ls")
+        draw.text((left, caption_row(p, i)), line, fill="#222222", font=font, anchor="ls")
     out = io.BytesIO()
     canvas.save(out, format="PNG", optimize=False, compress_level=6)
     return out.getvalue()

@@ -2,7 +2,8 @@
 
 The map shows the region's triangles in the returned layout, the triangles the validation
 flags in their own colours with a legend, the region's boundary, the seam and the singular
-points where they fall in view, axes in degrees and a caption. Up to ``VECTOR_TRIANGLES``
+points where they fall in view, axes in the layout's own coordinates (the ``x``, ``y`` that
+zones, curves and the flatten answer's vertices use) and a caption. Up to ``VECTOR_TRIANGLES``
 triangles are drawn one by one; beyond that, where triangles are too small to see, the fill
 is decimated (a raster of the triangles, painted by :mod:`transforms.raster`) and flagged
 triangles are marked at their centroids.
@@ -19,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from transforms import FlatRegion, Framing, Layout
+from transforms import STRETCHED_ENERGY, FlatRegion, Framing, Layout
 from transforms.pixels import face_ids
 from transforms.raster import paint_points, paint_segments, paint_triangles
 
@@ -33,14 +34,16 @@ MARKED_TRIANGLES = 20_000
 #: Labels of the raster, in drawing priority (a larger label wins a pixel).
 EMPTY, FILL, OUTLINE = 0, 1, 2
 #: (label, colour, legend text, validation field) of each flag, in priority order.
+#: Stretched is the least serious: its map is one to one, only drawn too long or too large.
 FLAGS = (
-    (3, "#f0e442", "degenerate", "degenerate_faces"),
-    (4, "#e69f00", "back-facing", "backfacing_faces"),
-    (5, "#d55e00", "folded", "folded_faces"),
-    (6, "#cc79a7", "crosses the seam", "seam_faces"),
-    (7, "#000000", "contains a singular point", "singular_point_faces"),
+    (3, "#8c6d31", f"stretched (isometric > {STRETCHED_ENERGY:g})", "stretched_faces"),
+    (4, "#f0e442", "degenerate", "degenerate_faces"),
+    (5, "#e69f00", "back-facing", "backfacing_faces"),
+    (6, "#d55e00", "folded", "folded_faces"),
+    (7, "#cc79a7", "crosses the seam", "seam_faces"),
+    (8, "#000000", "contains a singular point", "singular_point_faces"),
 )
-BOUNDARY = 8
+BOUNDARY = 9
 COLOURS = {
     EMPTY: "#ffffff",
     FILL: "#cfe3f2",
@@ -239,6 +242,7 @@ def describe(
     x, s, plot = flat.x, framing.s_sign * flat.y, framing.plot
     x_low, x_high, s_low, s_high = framing.view
     column, row = framing.column, framing.row
+    y_row = lambda y: row(framing.s_sign * y)  # noqa: E731
     points = np.stack([column(x), row(s)], axis=1)
     corners = points[flat.faces]
     labels = np.full(len(flat.faces), FILL, dtype=np.uint8)
@@ -294,9 +298,9 @@ def describe(
         seam_columns=seam,
         singular_rows=singular,
         x_ticks=_ticks(x_low, x_high, column),
-        y_ticks=_theta_ticks(s_low, s_high, row, flat.layout),
-        x_title="phi (degrees)",
-        y_title="theta (degrees)",
+        y_ticks=_ticks(*sorted((framing.s_sign * s_low, framing.s_sign * s_high)), y_row),
+        x_title=AXIS_TITLES[flat.layout][0],
+        y_title=AXIS_TITLES[flat.layout][1],
         legend=tuple(legend),
         caption=_caption(flat, params, face_count),
         overlays=tuple(overlays),
@@ -326,6 +330,13 @@ def _overlays(drawn: tuple[Drawn, ...], sites, canvas, plot, legend: list):
     return tuple(overlays), canvas(sites)
 
 
+#: The axes' titles by layout: which coordinate of the layout each axis is, in what units.
+AXIS_TITLES = {
+    Layout.THETA_PHI: ("x = phi (layout units, rad)", "y = theta (layout units, rad)"),
+    Layout.MERCATOR: ("x = phi (layout units, rad)", "y = ln tan((pi - theta) / 2) (layout units)"),
+}
+
+
 def _second_of(theta: float, layout: Layout) -> float:
     """The layout's downward coordinate of a polar angle (infinite at Mercator's poles)."""
     if layout is Layout.THETA_PHI:
@@ -334,35 +345,18 @@ def _second_of(theta: float, layout: Layout) -> float:
         return float(np.log(np.tan(0.5 * theta)))
 
 
-def _nice_step(span_deg: float, count: int = 6) -> float:
-    raw = span_deg / count
+def _nice_step(span: float, count: int = 6) -> float:
+    raw = span / count
     power = 10 ** math.floor(math.log10(raw))
     return next(k * power for k in (1, 2, 2.5, 5, 10) if k * power >= raw)
 
 
 def _ticks(low: float, high: float, to_pixel) -> tuple[tuple[float, str], ...]:
-    """Ticks at round degree values of a linear axis in radians."""
-    low_deg, high_deg = math.degrees(low), math.degrees(high)
-    step = _nice_step(high_deg - low_deg)
-    values = np.arange(math.ceil(low_deg / step), math.floor(high_deg / step) + 1) * step
-    return tuple((float(to_pixel(math.radians(v))), f"{v:g}") for v in values)
-
-
-def _theta_ticks(low: float, high: float, to_pixel, layout: Layout):
-    """Ticks at round theta values, placed where the layout puts them."""
-    if layout is Layout.THETA_PHI:
-        return _ticks(low, high, to_pixel)
-    theta_low = 2.0 * math.atan(math.exp(low))  # s = ln tan(theta / 2)
-    theta_high = 2.0 * math.atan(math.exp(high))
-    step = _nice_step(math.degrees(theta_high - theta_low))
-    first = math.ceil(math.degrees(theta_low) / step)
-    last = math.floor(math.degrees(theta_high) / step)
-    ticks = []
-    for k in range(first, last + 1):  # a handful of ticks
-        theta = math.radians(k * step)
-        if 0 < theta < math.pi:
-            ticks.append((float(to_pixel(_second_of(theta, layout))), f"{k * step:g}"))
-    return tuple(ticks)
+    """Ticks at round values of a linear axis from ``low`` to ``high``, labelled in the
+    axis's own units (the layout's): a value read off the picture is one to send back."""
+    step = _nice_step(high - low)
+    values = np.arange(math.ceil(low / step), math.floor(high / step) + 1) * step
+    return tuple((float(to_pixel(v)), f"{round(float(v), 12) + 0.0:g}") for v in values)
 
 
 def _caption(flat: FlatRegion, params: dict, face_count: int) -> tuple[str, ...]:
@@ -380,19 +374,22 @@ def _caption(flat: FlatRegion, params: dict, face_count: int) -> tuple[str, ...]
     )
     return (
         f"meshflat: {method}; layout {flat.layout.value}; {face_count:,} triangles",
-        f"{', '.join(status)}; {margins}; {energy_text(flat)}",
+        f"{', '.join(status)}; {margins}",
+        energy_text(flat),
     )
 
 
 def energy_text(flat: FlatRegion) -> str:
-    """The isometric energy as a caption says it: over the trusted faces, with the flagged
-    count beside it when any face is flagged."""
+    """The isometric energy as a caption says it: its median and 95th percentile over the
+    trusted faces (a mean is dominated by a few slivers), and how many faces are flagged,
+    the stretched among them."""
     flagged = flat.flagged_faces
-    if not flagged:
-        return f"isometric energy {flat.distortion.isometric.mean:.4f}"
+    stretched = len(flat.validation.stretched_faces)
+    of_them = f", {stretched:,} of them stretched" if stretched else ""
     if flat.trusted is None:
-        return f"isometric energy: no trusted face ({flagged:,} flagged)"
+        return f"isometric energy: no trusted face ({flagged:,} flagged{of_them})"
+    energy = flat.trusted.isometric
     return (
-        f"isometric energy {flat.trusted.isometric.mean:.4f} on the trusted faces "
-        f"({flagged:,} flagged)"
+        f"isometric energy p50 {energy.p50:.3f}, p95 {energy.p95:.3f} on the trusted faces "
+        f"({flagged:,} flagged{of_them})"
     )

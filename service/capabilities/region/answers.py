@@ -9,7 +9,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from transforms import Layout, Method
+from transforms import STRETCHED_ENERGY, Layout, Method
 
 from ...encoding import Answer
 from ...meshio import FORMATS
@@ -97,6 +97,11 @@ class Validation(Answer):
     folded_faces: list[int] = Field(description="Triangles flipped in the (phi, theta) map.")
     backfacing_faces: list[int] = Field(description="Triangles facing away from the centre.")
     degenerate_faces: list[int] = Field(description="Triangles with no area in 3D or in 2D.")
+    stretched_faces: list[int] = Field(
+        description=f"Triangles the map stretches beyond the bound: isometric energy above "
+        f"{STRETCHED_ENERGY:g} (not flipped, but drawn far too long or too large; they would "
+        "dominate a mean). Other lists may hold them too."
+    )
     margin_deg: Margins
     boundary_loops: int = Field(description="Boundary loops of the region (a disk has one).")
     winding: Literal["outward", "inward"] = Field(
@@ -115,6 +120,7 @@ class Validation(Answer):
             folded_faces=faces[v.folded_faces],
             backfacing_faces=faces[v.backfacing_faces],
             degenerate_faces=faces[v.degenerate_faces],
+            stretched_faces=faces[v.stretched_faces],
             margin_deg=Margins.build(
                 seam=v.margin_deg_seam, north=v.margin_deg_north, south=v.margin_deg_south
             ),
@@ -124,15 +130,16 @@ class Validation(Answer):
 
 
 class Summary(Answer):
-    mean: float
-    p95: float
-    max: float
+    mean: float = Field(description="Area-weighted mean.")
+    p50: float = Field(description="Area-weighted median: half the area is at or below it.")
+    p95: float = Field(description="Area-weighted 95th percentile.")
+    max: float = Field(description="The largest value.")
 
 
 def _summaries(d) -> dict:
     """The three summaries of a :class:`transforms.Distortion`."""
     return {
-        name: Summary.build(mean=s.mean, p95=s.p95, max=s.max)
+        name: Summary.build(mean=s.mean, p50=s.p50, p95=s.p95, max=s.max)
         for name, s in (("conformal", d.conformal), ("area", d.area), ("isometric", d.isometric))
     }
 
@@ -142,7 +149,9 @@ class TrustedMetrics(Answer):
     area: Summary = Field(description="|log(s1 s2)| over the trusted faces.")
     isometric: Summary = Field(description="The isometric energy over the trusted faces.")
     faces: int = Field(description="The trusted faces: neither flagged nor degenerate.")
-    flagged_faces: int = Field(description="The faces left out: flagged by the validation.")
+    flagged_faces: int = Field(
+        description="The faces left out: flagged by the validation (stretched included), each once."
+    )
 
 
 class Metrics(Answer):
@@ -153,9 +162,10 @@ class Metrics(Answer):
     )
     trusted: TrustedMetrics | None = Field(
         description="The same measures over the faces that are neither flagged (seam, "
-        "singular point, folded, back-facing) nor degenerate, with the same per-face values: "
-        "a few folded slivers, whose energy can be thousands, do not hide how the rest of "
-        "the map is. Null when no face is trusted."
+        "singular point, folded, back-facing, stretched) nor degenerate, with the same "
+        "per-face values: a few slivers, whose energy can be thousands, do not hide how the "
+        "rest of the map is; its p50 and p95 are the figures to quote. Null when no face is "
+        "trusted."
     )
 
     @classmethod

@@ -14,6 +14,7 @@ from transforms import Layout, Method
 from ...encoding import Answer
 from ...meshio import FORMATS
 from ..fields import choice
+from ..warnings import WarnedAnswer
 from .params import Region
 from .resolve import MeshRegion
 
@@ -194,7 +195,7 @@ class UntangleReport(Answer):
         )
 
 
-class ValidateResponse(Answer):
+class ValidateResponse(WarnedAnswer):
     params: ResolvedParams
     validation: Validation
     metrics: Metrics

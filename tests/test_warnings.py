@@ -205,6 +205,7 @@ async def test_sites_denser_than_a_scalp_holds_are_warned_of_naming_what_asked(c
     assert (await flatten(client, NAME, params, endpoint="/v1/sites")).json()["warnings"] == []
 
 
+@pytest.mark.slow
 async def test_more_sites_than_a_whole_scalp_holds_are_warned_of(client):
     params = {**SCALP, "units": "mm", "count": PLAUSIBLE_SITES + 1, "density_per_cm2": 1}
     answer = (await flatten(client, NAME, params, endpoint="/v1/sites")).json()

@@ -227,11 +227,13 @@ def beside_map(points: np.ndarray, x: np.ndarray, y: np.ndarray) -> bool:
     return bool(low[0] > x.max() or high[0] < x.min() or low[1] > y.max() or high[1] < y.min())
 
 
-def warn_outside(ctx: Context, field: str, name: str, points: np.ndarray, layout, x, y) -> None:
+def warn_outside(ctx: Context, region, field: str, name: str, points: np.ndarray) -> None:
     """Warn (``drawn_outside_map``) that the zone or curve ``field`` (``zones.2``, named
-    ``name``), of ``points`` ((n, 2) float), lies wholly outside the map of ``x`` and ``y``
-    ((k,) float each, ``layout``'s coordinates): the map's extent, the points', and whether
-    they look like degrees (beyond the map, within 360, while the map is within 2 pi)."""
+    ``name``), of ``points`` ((n, 2) float), lies wholly outside the map of ``region`` (a
+    :class:`~.region.resolve.MeshRegion`): the map's extent in its layout's coordinates, the
+    points', and whether they look like degrees (beyond the map, within 360, while the map
+    is within 2 pi)."""
+    (x, y), layout = region.layout, region.flat.layout
     x0, x1, y0, y1 = float(x.min()), float(x.max()), float(y.min()), float(y.max())
     low, high = points.min(axis=0), points.max(axis=0)
     kind = field.partition(".")[0].removesuffix("s")  # zone, curve

@@ -161,16 +161,13 @@ def _warn(ctx: Context, params, region: MeshRegion, zones, curves, scale) -> Non
     covers) and curves (their points and lifts) that miss the map wholly: no triangle inside
     or cut, no piece on the region."""
     outlines, covers = zones
-    warn_of_size(ctx, params.units, scale, region.mesh.vertices[region.flat.vertex_ids])
-    x, y = region.layout
+    warn_of_size(ctx, params.units, scale, region)
     for k, (outline, cover) in enumerate(zip(outlines, covers, strict=True)):
         if not len(cover.inside) and not len(cover.partial):
-            warn_outside(
-                ctx, f"zones.{k}", outline.name, outline.rings[0], region.flat.layout, x, y
-            )
+            warn_outside(ctx, region, f"zones.{k}", outline.name, outline.rings[0])
     for k, (points, (name, line)) in enumerate(zip(*curves, strict=True)):
         if not (line.faces >= 0).any():
-            warn_outside(ctx, f"curves.{k}", name, points, region.flat.layout, x, y)
+            warn_outside(ctx, region, f"curves.{k}", name, points)
 
 
 class LiftedLine(Answer):

@@ -210,13 +210,10 @@ def register_scans(given: RegisterInput, ctx: Context) -> Registered:
 def _warn(ctx: Context, params: RegisterParams, region, zones: tuple[Outline, ...], scale) -> None:
     """Warn of units that make the baseline's region implausible, and of zones drawn wholly
     beside its map."""
-    warn_of_size(ctx, params.units, scale, region.mesh.vertices[region.flat.vertex_ids])
-    x, y = region.layout
+    warn_of_size(ctx, params.units, scale, region)
     for k, outline in enumerate(zones):
-        if beside_map(outline.rings[0], x, y):
-            warn_outside(
-                ctx, f"zones.{k}", outline.name, outline.rings[0], region.flat.layout, x, y
-            )
+        if beside_map(outline.rings[0], *region.layout):
+            warn_outside(ctx, region, f"zones.{k}", outline.name, outline.rings[0])
 
 
 #: Follow-ups whose samples spread this many times as far as the baseline's, or as few, are

@@ -241,7 +241,7 @@ def place(given: SitesInput, ctx: Context) -> Placed:
     expected = [float(np.dot(part.core.area, part.core.density)) * unit_area for part in found]
     total = params.count if params.count is not None else sum(expected)
     # A unit that inflates the count is named in the refusal, as in the warning.
-    size = warn_of_size(ctx, params.units, scale, region.mesh.vertices[region.flat.vertex_ids])
+    size = warn_of_size(ctx, params.units, scale, region)
     check_count(round(total), ctx.settings.max_sites, "sites", "MESHFLAT_MAX_SITES", size or "")
     _warn_outside(ctx, region, outlines, found)
     quotas = _quotas(expected, params.count)
@@ -273,11 +273,9 @@ def place(given: SitesInput, ctx: Context) -> Placed:
 
 def _warn_outside(ctx: Context, region: MeshRegion, outlines: list[Outline], found) -> None:
     """Warn of each zone that covers none of the map (no surface area)."""
-    x, y = region.layout
     for k, (outline, part) in enumerate(zip(outlines, found, strict=False)):
         if part.area == 0:
-            rings = outline.rings[0]
-            warn_outside(ctx, f"zones.{k}", outline.name, rings, region.flat.layout, x, y)
+            warn_outside(ctx, region, f"zones.{k}", outline.name, outline.rings[0])
 
 
 def _apart(outlines: list[Outline]) -> list[Outline]:

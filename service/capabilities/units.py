@@ -143,16 +143,15 @@ def implausible_size(units, scale: float, points: np.ndarray) -> str | None:
     )
 
 
-def warn_of_size(
-    ctx: Context, units, scale: float | None, points: np.ndarray, field: str = "units"
-) -> str | None:
-    """Warn (``units_implausible``, naming ``field``) when ``units`` make the region of
-    ``points`` implausibly small or large (:func:`implausible_size`); the words, or None."""
+def warn_of_size(ctx: Context, units, scale: float | None, region) -> str | None:
+    """Warn (``units_implausible``, naming ``units``) when ``units`` make ``region`` (a
+    :class:`~.region.resolve.MeshRegion`) implausibly small or large
+    (:func:`implausible_size` of its vertices); the words, or None (also without units)."""
     if scale is None:
         return None
-    words = implausible_size(units, scale, points)
+    words = implausible_size(units, scale, region.mesh.vertices[region.flat.vertex_ids])
     if words is not None:
-        ctx.warn(WarningCode.UNITS_IMPLAUSIBLE, field, words)
+        ctx.warn(WarningCode.UNITS_IMPLAUSIBLE, "units", words)
     return words
 
 

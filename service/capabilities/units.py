@@ -110,8 +110,8 @@ def size_across(points: np.ndarray) -> float:
     """
     centred = points - points.mean(axis=0)
     _, axes = np.linalg.eigh(centred.T @ centred)
-    along = centred @ axes
-    return float(np.linalg.norm(along.max(axis=0) - along.min(axis=0)))
+    along = axes.T @ centred.T  # (3, n): a row per axis, reduced along memory
+    return float(np.linalg.norm(along.max(axis=1) - along.min(axis=1)))
 
 
 def _cm(value: float) -> str:

@@ -236,13 +236,24 @@ async def test_every_json_answer_carries_warnings_first(client):
         assert next(iter(answer)) == "warnings", response.url
         for warning in answer["warnings"]:
             assert set(warning) == {"code", "field", "message"}
-            assert warning["code"] in set(WarningCode) and warning["field"].startswith("params.")
+            assert warning["code"] in set(WarningCode) and warning["field"]
 
 
-async def test_the_readmes_first_request_answers_no_warnings(client):
+async def test_the_readmes_requests_answer_no_warnings(client):
+    """The fit of the README's first request, then its plan (step 4) measured and given
+    grafts on that map: nothing in them looks wrong."""
     response = await flatten(client, NAME, FIRST_REQUEST, endpoint="/v1/fit")
     assert response.status_code == 200, response.text
     assert response.json()["warnings"] == []
+    frontal = {
+        "name": "frontal",
+        "outer": {"x": [-1.8, -1.35, -1.35, -1.8], "y": [1.1, 1.1, 1.4, 1.4]},
+    }
+    plan = {**response.json()["params"], "units": "mm", "zones": [frontal]}
+    for endpoint, extra in (("/v1/measure", {}), ("/v1/sites", {"density_per_cm2": 40})):
+        answer = (await flatten(client, NAME, {**plan, **extra}, endpoint=endpoint)).json()
+        assert answer["warnings"] == [] and answer["zones"][0]["area_cm2"] > 50, endpoint
+    assert "y: [1.1, 1.1, 1.4, 1.4]}}]}' params.json > plan.json" in text(DOCS.parent / "README.md")
     assert '"rotation": {"pole": "auto", "up": [0, 1, 0]}}\' > fit.json' in text(
         DOCS.parent / "README.md"
     )

@@ -57,16 +57,21 @@ class OverLimit(Exception):
     field : str, the parameter that holds them
     count, limit : int
     setting : str, the environment variable that sets the limit
+    hint : str, what may be wrong beside the count (a unit that inflates it), or empty
     """
 
-    def __init__(self, field: str, count: int, limit: int, setting: str) -> None:
+    def __init__(self, field: str, count: int, limit: int, setting: str, hint: str = "") -> None:
         self.message = f"{count:,} items; the limit is {limit:,} ({setting})"
+        if hint:
+            self.message += f"; {hint}"
         super().__init__(f"{field}: {self.message}")
         self.field, self.count, self.limit, self.setting = field, count, limit, setting
 
 
-def check_count(count: int, limit: int, field: str, setting: str = "MESHFLAT_MAX_POINTS") -> None:
-    """Refuse more than ``limit`` items in ``field``.
+def check_count(
+    count: int, limit: int, field: str, setting: str = "MESHFLAT_MAX_POINTS", hint: str = ""
+) -> None:
+    """Refuse more than ``limit`` items in ``field`` (the refusal adds ``hint``, if any).
 
     Raises
     ------
@@ -74,7 +79,7 @@ def check_count(count: int, limit: int, field: str, setting: str = "MESHFLAT_MAX
         ``count`` is above ``limit``.
     """
     if count > limit:
-        raise OverLimit(field, count, limit, setting)
+        raise OverLimit(field, count, limit, setting, hint)
 
 
 class UnreadableMesh(Exception):

@@ -9,6 +9,8 @@ from pathlib import Path
 
 from pydantic import Field
 
+from .capabilities.fields import choice
+from .capabilities.units import LengthUnit
 from .encoding import Answer
 from .meshio import format_of, read_mesh
 from .settings import Settings
@@ -26,12 +28,15 @@ class Sample:
     description : str
     credit : str, the attribution its licence asks for
     licence : str
+    units : LengthUnit, the file's length unit: the source's, or estimated from the size of
+        what it shows (then ``description`` says so)
     """
 
     name: str
     description: str
     credit: str
     licence: str
+    units: LengthUnit
 
     @property
     def path(self) -> Path:
@@ -43,20 +48,30 @@ _LEE_PERRY_SMITH = (
     "work at www.triplegangers.com; converted from the scan's three.js example copy."
 )
 
+#: The scan's file gives no unit: its unit is estimated from the head's width.
+_LEE_PERRY_SMITH_UNITS = (
+    "Units estimated (the file gives none): the head is 3.6 units wide where a head is about "
+    "15 cm, so a unit is about 4 cm; cm is the nearest unit, with which lengths read about 4 "
+    "times and areas about 18 times too small (a known distance gives true sizes)"
+)
+
 SAMPLES: dict[str, Sample] = {
     sample.name: sample
     for sample in (
         Sample(
             "lee-perry-smith.glb",
-            "3D scan of a bald human head with shoulders; Y up, face towards +Z; watertight",
+            "3D scan of a bald human head with shoulders; Y up, face towards +Z; watertight. "
+            + _LEE_PERRY_SMITH_UNITS,
             _LEE_PERRY_SMITH,
             "CC BY 3.0",
+            LengthUnit.CM,
         ),
         Sample(
             "lee-perry-smith.obj",
-            "the same head scan as OBJ",
+            "the same head scan as OBJ. " + _LEE_PERRY_SMITH_UNITS,
             _LEE_PERRY_SMITH,
             "CC BY 3.0",
+            LengthUnit.CM,
         ),
         Sample(
             "fsaverage-head.ply",
@@ -65,14 +80,17 @@ SAMPLES: dict[str, Sample] = {
             "FreeSurfer's fsaverage subject, read from the mne Python package "
             "(mne/data/fsaverage/fsaverage-head.fif).",
             "BSD-3-Clause (mne); FreeSurfer licence (surface)",
+            LengthUnit.MM,
         ),
         Sample(
             "nefertiti-lowres.obj",
             "remeshed 3D scan of the Nefertiti bust; the crown overhangs, so it is not "
-            "star-shaped from any point",
+            "star-shaped from any point. Units estimated (the file gives none): the bust is "
+            "495 units tall and the original 48 cm, so about 1 mm per unit",
             "Scan released by Nora Al-Badri and Jan Nikolai Nelles (2016); remesh from the "
             "odedstein/meshes collection.",
             "Public domain",
+            LengthUnit.MM,
         ),
     )
 }
@@ -87,6 +105,10 @@ class SampleInfo(Answer):
     description: str
     credit: str
     licence: str
+    units: choice(LengthUnit) = Field(
+        description="The file's length unit, to send as params.units: the source's, or "
+        "estimated from the size of what it shows (then the description says so)."
+    )
     url: str = Field(description="Where to download it.")
 
 
@@ -105,6 +127,7 @@ def _sample_info(name: str) -> SampleInfo:
         description=sample.description,
         credit=sample.credit,
         licence=sample.licence,
+        units=sample.units,
         url=f"/v1/samples/{name}",
     )
 

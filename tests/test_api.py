@@ -290,7 +290,7 @@ async def test_nefertiti_comes_back_with_its_backfacing_faces(client):
     response = await flatten(client, "nefertiti-lowres.obj", endpoint="/v1/validate")
     assert response.status_code == 200
     body = response.json()
-    assert set(body) == {"params", "validation", "metrics"}
+    assert set(body) == {"warnings", "params", "validation", "metrics"}
     assert not body["validation"]["star_shaped"]
     vertices, faces = load_sample("nefertiti-lowres.obj")
     center = (vertices.min(axis=0) + vertices.max(axis=0)) / 2

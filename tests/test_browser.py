@@ -245,11 +245,26 @@ def measured(page, server: str, units: str) -> tuple[dict, dict]:
     return ring, post(server, "/v1/measure", params)["zones"][0]
 
 
+def units_of_samples(page, names: list[str]) -> list[str]:
+    """The units the page sets as each sample is picked in turn (/v1/samples' units)."""
+    found = []
+    for name in names:
+        page.select_option("#sample", name)
+        found.append(page.locator("#units").input_value())
+    return found
+
+
+def zone_warnings(page) -> list[str]:
+    """The warnings the page lists for its last answer."""
+    return page.locator("#warnings li").all_inner_texts()
+
+
 def test_a_zone_drawn_on_the_map_is_measured_and_outlined_on_the_3d_view(server):
     """Five points clicked on the map (the last a double click, which closes the outline):
     the page posts the ring at those points of the layout to /v1/measure, shows its area in
     cm² as the API answers it, draws the outline lifted onto the surface in the 3D view, and
-    measures again when the units change; Clear takes it all away."""
+    measures again when the units change, listing the answer's warnings (a scalp in cm is
+    implausibly large); Clear takes it all away. The units are the sample's."""
     flat = post(server, "/v1/flatten", PARAMS)
     ring = pentagon(flat, 0.3)
 
@@ -258,7 +273,7 @@ def test_a_zone_drawn_on_the_map_is_measured_and_outlined_on_the_3d_view(server)
         page = demo_page(browser, server, problems)
         assert page.locator("#draw").is_disabled()  # no map to draw on yet
         flatten_sample(page)
-        assert page.locator("#units").input_value() == "mm"
+        assert units_of_samples(page, ["lee-perry-smith.obj", SAMPLE]) == ["cm", "mm"]
         page.wait_for_timeout(500)  # a few frames of the 3D view
         assert page.evaluate(CHANGED_PIXELS, True) == 0
 
@@ -277,6 +292,7 @@ def test_a_zone_drawn_on_the_map_is_measured_and_outlined_on_the_3d_view(server)
         assert zone["area_outside_region"] == 0.0  # drawn inside the region
         text = page.locator("#zone-area").inner_text()
         assert text == f"Zone: {zone['area_cm2']:.2f} cm²", text
+        assert zone_warnings(page) == []  # the sample's units: nothing to warn of
         # The 3D view: one line segment per piece of the lifted outline, none off the
         # region, and the canvas shows them.
         faces = zone["outline"][0]["faces"]
@@ -290,6 +306,9 @@ def test_a_zone_drawn_on_the_map_is_measured_and_outlined_on_the_3d_view(server)
         _, in_cm = measured(page, server, "cm")
         assert in_cm["area_cm2"] == pytest.approx(100 * zone["area_cm2"])
         assert page.locator("#zone-area").inner_text() == f"Zone: {in_cm['area_cm2']:.2f} cm²"
+        (warning,) = zone_warnings(page)  # a scalp some 3 m across: the answer's warning
+        assert warning.startswith("params.units: with units 'cm' the region is")
+        assert "with units 'mm' it would be" in warning
 
         # A zone that runs off the region (a new drawing replaces the last): its outline
         # in the 3D view breaks there, no segment where a piece has no face.

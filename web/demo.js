@@ -3,7 +3,8 @@
 // (GLB from /v1/flatten, loaded by three.js's GLTFLoader). A zone drawn on the map is
 // measured by /v1/measure: its area, and its outline lifted onto the surface in the 3D view.
 // Grafts placed by /v1/sites (in the zone, or over the region) show on the map and the head,
-// with a table of each zone's area, density and grafts.
+// with a table of each zone's area, density and grafts. The units are the sample's (from
+// /v1/samples), and what an answer warns of (units, a zone off the map) is listed.
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
@@ -16,6 +17,9 @@ const PRESETS = {
   'lee-perry-smith.obj': { axis: [0, 1, 0], angle: 60, apex: [0, 1.2, -0.3], center: [0, 1.2, -0.3], pole: [0, -1, 0], up: [0, 0, 1] },
   'nefertiti-lowres.obj': { axis: [0, 0, 1], angle: 60, apex: null, center: 'bbox_center', pole: [0, 0, -1], up: [0, 1, 0] },
 };
+
+// Each bundled scan's length unit, as /v1/samples gives it (estimated where its file has none).
+const SAMPLE_UNITS = {};
 
 const $ = (id) => document.getElementById(id);
 const vector = (id) => $(id).value.split(',').map(Number);
@@ -46,6 +50,7 @@ async function loadSamples() {
     option.value = sample.name;
     option.textContent = `${sample.name} (${sample.faces.toLocaleString('en')} faces)`;
     $('sample').append(option);
+    SAMPLE_UNITS[sample.name] = sample.units;
   }
   $('credits').textContent = samples.map((s) => `${s.name}: ${s.credit}`).join(' · ');
   applyPreset();
@@ -60,6 +65,15 @@ function applyPreset() {
   $('center').value = Array.isArray(preset.center) ? preset.center.join(', ') : preset.center;
   $('pole').value = preset.pole.join(', ');
   $('up').value = preset.up.join(', ');
+  if (SAMPLE_UNITS[$('sample').value]) $('units').value = SAMPLE_UNITS[$('sample').value];
+}
+
+// What the last answer warns of: legal but probably wrong (units that make the region
+// implausible, a zone off the map, more grafts than a scalp holds).
+function showWarnings(answer) {
+  const items = (answer?.warnings ?? []).map((w) => Object.assign(document.createElement('li'), { textContent: `${w.field}: ${w.message}` }));
+  $('warnings').replaceChildren(...items);
+  $('warnings').dataset.count = String(items.length);
 }
 
 function params() {
@@ -263,6 +277,7 @@ function clearSites() {
   $('sites-status').className = '';
   $('sites-status').dataset.state = 'none';
   delete $('sites-status').dataset.count;
+  showWarnings(null);
 }
 
 function showSites(answer) {
@@ -291,7 +306,9 @@ function showSites(answer) {
   const head = document.createElement('tr');
   head.replaceChildren(...['zone', 'area (cm²)', 'density (per cm²)', 'grafts'].map((text) => Object.assign(document.createElement('th'), { textContent: text })));
   $('sites-table').replaceChildren(head, ...rows);
-  $('sites-status').textContent = `${answer.count.toLocaleString('en')} grafts, at least ${answer.min_distance_mm.toFixed(2)} mm apart`;
+  // Fewer than two grafts have no distance apart (null).
+  const apart = answer.min_distance_mm === null ? '' : `, at least ${answer.min_distance_mm.toFixed(2)} mm apart`;
+  $('sites-status').textContent = `${answer.count.toLocaleString('en')} grafts${apart}`;
   $('sites-status').dataset.count = String(answer.count);
   $('sites-status').dataset.state = 'placed';
 }
@@ -312,6 +329,7 @@ async function placeSites() {
     const response = await post('/v1/sites', map.mesh, p, 'application/json');
     const answer = await response.json();
     if (ticket !== sitesTicket) return;
+    showWarnings(answer);
     showSites(answer);
   } catch (error) {
     if (ticket !== sitesTicket) return;
@@ -350,8 +368,10 @@ async function measure() {
   zoneStatus('measuring…', 'measuring');
   try {
     const response = await post('/v1/measure', map.mesh, p, 'application/json');
-    const [measured] = (await response.json()).zones;
+    const answer = await response.json();
+    const [measured] = answer.zones;
     if (ticket !== zone.ticket) return; // cleared, or measured again, meanwhile
+    showWarnings(answer);
     removeOutline();
     showOutline(measured.outline[0]);
     zoneStatus(`Zone: ${measured.area_cm2.toFixed(2)} cm²`, 'measured');

@@ -1,5 +1,5 @@
-"""What a use-case is given beside its input: the settings, the memory budget it charges and
-the threads it may use; and the memory model it charges by.
+"""What a use-case is given beside its input: the settings, the memory budget it charges, the
+threads it may use and the warnings it adds to its answer; and the memory model it charges by.
 
 A use-case charges what a step will allocate before it allocates it (a picture's raster, a
 map's triangles, sites), so that no mix of valid requests takes a worker past its budget.
@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from ..settings import Settings
+from .warnings import Warned, WarningCode
 
 MiB = 2**20
 #: What a reader may allocate per byte of its file beside its mesh (the readers keep within
@@ -84,10 +85,19 @@ class Context:
     ----------
     settings : Settings, the limits the use-case enforces (MESHFLAT_MAX_POINTS, ...)
     budget : Budget, what the use-case charges its allocations to
+    warnings : list of Warned, what the use-case found legal but probably wrong, in the
+        order found (:meth:`warn`); the JSON answer carries them
     """
 
     settings: Settings = field(default_factory=Settings)
     budget: Budget = field(default_factory=Unlimited)
+    warnings: list[Warned] = field(default_factory=list)
+
+    def warn(self, code: WarningCode, field: str, message: str) -> None:
+        """Add a warning to the answer: ``code`` (one of :class:`WarningCode`), the
+        parameter it concerns (dotted as an error's field: ``units``, ``zones.2``) and what
+        looks wrong, in plain words with the numbers."""
+        self.warnings.append(Warned(code, field, message))
 
     @property
     def threads(self) -> int:

@@ -3,7 +3,9 @@
 shapely: simple, at least three distinct points, holes inside the outer ring and apart), the
 zones' pairwise overlaps as polygons of their own.
 
-A bad ring is refused naming the zone (its position and name) and the ring.
+A bad ring is refused naming the zone (its position and name) and the ring; one wholly
+outside the region's map is answered with a warning that gives the map's extent (and says
+when the numbers look like degrees: the layout is in radians).
 """
 
 from __future__ import annotations
@@ -16,8 +18,12 @@ import numpy as np
 import shapely
 from pydantic import Field, model_validator
 
+from transforms import Layout
+
 from ..errors import InvalidInput
+from .context import Context
 from .fields import MapCoordinates, Name, Strict
+from .warnings import WarningCode
 
 
 class _MapPoints(Strict):
@@ -212,3 +218,35 @@ def overlaps(outlines: list[Outline]) -> list[tuple[int, int, list[tuple[np.ndar
 def _open(ring) -> np.ndarray:
     """(n, 2) float: a shapely ring's points without the repeated first one."""
     return np.asarray(ring.coords)[:-1, :2]
+
+
+def beside_map(points: np.ndarray, x: np.ndarray, y: np.ndarray) -> bool:
+    """Whether ``points`` ((n, 2) float) lie wholly beside the box of the map's ``x`` and
+    ``y`` ((k,) float each): then they miss the map, whatever its shape."""
+    low, high = points.min(axis=0), points.max(axis=0)
+    return bool(low[0] > x.max() or high[0] < x.min() or low[1] > y.max() or high[1] < y.min())
+
+
+def warn_outside(ctx: Context, region, field: str, name: str, points: np.ndarray) -> None:
+    """Warn (``drawn_outside_map``) that the zone or curve ``field`` (``zones.2``, named
+    ``name``), of ``points`` ((n, 2) float), lies wholly outside the map of ``region`` (a
+    :class:`~.region.resolve.MeshRegion`): the map's extent in its layout's coordinates, the
+    points', and whether they look like degrees (beyond the map, within 360, while the map
+    is within 2 pi)."""
+    (x, y), layout = region.layout, region.flat.layout
+    x0, x1, y0, y1 = float(x.min()), float(x.max()), float(y.min()), float(y.max())
+    low, high = points.min(axis=0), points.max(axis=0)
+    kind = field.partition(".")[0].removesuffix("s")  # zone, curve
+    words = (
+        f"the {kind} {name!r} lies wholly outside the region's map, which spans x {x0:.4g} to "
+        f"{x1:.4g} and y {y0:.4g} to {y1:.4g} (the {Layout(layout).value} layout's "
+        f"coordinates); its points span x {low[0]:.4g} to {high[0]:.4g} and y "
+        f"{low[1]:.4g} to {high[1]:.4g}"
+    )
+    reach, drawn = max(abs(x0), abs(x1), abs(y0), abs(y1)), float(np.abs(points).max())
+    if reach <= 2 * np.pi and reach < drawn <= 360:
+        words += (
+            ": its numbers look like degrees, but the map's are radians (phi, and theta or "
+            "its Mercator function): multiply degrees by pi/180"
+        )
+    ctx.warn(WarningCode.DRAWN_OUTSIDE_MAP, field, words)

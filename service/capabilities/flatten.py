@@ -15,6 +15,7 @@ from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
 from .region.pictures import RENDERERS
 from .region.resolve import MeshRegion, flatten
 from .rows import MeshCapability
+from .warnings import WarnedAnswer
 
 
 class FlattenParams(MeshParams, PictureParams):
@@ -49,7 +50,7 @@ class FlatFaces(Answer):
     vertices: list[list[int]] = Field(description="Each triangle's three vertex ids.")
 
 
-class FlattenResponse(Answer):
+class FlattenResponse(WarnedAnswer):
     params: ResolvedParams
     vertices: FlatVertices
     faces: FlatFaces

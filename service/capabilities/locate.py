@@ -30,6 +30,7 @@ from .region.resolve import (
     select_region,
 )
 from .rows import MeshCapability
+from .warnings import WarnedAnswer
 
 
 class LocateVia(StrEnum):
@@ -167,7 +168,7 @@ class Hit(Answer):
     point: list[float] = Field(description="The hit point, world coordinates.")
 
 
-class LocateResponse(Answer):
+class LocateResponse(WarnedAnswer):
     params: ResolvedParams
     hits: list[Hit | None] = Field(description="Per query; null where the ray misses.")
 

@@ -18,7 +18,16 @@ from ..errors import check_count
 from ..outputs import Output
 from ..outputs.picture import Drawn
 from .context import Context
-from .drawn import Curve, Outline, Zone, check_names, checked_curve, checked_zone, overlaps
+from .drawn import (
+    Curve,
+    Outline,
+    Zone,
+    check_names,
+    checked_curve,
+    checked_zone,
+    overlaps,
+    warn_outside,
+)
 from .fields import PictureParams, choice, output_choice
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
@@ -34,7 +43,9 @@ from .units import (
     in_mm,
     length_text,
     mm_per_unit,
+    warn_of_size,
 )
+from .warnings import WarnedAnswer
 
 
 class MeasureParams(MeshParams, PictureParams):
@@ -129,18 +140,34 @@ def measure(given: MeshInput[MeasureParams], ctx: Context) -> Measured:
         (i, j, sum(cover_zone(triangles, rings).total(triangles.surface_area) for rings in parts))
         for i, j, parts in overlaps(outlines)
     )
+    lifted = tuple(
+        (curve.name, lift_curve(triangles, points))
+        for curve, points in zip(params.curves, curves, strict=True)
+    )
+    _warn(ctx, params, region, (outlines, covers), (curves, lifted), scale)
     return Measured(
         region,
         triangles,
         flagged_mask(region.flat.validation, len(triangles)),
         tuple(zip(outlines, covers, strict=True)),
-        tuple(
-            (curve.name, lift_curve(triangles, points))
-            for curve, points in zip(params.curves, curves, strict=True)
-        ),
+        lifted,
         shared,
         scale,
     )
+
+
+def _warn(ctx: Context, params, region: MeshRegion, zones, curves, scale) -> None:
+    """Warn of units that make the region implausible, and of zones (their outlines and
+    covers) and curves (their points and lifts) that miss the map wholly: no triangle inside
+    or cut, no piece on the region."""
+    outlines, covers = zones
+    warn_of_size(ctx, params.units, scale, region)
+    for k, (outline, cover) in enumerate(zip(outlines, covers, strict=True)):
+        if not len(cover.inside) and not len(cover.partial):
+            warn_outside(ctx, region, f"zones.{k}", outline.name, outline.rings[0])
+    for k, (points, (name, line)) in enumerate(zip(*curves, strict=True)):
+        if not (line.faces >= 0).any():
+            warn_outside(ctx, region, f"curves.{k}", name, points)
 
 
 class LiftedLine(Answer):
@@ -252,7 +279,7 @@ class Overlap(Answer):
     area_cm2: float | None = Field(description="The same in cm² (with params.units).")
 
 
-class MeasureResponse(Answer):
+class MeasureResponse(WarnedAnswer):
     params: ResolvedParams
     units: Units | None = Field(description="The scale used; null without params.units.")
     zones: list[ZoneMeasure]

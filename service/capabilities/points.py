@@ -12,13 +12,13 @@ from pydantic import ConfigDict, Field, model_validator
 
 from transforms import angles_to_world, world_to_angles
 
-from ..encoding import Answer
 from ..errors import check_count
 from .context import Context
 from .fields import Number, Vector3
 from .region.params import ChartParams
 from .region.resolve import chart_of, frame_of
 from .rows import JsonCapability
+from .warnings import WarnedAnswer
 
 
 class PointsRequest(ChartParams):
@@ -106,7 +106,7 @@ def angles_to_points(request: InverseRequest, ctx: Context) -> np.ndarray:
     return angles_to_world(request.theta, request.phi, r, frame, chart)
 
 
-class PointsResponse(Answer):
+class PointsResponse(WarnedAnswer):
     theta: list[float] = Field(description="Polar angles, radians, in [0, pi].")
     phi: list[float] = Field(description="Azimuths, radians, in (-pi, pi].")
     r: list[float] = Field(description="Distances from the centre.")
@@ -116,7 +116,7 @@ class PointsResponse(Answer):
         return cls.build(theta=angles.theta, phi=angles.phi, r=angles.r)
 
 
-class InverseResponse(Answer):
+class InverseResponse(WarnedAnswer):
     points: list[list[float]] = Field(description="World points [[x, y, z], ...].")
 
     @classmethod

@@ -22,13 +22,12 @@ from transforms.registration import (
     register,
 )
 
-from ..encoding import Answer
 from ..errors import InvalidInput
 from ..meshio import Mesh
 from ..outputs import Output
 from ..outputs.picture import Drawn
 from .context import Context
-from .drawn import Outline, Zone, check_names, checked_zone
+from .drawn import Outline, Zone, beside_map, check_names, checked_zone, warn_outside
 from .fields import PictureParams, Strict, choice, output_choice
 from .inputs import MeshPart, PngFile
 from .region.answers import ResolvedParams
@@ -36,7 +35,8 @@ from .region.params import MESH_PARAMS_EXAMPLE, Landmarks, MeshParams
 from .region.pictures import map_renderers
 from .region.resolve import MeshInput, MeshRegion, checked_landmarks, flatten, region_faces
 from .rows import MeshCapability
-from .units import KnownDistance, LengthUnit, mm_per_unit
+from .units import KnownDistance, LengthUnit, mm_per_unit, warn_of_size
+from .warnings import WarnedAnswer
 
 #: Landmarks at vertices of the examples' unit icosahedron (the left and right tragi on
 #: either side of x, the nasion in front, +y, and the inion behind).
@@ -201,9 +201,19 @@ def register_scans(given: RegisterInput, ctx: Context) -> Registered:
     seeded = "landmarks" if pairs is not None else "moments"
     boundary = _follow_boundary(follow, found, focus, frame, region)
     zones = tuple(checked_zone(zone, k) for k, zone in enumerate(params.zones))
+    _warn(ctx, params, region, zones, scale)
     return Registered(
         region, found, seeded, overlap, OVERLAP_MM, rms, p95, frame, scale, boundary, zones,
     )  # fmt: skip
+
+
+def _warn(ctx: Context, params: RegisterParams, region, zones: tuple[Outline, ...], scale) -> None:
+    """Warn of units that make the baseline's region implausible, and of zones drawn wholly
+    beside its map."""
+    warn_of_size(ctx, params.units, scale, region)
+    for k, outline in enumerate(zones):
+        if beside_map(outline.rings[0], *region.layout):
+            warn_outside(ctx, region, f"zones.{k}", outline.name, outline.rings[0])
 
 
 #: Follow-ups whose samples spread this many times as far as the baseline's, or as few, are
@@ -261,7 +271,7 @@ def _landmark_pairs(mesh: Mesh, follow: Mesh, params: RegisterParams):
     return np.stack([other[n] for n in common]), np.stack([base[n] for n in common])
 
 
-class RegisterResponse(Answer):
+class RegisterResponse(WarnedAnswer):
     params: ResolvedParams = Field(description="The baseline's params, resolved.")
     transform: list[list[float]] = Field(
         description="The 4x4 matrix (rows) that maps the follow-up's points onto the "

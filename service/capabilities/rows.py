@@ -15,7 +15,7 @@ from typing import ClassVar
 from pydantic import BaseModel
 
 from ..encoding import encode
-from ..errors import ErrorPlaces, InvalidInput
+from ..errors import JSON_BODY, ErrorPlaces, InvalidInput
 from ..outputs import Output
 from ..timings import Timings
 from .context import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE, Context
@@ -23,6 +23,7 @@ from .inputs import MASK, MeshPart, PngFile, PngPart, Upload
 from .region.params import MeshParams
 from .region.pictures import Renderer
 from .region.resolve import MeshInput
+from .warnings import WarnedAnswer
 
 
 @dataclass(frozen=True)
@@ -34,7 +35,8 @@ class Capability:
     name : the route's name (its OpenAPI operation id starts with it)
     path, summary, description : the route and its documentation
     operation : the use-case, ``(input, ctx) -> result``
-    response : the JSON answer's model; ``response.of(result)`` builds it
+    response : the JSON answer's model (a :class:`~.warnings.WarnedAnswer`: it carries the
+        warnings); ``response.of(result)`` builds it
     """
 
     name: str
@@ -45,10 +47,20 @@ class Capability:
     response: type[BaseModel]
     parse_bytes_per_byte: ClassVar[int]
 
-    def encoded(self, result, timings: Timings) -> bytes:
-        """The JSON answer to ``result`` (timed as ``encode``)."""
+    def __post_init__(self) -> None:
+        if not issubclass(self.response, WarnedAnswer):  # its warnings would be lost: a bug
+            raise TypeError(f"{self.name}: its answer {self.response.__name__} carries no warnings")
+
+    @property
+    def places(self) -> ErrorPlaces:
+        """Where the fields of a refusal or a warning lie in this route's request."""
+        return JSON_BODY
+
+    def encoded(self, result, ctx: Context, timings: Timings) -> bytes:
+        """The JSON answer to ``result``, with the warnings its use-case added to ``ctx``
+        (timed as ``encode``)."""
         with timings.measure("encode"):
-            return encode(self.response.of(result))
+            return encode(self.response.of(result).warned(ctx.warnings, self.places))
 
 
 #: The mesh part of most routes.
@@ -79,6 +91,7 @@ class MeshCapability(Capability):
     parse_bytes_per_byte: ClassVar[int] = READER_BYTES_PER_BYTE
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         names = {item.name for item in fields(self.input)}
         declared = {part.name for part in self.parts} | {"params"}
         if names != declared:  # a row that cannot build its input is a bug: fail at import
@@ -173,7 +186,7 @@ class MeshCapability(Capability):
         """The bytes of ``result`` in ``output``: one computation can be answered in several
         forms (``meshflat batch`` writes each output a manifest line names)."""
         if output is Output.JSON:
-            return self.encoded(result, timings)
+            return self.encoded(result, ctx, timings)
         with timings.measure("encode"):
             return self.renderers[output](result, params, ctx)
 
@@ -194,4 +207,4 @@ class JsonCapability(Capability):
     def answer(self, request: BaseModel, ctx: Context, timings: Timings) -> bytes:
         with timings.measure("compute"):
             result = self.operation(request, ctx)
-        return self.encoded(result, timings)
+        return self.encoded(result, ctx, timings)

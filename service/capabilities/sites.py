@@ -27,7 +27,7 @@ from ..errors import InvalidInput, check_count
 from ..outputs import Output
 from ..outputs.picture import Drawn
 from .context import SITE_BYTES, Context
-from .drawn import Outline, Zone, check_names, checked_zone, overlaps
+from .drawn import Outline, Zone, check_names, checked_zone, overlaps, warn_outside
 from .fields import PictureParams, PositiveNumber, choice, output_choice
 from .inputs import PngFile, PngPart
 from .region.answers import ResolvedParams
@@ -35,7 +35,9 @@ from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
 from .region.pictures import glb, map_renderers
 from .region.resolve import MeshInput, MeshRegion, flatten, map_triangles
 from .rows import MeshCapability
-from .units import KnownDistance, LengthUnit, Units, in_cm2, mm_per_unit
+from .scalp import warn_implausible
+from .units import KnownDistance, LengthUnit, Units, in_cm2, mm_per_unit, warn_of_size
+from .warnings import WarnedAnswer
 
 #: Sites per cm² a density may ask for (a site every 0.1 mm or so).
 MAX_DENSITY_PER_CM2 = 10_000.0
@@ -242,7 +244,10 @@ def place(given: SitesInput, ctx: Context) -> Placed:
     unit_area = in_cm2(1.0, scale)  # cm² per mesh unit²
     expected = [float(np.dot(part.core.area, part.core.density)) * unit_area for part in found]
     total = params.count if params.count is not None else sum(expected)
-    check_count(round(total), ctx.settings.max_sites, "sites", "MESHFLAT_MAX_SITES")
+    # A unit that inflates the count is named in the refusal, as in the warning.
+    size = warn_of_size(ctx, params.units, scale, region)
+    check_count(round(total), ctx.settings.max_sites, "sites", "MESHFLAT_MAX_SITES", size or "")
+    _warn_outside(ctx, region, outlines, found)
     quotas = _quotas(expected, params.count)
     ctx.charge(SITE_BYTES * sum(quotas))
     asked = None if params.min_spacing_mm is None else params.min_spacing_mm / scale
@@ -259,6 +264,7 @@ def place(given: SitesInput, ctx: Context) -> Placed:
         parts.append(part.sites(quota, spacing))
         least = float(spacing[placed > 0].min()) if quota and (placed > 0).any() else None
         results.append(part.result(quota, least, unit_area))
+    warn_implausible(ctx, params, results, scale)
     sites = _placed(triangles, parts, params, scale)
     normals = site_normals(triangles.surface_points, triangles.faces, sites, region.frame.center)
     map_points = triangles.on_map(sites.triangles, sites.weights)
@@ -267,6 +273,13 @@ def place(given: SitesInput, ctx: Context) -> Placed:
         region, triangles, sites, normals, map_points, theta, phi, tuple(results),
         minimum_distance(sites.points), scale,
     )  # fmt: skip
+
+
+def _warn_outside(ctx: Context, region: MeshRegion, outlines: list[Outline], found) -> None:
+    """Warn of each zone that covers none of the map (no surface area)."""
+    for k, (outline, part) in enumerate(zip(outlines, found, strict=False)):
+        if part.area == 0:
+            warn_outside(ctx, region, f"zones.{k}", outline.name, outline.rings[0])
 
 
 def _apart(outlines: list[Outline]) -> list[Outline]:
@@ -462,7 +475,7 @@ class ZoneSites(Answer):
     )
 
 
-class SitesResponse(Answer):
+class SitesResponse(WarnedAnswer):
     params: ResolvedParams
     units: Units = Field(description="The scale used.")
     count: int = Field(description="Sites placed.")

@@ -29,6 +29,7 @@ from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
 from .region.resolve import MeshInput, MeshRegion, flatten, lacking
 from .rows import MeshCapability
+from .warnings import WarnedAnswer
 
 
 class TransferParams(MeshParams, FramingParams):
@@ -261,7 +262,7 @@ class TransferredFaces(Answer):
     )
 
 
-class TransferResponse(Answer):
+class TransferResponse(WarnedAnswer):
     params: ResolvedParams
     image_width: int = Field(description="The grid's width, pixels (the PNG answer's).")
     image_height: int = Field(description="The grid's height, pixels.")

@@ -1,5 +1,6 @@
 """A mesh's length unit: the ``units`` parameter (a unit, or a distance known in
-millimetres), millimetres per mesh unit from it, and lengths and areas in mm and cm²."""
+millimetres), millimetres per mesh unit from it, lengths and areas in mm and cm², and the
+warning when the unit makes the region implausibly small or large for a scalp."""
 
 from __future__ import annotations
 
@@ -11,7 +12,9 @@ from pydantic import Field
 
 from ..encoding import Answer
 from ..errors import InvalidInput
+from .context import Context
 from .fields import PositiveNumber, Strict, Vector3
+from .warnings import WarningCode
 
 #: Millimetres per mesh unit a known distance may give (areas in cm² stay finite).
 MM_PER_UNIT = (1e-3, 1e6)
@@ -93,6 +96,63 @@ def length_text(length: float, mm_per_unit: float | None) -> str:
     if mm_per_unit is None:
         return f"{length:.4g} units"
     return f"{length * mm_per_unit:.1f} mm"
+
+
+#: The sizes across a scalp region may plausibly have, cm: a patch of the crown is some 5 cm
+#: across, a whole head with its shoulders under 60 cm. Outside them, a units warning.
+PLAUSIBLE_ACROSS_CM = (5.0, 60.0)
+
+
+def size_across(points: np.ndarray) -> float:
+    """A region's size across, in its points' units: the diagonal of the box around the
+    points ((n, 3) float) along their principal axes. Free of the mesh's pose, and between
+    their largest distance apart and sqrt(3) times it.
+    """
+    centred = points - points.mean(axis=0)
+    _, axes = np.linalg.eigh(centred.T @ centred)
+    along = axes.T @ centred.T  # (3, n): a row per axis, reduced along memory
+    return float(np.linalg.norm(along.max(axis=1) - along.min(axis=1)))
+
+
+def _cm(value: float) -> str:
+    return f"{value:,.0f}" if value >= 100 else f"{value:.3g}"
+
+
+def implausible_size(units, scale: float, points: np.ndarray) -> str | None:
+    """Why ``units`` (the params' value, giving ``scale`` mm per unit) look wrong for a
+    region of ``points`` ((n, 3) float, mesh units), with the unit that would fit; None when
+    its size across (:func:`size_across`) is within :data:`PLAUSIBLE_ACROSS_CM`."""
+    across = size_across(points) if len(points) else 0.0
+    low, high = PLAUSIBLE_ACROSS_CM
+    size = across * scale / 10.0
+    if low <= size <= high or across == 0:
+        return None
+    if isinstance(units, KnownDistance):
+        declared = f"the known distance ({scale:.4g} mm per mesh unit)"
+    else:
+        declared = f"units {LengthUnit(units).value!r}"
+    fits = [unit for unit in LengthUnit if low <= across * unit.mm / 10.0 <= high]
+    if fits:
+        fit = fits[0]
+        hint = f"with units {fit.value!r} it would be {_cm(across * fit.mm / 10.0)} cm across"
+    else:
+        hint = "no unit of mm, cm or m fits: give the scale as a known distance"
+    return (
+        f"with {declared} the region is {_cm(size)} cm across (the diagonal of its box along "
+        f"its principal axes), where a scalp region is {low:g} to {high:g} cm; {hint}"
+    )
+
+
+def warn_of_size(ctx: Context, units, scale: float | None, region) -> str | None:
+    """Warn (``units_implausible``, naming ``units``) when ``units`` make ``region`` (a
+    :class:`~.region.resolve.MeshRegion`) implausibly small or large
+    (:func:`implausible_size` of its vertices); the words, or None (also without units)."""
+    if scale is None:
+        return None
+    words = implausible_size(units, scale, region.mesh.vertices[region.flat.vertex_ids])
+    if words is not None:
+        ctx.warn(WarningCode.UNITS_IMPLAUSIBLE, "units", words)
+    return words
 
 
 class Units(Answer):

@@ -14,6 +14,7 @@ from transforms import STRETCHED_ENERGY, Layout, Method
 from ...encoding import Answer
 from ...meshio import FORMATS
 from ..fields import choice
+from ..warnings import WarnedAnswer
 from .params import Region
 from .resolve import MeshRegion
 
@@ -212,7 +213,7 @@ class UntangleReport(Answer):
         )
 
 
-class ValidateResponse(Answer):
+class ValidateResponse(WarnedAnswer):
     params: ResolvedParams
     validation: Validation
     metrics: Metrics

@@ -33,7 +33,7 @@ pytestmark = pytest.mark.anyio
 #: The README's first request: the fit of the fsaverage scalp.
 FIRST_REQUEST = {
     "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}},
-    "rotation": {"pole": "auto", "up": [0, 1, 0]},
+    "facing": [0, 1, 0],
 }
 
 
@@ -254,9 +254,7 @@ async def test_the_readmes_requests_answer_no_warnings(client):
         answer = (await flatten(client, NAME, {**plan, **extra}, endpoint=endpoint)).json()
         assert answer["warnings"] == [] and answer["zones"][0]["area_cm2"] > 50, endpoint
     assert "y: [1.1, 1.1, 1.4, 1.4]}}]}' params.json > plan.json" in text(DOCS.parent / "README.md")
-    assert '"rotation": {"pole": "auto", "up": [0, 1, 0]}}\' > fit.json' in text(
-        DOCS.parent / "README.md"
-    )
+    assert '"facing": [0, 1, 0]}\' > fit.json' in text(DOCS.parent / "README.md")
 
 
 def test_a_row_whose_answer_cannot_carry_warnings_is_refused_at_import():

@@ -137,9 +137,11 @@ def bbox_center(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     used = np.zeros(len(vertices), dtype=bool)
     used[faces.ravel()] = True
     origin, axes = principal_axes(vertices, faces)
-    local = (vertices[used] - origin) @ axes.T
-    # Column by column: a reduction down the rows of an (n, 3) array is ten times slower.
-    middle = np.array([(local[:, k].min() + local[:, k].max()) / 2.0 for k in range(3)])
+    points = vertices if used.all() else vertices[used]
+    # (3, k): each axis a contiguous row (a reduction down the rows of an (n, 3) array is
+    # ten times slower).
+    local = axes @ (points - origin).T
+    middle = (local.min(axis=1) + local.max(axis=1)) / 2.0
     return origin + middle @ axes
 
 
@@ -159,15 +161,14 @@ def principal_axes(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
     total = areas.sum()
     if not total > 0:
         return vertices[faces.ravel()].mean(axis=0), np.eye(3)
-    corners = [vertices[faces[:, i]] for i in range(3)]
-    origin = sum((areas @ corner) for corner in corners) / (3.0 * total)
-    moment = np.zeros((3, 3))
-    offset_sum = np.zeros((len(faces), 3))
-    for corner in corners:
-        offset = corner - origin
-        offset_sum += offset
-        moment += (offset * areas[:, None]).T @ offset
-    moment += (offset_sum * areas[:, None]).T @ offset_sum
+    sums = vertices[faces[:, 0]] + vertices[faces[:, 1]] + vertices[faces[:, 2]]
+    origin = (areas @ sums) / (3.0 * total)
+    # The squares gathered per vertex (each weighed by its faces' areas: 0 for a vertex of
+    # none), the sums' squares per face: (m, 3) temporaries, no (m, 3, 3).
+    weights = np.bincount(faces.ravel(), np.repeat(areas, 3), len(vertices))
+    offsets = vertices - origin
+    sums -= 3.0 * origin
+    moment = (offsets * weights[:, None]).T @ offsets + (sums * areas[:, None]).T @ sums
     _, vectors = np.linalg.eigh(moment / 12.0)
     return origin, vectors.T
 

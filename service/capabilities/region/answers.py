@@ -123,8 +123,8 @@ class Validation(Answer):
                 seam=v.margin_deg_seam, north=v.margin_deg_north, south=v.margin_deg_south
             ),
             boundary_loops=v.boundary_loops,
-            pieces=region.selection.pieces.sizes,
-            stray_faces=region.selection.pieces.stray,
+            pieces=region.pieces.sizes,
+            stray_faces=region.pieces.stray,
             winding="outward" if v.winding == 1 else "inward",
         )
 

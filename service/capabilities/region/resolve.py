@@ -324,6 +324,11 @@ class MeshRegion:
         """(m,) int: the region's file face ids, ascending."""
         return self.selection.faces
 
+    @property
+    def pieces(self) -> select.RegionPieces:
+        """The region's connected pieces (``count > 1``: the region is several pieces)."""
+        return self.selection.pieces
+
 
 def resolve(
     mesh: Mesh, selection: Selection, params: MeshParams, ctx: Context

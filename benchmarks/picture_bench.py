@@ -40,6 +40,7 @@ from service.meshio import Mesh
 from service.outputs import Output
 from service.outputs.colours import ColourBy
 from transforms import Chart, Frame, Framing, Layout, PoleCap, flatten_region
+from transforms.selection import RegionPieces
 
 TARGETS = {Output.PNG: 1.0, Output.SVG: 1.5}
 WIDTH, HEIGHT = 1200, 800
@@ -57,7 +58,8 @@ def region() -> MeshRegion:
     chart = Chart.distorted(PoleCap.from_sigma(SIGMA))
     flat = flatten_region(vertices, faces[chosen], frame, chart)
     mesh = Mesh(vertices=vertices, faces=faces, format="ply")
-    selection = Selection(chosen, centre, {"faces": "..."})
+    pieces = RegionPieces(np.array([len(chosen)]), chosen[:0])
+    selection = Selection(chosen, centre, {"faces": "..."}, pieces)
     return MeshRegion(mesh, selection, chart, frame, flat, None)
 
 

@@ -24,12 +24,22 @@ from .test_locate import brute_force
 
 pytestmark = pytest.mark.anyio
 
+
+def world_box_middle(name: str) -> list[float]:
+    """The middle of a sample's box in the world axes."""
+    vertices = load_sample(name)[0]
+    return ((vertices.min(axis=0) + vertices.max(axis=0)) / 2).tolist()
+
+
+#: The FreeSurfer head is star-shaped from the middle of its box in the world axes: the
+#: scalp's centre and its cone's apex, given (the defaults are tests/test_centres.py's).
+HEAD_BOX = world_box_middle("fsaverage-head.ply")
 SCALP = {
     "fsaverage-head.ply": {
-        "center": "bbox_center",
+        "center": HEAD_BOX,
         "sigma": 0.3,
         "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
-        "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}},
+        "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70, "apex": HEAD_BOX}},
     },
     "lee-perry-smith.glb": {
         "center": [0.0, 1.2, -0.3],
@@ -268,9 +278,9 @@ async def test_flatten_a_scalp_matches_the_core(client, name):
     assert body["metrics"]["isometric"]["mean"] == pytest.approx(flat.distortion.isometric.mean)
     assert body["params"]["sigma"] == 0.3
     assert body["params"]["pole_angle_deg"] == pytest.approx(math.degrees(2 * math.atan(0.3)))
-    # The cone: faces whose centroid lies within 60/70 degrees of the axis, from the centre.
+    # The cone: faces whose centroid lies within 60/70 degrees of the axis, from the apex.
     axis = np.asarray(params["region"]["cone"]["axis"], dtype=float)
-    directions = vertices[faces].mean(axis=1) - center
+    directions = vertices[faces].mean(axis=1) - body["params"]["region"]["cone"]["apex"]
     cosine = directions @ axis / np.linalg.norm(directions, axis=1) / np.linalg.norm(axis)
     expected = np.flatnonzero(
         cosine >= math.cos(math.radians(params["region"]["cone"]["half_angle_deg"]))
@@ -293,7 +303,7 @@ async def test_nefertiti_comes_back_with_its_backfacing_faces(client):
     assert set(body) == {"warnings", "params", "validation", "metrics"}
     assert not body["validation"]["star_shaped"]
     vertices, faces = load_sample("nefertiti-lowres.obj")
-    center = (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    center = np.asarray(body["params"]["center"])  # the box centre: tests/test_centres.py
     flat = flatten_region(
         vertices, faces, Frame.identity(center), Chart.distorted(PoleCap.from_sigma(0.3))
     )
@@ -407,6 +417,9 @@ FLAT = {
     "triangle": (np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])),
     "grid": grid_mesh(np.linspace(0, 1, 5), np.linspace(0, 1, 5), 0.0),
 }
+#: Their box centres: in the triangle's principal axes (along its mirror line and across
+#: it) the middle of its box is a quarter of the way along both legs.
+FLAT_CENTRES = {"triangle": "[0.25, 0.25, 0]", "grid": "[0.5, 0.5, 0]"}
 
 
 @pytest.mark.parametrize("name", list(FLAT))
@@ -415,7 +428,7 @@ async def test_a_centre_in_the_plane_of_a_flat_region_is_named_as_the_centre(cli
     response = await client.post("/v1/flatten", files={"mesh": ("flat.obj", data)})
     body = problem(response, 422, "params.center")
     detail = body["detail"]
-    assert detail.startswith("params.center: the centre [0.5, 0.5, 0] lies in the plane")
+    assert detail.startswith(f"params.center: the centre {FLAT_CENTRES[name]} lies in the plane")
     assert "edge-on" in detail and "move the centre off that plane" in detail
     assert "zero area" not in detail
     if name == "grid":
@@ -825,7 +838,7 @@ async def test_locate_through_the_api_inverts_flatten(client):
 async def test_locate_answers_the_first_hits_brute_force_finds(client, count):
     params = {
         "region": SCALP_REGION,
-        "center": "bbox_center",
+        "center": [1.3, -12.5, -32.3],  # about the middle of the head's box
         "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
         "sigma": 0.3,
     }

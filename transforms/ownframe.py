@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .arrays import cross_rows
+from .arrays import triangle_areas
 
 #: Relative size of a third moment below which its sign is taken as undecided (a symmetric
 #: surface): the axis then keeps the sign the eigen-solver gave it.
@@ -59,30 +59,34 @@ class OwnFrame:
     def of_triangles(cls, vertices: np.ndarray, faces: np.ndarray) -> OwnFrame:
         """The frame of the surface of ``faces`` ((m, 3) int) over ``vertices`` ((n, 3)).
 
-        The triangles must have some area (a region's faces do: selection refuses none).
+        Triangles of no area in all: the vertices' mean, the world axes and their RMS
+        distance from it (a scale of 1 when they coincide).
         """
-        corners = vertices[faces]  # (m, 3, 3)
-        shift = corners.reshape(-1, 3).mean(axis=0)  # a first guess, for rounding only
-        corners = corners - shift
-        doubled = np.linalg.norm(cross_rows(corners[:, 1] - corners[:, 0],
-                                            corners[:, 2] - corners[:, 0]), axis=1)  # fmt: skip
-        area = doubled.sum() / 2
-        sums = corners.sum(axis=1)  # (m, 3): a + b + c
-        centroid = (doubled @ sums) / (6 * area)
-        # Over a triangle, the integral of x x^T is area/12 (a a^T + b b^T + c c^T + s s^T).
-        second = np.einsum("m,mki,mkj->ij", doubled, corners, corners)
-        second += np.einsum("m,mi,mj->ij", doubled, sums, sums)
-        covariance = second / (24 * area) - np.outer(centroid, centroid)
-        variances, vectors = np.linalg.eigh((covariance + covariance.T) / 2)
-        axes = vectors[:, ::-1].T  # rows, largest variance first
+        areas = triangle_areas(vertices, faces)
+        total = areas.sum()
+        if not total > 0:
+            points = vertices[faces.ravel()]
+            origin = points.mean(axis=0)
+            spread = float(np.sqrt(((points - origin) ** 2).sum(axis=1).mean()))
+            return cls(origin, np.eye(3), spread if spread > 0 else 1.0)
+        sums = vertices[faces[:, 0]] + vertices[faces[:, 1]] + vertices[faces[:, 2]]
+        origin = (areas @ sums) / (3.0 * total)
+        # Over a triangle, the integral of x x^T is area/12 (a a^T + b b^T + c c^T + s s^T):
+        # the corners' squares gathered per vertex (each weighed by its faces' areas), the
+        # sums' squares per face; (n, 3) and (m, 3) temporaries, no (m, 3, 3).
+        weights = np.bincount(faces.ravel(), np.repeat(areas, 3), len(vertices))
+        offsets = vertices - origin
+        sums -= 3.0 * origin
+        moment = (offsets * weights[:, None]).T @ offsets + (sums * areas[:, None]).T @ sums
+        variances, vectors = np.linalg.eigh(moment / (12.0 * total))
+        axes = vectors[:, ::-1].T.copy()  # rows, largest variance first
         scale = float(np.sqrt(max(variances.sum(), 0.0)))
-        relative = corners - centroid
-        for row in range(2):
-            skew = _third_moment(relative @ axes[row], doubled)
-            if abs(skew) > SKEW_RTOL * max(scale, np.finfo(float).tiny) ** 3 * area and skew < 0:
+        for row in range(2):  # two axes, not a loop over the mesh
+            skew = _third_moment(offsets @ axes[row], faces, areas)
+            if skew < -SKEW_RTOL * scale**3 * total:
                 axes[row] = -axes[row]
         axes[2] = np.cross(axes[0], axes[1])
-        return cls(centroid + shift, axes, scale)
+        return cls(origin, axes, scale if scale > 0 else 1.0)
 
     @property
     def origin(self) -> np.ndarray:
@@ -104,6 +108,19 @@ class OwnFrame:
         """(k, 3) points of the frame back into world coordinates."""
         return np.asarray(points, dtype=np.float64) * self._scale @ self._axes + self._origin
 
+    def box(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The box of ``points`` ((k, 3), world) along the frame's axes: its lowest and
+        highest corner ((3,) each) in turned coordinates about the origin, mesh units."""
+        # (3, k): each axis a contiguous row (a reduction down the rows of a (k, 3) array
+        # is ten times slower).
+        along = self._axes @ (np.asarray(points, dtype=np.float64) - self._origin).T
+        return along.min(axis=1), along.max(axis=1)
+
+    def box_middle(self, points: np.ndarray) -> np.ndarray:
+        """(3,) world point: the middle of :meth:`box`."""
+        low, high = self.box(points)
+        return self._origin + (low + high) / 2.0 @ self._axes
+
     def directions_to_own(self, directions: np.ndarray) -> np.ndarray:
         """(k, 3) world directions turned into the frame (lengths kept)."""
         return np.asarray(directions, dtype=np.float64) @ self._axes.T
@@ -116,10 +133,10 @@ class OwnFrame:
         return f"OwnFrame(origin={self._origin.tolist()}, scale={self._scale:.6g})"
 
 
-def _third_moment(values: np.ndarray, doubled: np.ndarray) -> float:
-    """The integral of f^3 over the triangles, f linear with corner values ``values``
-    ((m, 3)); ``doubled``: (m,) twice their areas. Over one triangle it is area/10 times
-    the complete homogeneous polynomial h3 of the corner values."""
-    a, b, c = values.T
+def _third_moment(values: np.ndarray, faces: np.ndarray, areas: np.ndarray) -> float:
+    """The integral of f^3 over the triangles ``faces`` ((m, 3) int) of ``areas`` ((m,)),
+    f linear with the vertex values ``values`` ((n,)). Over one triangle it is area/10 times
+    the complete homogeneous polynomial h3 of its corner values."""
+    a, b, c = (values[faces[:, k]] for k in range(3))
     h3 = a**3 + b**3 + c**3 + a * a * (b + c) + b * b * (a + c) + c * c * (a + b) + a * b * c
-    return float(doubled @ h3) / 20
+    return float(areas @ h3) / 10

@@ -15,6 +15,7 @@ from .faces import FaceMeasures, measure_checked, measure_faces
 from .frames import Frame
 from .layouts import Layout, layout_xy, measured_second
 from .metrics import Distortion, FaceDistortion, distortion, face_distortion
+from .topology import representatives, welded_by
 from .validation import RegionValidation, validate
 from .viewpoint import check_center_sees_area
 
@@ -36,6 +37,9 @@ class FlatRegion:
         validation (stretched faces included) nor degenerate (the same per-face values;
         None when no face is trusted)
     flagged_faces : int, how many faces the validation flags (any reason, each face once)
+    weld : (k,) int, for each vertex the position of the lowest at exactly its place
+        (:func:`.topology.representatives`; itself when alone): a triangle soup's corners
+        are one vertex for all that needs connectivity (docs/math.md, section 8)
     """
 
     vertex_ids: np.ndarray
@@ -50,6 +54,14 @@ class FlatRegion:
     distortion: Distortion
     trusted: Distortion | None
     flagged_faces: int
+    weld: np.ndarray
+
+    @property
+    def links(self) -> np.ndarray:
+        """(m, 3) int: ``faces`` welded (:attr:`weld`): what their edges, boundary loops,
+        pieces and neighbourhoods are read from; ``faces`` itself when no vertex repeats
+        another's position."""
+        return welded_by(self.faces, self.weld)
 
 
 def flatten_region(
@@ -100,6 +112,7 @@ def flatten_region(
     # What is done with is let go as soon as it is (faces, used, rows): the validation's
     # edge classification, the peak of the call, then runs beside less.
     del faces
+    weld = representatives(used)
     # The local rows come out of the same pass as the angles; measured without checking
     # again, since everything here was made checked.
     rows = np.empty((3, len(used)))
@@ -112,7 +125,9 @@ def flatten_region(
         rows, compact, measured_second(theta, layout), phi, chart.cap, threads
     )
     del rows  # the measures hold their own, scaled
-    validation, metrics, trusted, flagged = _judge(measures, winding, threads)
+    links = welded_by(compact, weld)
+    validation, metrics, trusted, flagged = _judge(measures, winding, threads, links)
+    del links
     x, y = layout_xy(theta, phi, layout)
     return FlatRegion(
         vertex_ids=vertex_ids,
@@ -127,6 +142,7 @@ def flatten_region(
         distortion=metrics,
         trusted=trusted,
         flagged_faces=flagged,
+        weld=weld,
     )
 
 
@@ -200,12 +216,12 @@ def flagged_mask(
 
 
 def _judge(
-    measures: FaceMeasures, winding: int | None, threads: int
+    measures: FaceMeasures, winding: int | None, threads: int, links: np.ndarray | None = None
 ) -> tuple[RegionValidation, Distortion, Distortion | None, int]:
-    """Validation, distortion over every face and over the trusted ones, and the count of
-    flagged faces."""
+    """Validation (edges read from ``links``, the faces welded), distortion over every face
+    and over the trusted ones, and the count of flagged faces."""
     # One after the other: side by side on two threads they only compete for memory.
-    validation = validate(measures, winding, threads)
+    validation = validate(measures, winding, threads, links)
     metrics = distortion(measures)
     flagged = flagged_mask(validation, len(measures))
     count = int(flagged.sum())

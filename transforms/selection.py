@@ -10,13 +10,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
 
 from .arrays import as_direction, triangle_areas, unit_rows
 from .errors import TransformInputError
+from .ownframe import OwnFrame
 from .pixels import face_means
+from .topology import face_components, largest_piece, piece_sizes
 
 #: The named centres: the area-weighted centroid or the bounding-box centre of the faces.
 NAMED_CENTERS = ("centroid", "bbox_center")
@@ -123,7 +126,10 @@ def faces_of_groups(
 
 
 def bbox_center(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(3,) float: the middle of the bounding box of the vertices ``faces`` use.
+    """(3,) float: the middle of the box of the vertices ``faces`` use, along the triangles'
+    own axes (:class:`~transforms.ownframe.OwnFrame`): it moves and turns with the mesh,
+    where the middle of the world axes' box would depend on the pose (docs/math.md,
+    section 8).
 
     Parameters
     ----------
@@ -132,11 +138,8 @@ def bbox_center(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """
     used = np.zeros(len(vertices), dtype=bool)
     used[faces.ravel()] = True
-    points = vertices[used]
-    # Column by column: a reduction down the rows of an (n, 3) array is ten times slower.
-    low = np.array([points[:, k].min() for k in range(3)])
-    high = np.array([points[:, k].max() for k in range(3)])
-    return (low + high) / 2.0
+    points = vertices if used.all() else vertices[used]
+    return OwnFrame.of_triangles(vertices, faces).box_middle(points)
 
 
 def area_centroid(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -189,6 +192,48 @@ def cone_faces(
     directions, at_apex = unit_rows(vertices[faces].mean(axis=1) - apex)
     inside = directions @ axis >= math.cos(math.radians(half_angle_deg)) - 1e-15
     return np.flatnonzero(inside & ~at_apex)
+
+
+class Pieces(StrEnum):
+    """Which connected pieces of the selected faces a region keeps (``region.pieces``)."""
+
+    ALL = "all"
+    LARGEST = "largest"
+
+
+@dataclass(frozen=True)
+class RegionPieces:
+    """The connected pieces of a region (docs/math.md, section 8: welding and pieces).
+
+    Attributes
+    ----------
+    sizes : (p,) int, each piece's face count, largest first
+    stray : (j,) int, ascending: the ids of the faces outside the largest piece
+    """
+
+    sizes: np.ndarray
+    stray: np.ndarray
+
+    @property
+    def count(self) -> int:
+        """How many pieces the region is."""
+        return len(self.sizes)
+
+
+def region_pieces(links: np.ndarray, face_ids: np.ndarray) -> tuple[RegionPieces, np.ndarray]:
+    """The pieces of a region: faces sharing an edge are in one piece
+    (:func:`.topology.face_components`); and which of its faces are its largest piece
+    ((k,) bool).
+
+    Parameters
+    ----------
+    links : (k, 3) int, the region's faces welded (:func:`.topology.representatives`:
+        corners at one position are one vertex), in the order of ``face_ids``
+    face_ids : (k,) int, ascending, at least one: the region's face ids
+    """
+    labels = face_components(links)
+    largest = largest_piece(labels)
+    return RegionPieces(sizes=piece_sizes(labels), stray=face_ids[~largest]), largest
 
 
 def nonempty(faces: np.ndarray) -> np.ndarray:

@@ -47,39 +47,84 @@ def face_components(faces: np.ndarray, positions: np.ndarray | None = None) -> n
     """(m,) int: the label of each face's piece, faces ((m, 3) int) that share an edge being
     in one piece; labels count from 0. With ``positions`` ((n, 3) float, the vertices), the
     vertices at one position count as one (:func:`welded`): a triangle soup (an STL, a scan
-    split at its texture seams) is joined where its triangles meet."""
-    if len(faces) == 0:
+    split at its texture seams) is joined where its triangles meet.
+
+    The half-edges are sorted by their edge (one sort of 3 m keys); two in a row on one edge
+    join their faces, and the pieces are the components of that graph on the faces."""
+    m = len(faces)
+    if m == 0:
         return np.zeros(0, dtype=np.int64)
     if positions is not None:
         faces = welded(faces, positions)
     n = int(faces.max()) + 1
     ends = faces[:, [0, 1, 2]], faces[:, [1, 2, 0]]
     keys = np.minimum(*ends).astype(np.int64) * n + np.maximum(*ends)  # an edge, one number
-    _, edge_ids = np.unique(keys.ravel(), return_inverse=True)
-    # A graph on faces and edges together: each face joined to its three edges.
-    count = len(faces) + int(edge_ids.max()) + 1
+    order = np.argsort(keys.ravel())
+    ordered = keys.ravel()[order]
+    pairs = np.flatnonzero(ordered[1:] == ordered[:-1])
     graph = coo_matrix(
-        (
-            np.ones(len(edge_ids), dtype=np.int8),
-            (np.repeat(np.arange(len(faces)), 3), len(faces) + edge_ids.ravel()),
-        ),
-        shape=(count, count),
+        (np.ones(len(pairs), dtype=np.int8), (order[pairs] // 3, order[pairs + 1] // 3)),
+        shape=(m, m),
     )
-    return connected_components(graph, directed=False)[1][: len(faces)]
+    return connected_components(graph, directed=False)[1]
 
 
-def welded(faces: np.ndarray, positions: np.ndarray) -> np.ndarray:
-    """(m, 3) int: ``faces`` with each vertex replaced by the first of the vertices they use
-    at its exact position (sorted by x, y, z: one pass, no tolerance)."""
-    used, inverse = np.unique(faces, return_inverse=True)
-    points = np.asarray(positions)[used]
-    order = np.lexsort((points[:, 2], points[:, 1], points[:, 0]))
+def piece_sizes(labels: np.ndarray) -> np.ndarray:
+    """(p,) int: the face count of each piece of :func:`face_components`' ``labels``
+    ((m,) int), largest first (docs/math.md, section 8: welding and pieces)."""
+    return -np.sort(-np.bincount(labels))
+
+
+def largest_piece(labels: np.ndarray) -> np.ndarray:
+    """(m,) bool: the faces of the largest piece (of most faces; of two as large, the one
+    with the lowest label, the piece of the first face among them)."""
+    return labels == np.argmax(np.bincount(labels))
+
+
+def representatives(points: np.ndarray) -> np.ndarray:
+    """(n,) int: for each of ``points`` ((n, 3) float), the lowest row at exactly its
+    position (itself when it is alone there), found by sorting (no tolerance; -0.0 and 0.0
+    are one position): the weld of docs/math.md, section 8.
+
+    One sort of the first coordinate finds the points that share it with another; only those
+    are sorted by all three (none, on most scans: the weld is then the identity).
+    """
+    points = np.asarray(points)
+    n = len(points)
+    found = np.arange(n)
+    by_x = np.argsort(points[:, 0], kind="stable")
+    x = points[by_x, 0]
+    tied = np.zeros(n, dtype=bool)
+    tied[1:] = x[1:] == x[:-1]
+    tied[:-1] |= tied[1:]
+    if not tied.any():
+        return found
+    rows = np.sort(by_x[tied])
+    chosen = points[rows]
+    order = rows[np.lexsort((rows, chosen[:, 2], chosen[:, 1], chosen[:, 0]))]
     ordered = points[order]
     fresh = np.ones(len(order), dtype=bool)
     fresh[1:] = (ordered[1:] != ordered[:-1]).any(axis=1)
-    label = np.empty(len(order), dtype=np.int64)
-    label[order] = np.cumsum(fresh) - 1
-    return label[inverse.reshape(faces.shape)]
+    # The first of each run of equal points is its lowest row (the rows break the ties).
+    found[order] = order[fresh][np.cumsum(fresh) - 1]
+    return found
+
+
+def welded_by(faces: np.ndarray, weld: np.ndarray) -> np.ndarray:
+    """(m, 3) int: ``faces`` with each vertex replaced by ``weld``'s ((n,) int, from
+    :func:`representatives`); ``faces`` itself when ``weld`` is the identity."""
+    if (weld == np.arange(len(weld))).all():
+        return faces
+    return weld[faces]
+
+
+def welded(faces: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """(m, 3) int: ``faces`` ((m, 3) int into ``positions``, (n, 3) float) with each vertex
+    replaced by the lowest of the vertices they use at its exact position
+    (:func:`representatives`): the same triangles, joined where their corners coincide."""
+    used, inverse = np.unique(faces, return_inverse=True)
+    same = representatives(np.asarray(positions)[used])
+    return used[same][inverse.reshape(faces.shape)]
 
 
 #: Per half-edge value summed per edge: the count in the low bits, (side + 1)^2 above. Two

@@ -119,7 +119,10 @@ class RegionValidation:
 
 
 def validate(
-    measures: FaceMeasures, winding: int | None = None, threads: int = 1
+    measures: FaceMeasures,
+    winding: int | None = None,
+    threads: int = 1,
+    links: np.ndarray | None = None,
 ) -> RegionValidation:
     """Validate a region from its face measurements.
 
@@ -130,6 +133,9 @@ def validate(
     winding : +1 or -1 to fix which way normals point; ``None`` decides from the region's
         signed solid angle (the sum of its faces' orientations seen from the centre)
     threads : int, threads for the independent parts
+    links : (m, 3) int or None, the faces welded (vertices at one position made one,
+        docs/math.md section 8), whose edges give the boundary, its loops and the outline;
+        None: the measured faces'
 
     Returns
     -------
@@ -152,7 +158,11 @@ def validate(
     # When faces are flagged already that search runs beside the edge classification.
     edges, dipping = run_all(
         [
-            lambda: region_edges(measures.faces, orientation, measures.vertices.shape[1]),
+            lambda: region_edges(
+                measures.faces if links is None else links,
+                orientation,
+                measures.vertices.shape[1],
+            ),
             lambda: _faces_meeting_seam(measures) if flagged else None,
         ],
         threads,

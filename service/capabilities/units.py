@@ -10,6 +10,8 @@ from typing import Annotated
 import numpy as np
 from pydantic import Field
 
+from transforms.ownframe import OwnFrame
+
 from ..encoding import Answer
 from ..errors import InvalidInput
 from .context import Context
@@ -103,26 +105,23 @@ def length_text(length: float, mm_per_unit: float | None) -> str:
 PLAUSIBLE_ACROSS_CM = (5.0, 60.0)
 
 
-def size_across(points: np.ndarray) -> float:
-    """A region's size across, in its points' units: the diagonal of the box around the
-    points ((n, 3) float) along their principal axes. Free of the mesh's pose, and between
-    their largest distance apart and sqrt(3) times it.
-    """
-    centred = points - points.mean(axis=0)
-    _, axes = np.linalg.eigh(centred.T @ centred)
-    along = axes.T @ centred.T  # (3, n): a row per axis, reduced along memory
-    return float(np.linalg.norm(along.max(axis=1) - along.min(axis=1)))
+def size_across(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """A region's size across, in its mesh's units: the diagonal of the box around the
+    vertices ``faces`` ((m, 3) int) use, along the triangles' own axes
+    (:class:`~transforms.ownframe.OwnFrame`). Free of the mesh's pose, and between the
+    vertices' largest distance apart and sqrt(3) times it."""
+    low, high = OwnFrame.of_triangles(vertices, faces).box(vertices[np.unique(faces)])
+    return float(np.linalg.norm(high - low))
 
 
 def _cm(value: float) -> str:
     return f"{value:,.0f}" if value >= 100 else f"{value:.3g}"
 
 
-def implausible_size(units, scale: float, points: np.ndarray) -> str | None:
+def implausible_size(units, scale: float, across: float) -> str | None:
     """Why ``units`` (the params' value, giving ``scale`` mm per unit) look wrong for a
-    region of ``points`` ((n, 3) float, mesh units), with the unit that would fit; None when
-    its size across (:func:`size_across`) is within :data:`PLAUSIBLE_ACROSS_CM`."""
-    across = size_across(points) if len(points) else 0.0
+    region ``across`` mesh units across (:func:`size_across`), with the unit that would fit;
+    None when its size is within :data:`PLAUSIBLE_ACROSS_CM`."""
     low, high = PLAUSIBLE_ACROSS_CM
     size = across * scale / 10.0
     if low <= size <= high or across == 0:
@@ -149,7 +148,8 @@ def warn_of_size(ctx: Context, units, scale: float | None, region) -> str | None
     (:func:`implausible_size` of its vertices); the words, or None (also without units)."""
     if scale is None:
         return None
-    words = implausible_size(units, scale, region.mesh.vertices[region.flat.vertex_ids])
+    faces = region.mesh.faces[region.selection.faces]
+    words = implausible_size(units, scale, size_across(region.mesh.vertices, faces))
     if words is not None:
         ctx.warn(WarningCode.UNITS_IMPLAUSIBLE, "units", words)
     return words

@@ -28,6 +28,7 @@ class WarningCode(StrEnum):
     DRAWN_OUTSIDE_MAP = "drawn_outside_map"
     DENSITY_IMPLAUSIBLE = "density_implausible"
     SITES_IMPLAUSIBLE = "sites_implausible"
+    REGION_PIECES = "region_pieces"
 
 
 #: What each code means: the table of docs/api.md (tests/test_warnings.py keeps them equal;
@@ -40,6 +41,10 @@ MEANINGS = {
     "layout's coordinates, and says when the numbers look like degrees.",
     WarningCode.DENSITY_IMPLAUSIBLE: "Sites placed denser than a scalp holds hair.",
     WarningCode.SITES_IMPLAUSIBLE: "More sites in all than a whole scalp holds.",
+    WarningCode.REGION_PIECES: "The region is several pieces that share no edge (a stray "
+    "part of the scan, an eye, a box beside the head). The message gives their face counts; "
+    "validation.stray_faces lists the faces outside the largest, and region.pieces "
+    '"largest" keeps the largest alone.',
 }
 
 

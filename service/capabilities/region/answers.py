@@ -104,7 +104,19 @@ class Validation(Answer):
         "dominate a mean). Other lists may hold them too."
     )
     margin_deg: Margins
-    boundary_loops: int = Field(description="Boundary loops of the region (a disk has one).")
+    boundary_loops: int = Field(
+        description="Boundary loops of the region (a disk has one), corners at one position "
+        "counted as one vertex (a triangle soup, an STL, has the loops of its surface)."
+    )
+    pieces: list[int] = Field(
+        description="The face count of each connected piece of the region (faces joined by "
+        "an edge, corners at one position counted as one vertex), largest first: [n] for a "
+        'region in one piece; region.pieces "largest" keeps the first alone.'
+    )
+    stray_faces: list[int] = Field(
+        description="The faces outside the region's largest piece (file ids, ascending): a "
+        "stray object or fragment that the region's numbers (areas, zones) include."
+    )
     winding: Literal["outward", "inward"] = Field(
         description="Which way the file's winding faces, as the region shows it."
     )
@@ -126,6 +138,8 @@ class Validation(Answer):
                 seam=v.margin_deg_seam, north=v.margin_deg_north, south=v.margin_deg_south
             ),
             boundary_loops=v.boundary_loops,
+            pieces=region.pieces.sizes,
+            stray_faces=region.pieces.stray,
             winding="outward" if v.winding == 1 else "inward",
         )
 

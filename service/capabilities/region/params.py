@@ -11,7 +11,7 @@ from typing import Annotated, Literal
 from pydantic import ConfigDict, Field, model_validator
 
 from transforms import Layout, Method
-from transforms.selection import NAMED_CENTERS, Channel, CornerRule
+from transforms.selection import NAMED_CENTERS, Channel, CornerRule, Pieces
 
 from ...meshio import FORMATS
 from ..fields import Matrix3, Number, PositiveNumber, Strict, Vector3, choice
@@ -126,9 +126,9 @@ class Cone(Strict):
     half_angle_deg: Number = Field(gt=0, le=180, description="Half-angle in degrees.")
     apex: Vector3 | None = Field(
         None,
-        description="Where the cone starts, world coordinates. Default: the bounding-box "
-        "centre of the whole mesh, whatever center is (so a fitted centre sent back selects "
-        "the same faces); answers give it resolved.",
+        description="Where the cone starts, world coordinates. Default: the box centre of "
+        "the whole mesh in its principal axes (as center's bbox_center), whatever center is "
+        "(so a fitted centre sent back selects the same faces); answers give it resolved.",
     )
 
 
@@ -185,7 +185,7 @@ class TextureMask(Strict):
 
 class Region(Strict):
     """Which faces: exactly one of ``faces``, ``vertices``, ``groups``, ``cone``, ``scalp``,
-    ``vertex_color``, ``feature_id`` or ``texture_mask``."""
+    ``vertex_color``, ``feature_id`` or ``texture_mask``, and which of their pieces."""
 
     model_config = ConfigDict(json_schema_extra=lambda schema: _one_property(schema))
 
@@ -222,10 +222,17 @@ class Region(Strict):
         description="Faces under the mask PNG sent as the form's part 'mask', read through "
         "the mesh's texture coordinates (glTF TEXCOORD_0, OBJ vt, PLY u v).",
     )
+    pieces: choice(Pieces) = Field(
+        Pieces.ALL,
+        description="all: every face selected; largest: only the largest connected piece of "
+        "them (faces joined by an edge, corners at one position counted as one vertex), as "
+        "validation.pieces and validation.stray_faces report them: a stray object or "
+        "fragment beside the head is left out.",
+    )
 
     @model_validator(mode="after")
     def _exactly_one(self) -> Region:
-        kinds = tuple(type(self).model_fields)
+        kinds = REGION_KINDS
         given = [name for name in kinds if name in self.model_fields_set]
         if len(given) != 1:
             raise ValueError(
@@ -234,13 +241,33 @@ class Region(Strict):
             )
         return self
 
+    def resolved(self) -> dict:
+        """The region as answers repeat it: what was given, ``pieces`` only when not all."""
+        given = self.model_dump(exclude_none=True)
+        if self.pieces is Pieces.ALL:
+            given.pop("pieces")
+        return given
+
+
+#: The kinds of region, of which a region names exactly one.
+REGION_KINDS = (
+    "faces",
+    "vertices",
+    "groups",
+    "cone",
+    "scalp",
+    "vertex_color",
+    "feature_id",
+    "texture_mask",
+)
+
 
 def _one_property(schema: dict) -> None:
-    """Region's JSON schema: exactly one property, none of them null (the None defaults only
-    mark what was not given)."""
-    schema.update(minProperties=1, maxProperties=1)
-    for field in schema["properties"].values():
-        field.pop("default", None)
+    """Region's JSON schema: exactly one of the kinds (with ``pieces`` beside it or not),
+    none of them null (the None defaults only mark what was not given)."""
+    schema["oneOf"] = [{"required": [kind]} for kind in REGION_KINDS]
+    for kind in REGION_KINDS:
+        schema["properties"][kind].pop("default", None)
 
 
 #: A scalp-like region: the faces within 60 degrees of +Y, the cap around -Y (the neck).
@@ -275,10 +302,13 @@ class MeshParams(ChartParams):
 
     center: Vector3 | Literal[CENTERS] = Field(
         "bbox_center",
-        description="The centre: world point, or the area-weighted centroid or bounding-box "
-        "centre of the region (of the whole mesh when the region is a cone), or "
+        description="The centre: world point, or the area-weighted centroid of the region's "
+        "triangles, or bbox_center: the middle of the box around the region's vertices in "
+        "the region's own principal axes (the area-weighted principal axes of its "
+        "triangles: it moves and turns with the mesh), or "
         + AUTO_DESCRIPTION
-        + " A cone region is taken around its apex, not the centre.",
+        + " A cone's faces are selected from its apex, and the named centres (and the start "
+        "of auto) are those of the faces it selects.",
     )
     sigma: PositiveNumber | Literal["auto"] | None = Field(
         None,

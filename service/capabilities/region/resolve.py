@@ -8,7 +8,7 @@ placed in the request by :func:`service.problems.problem_of`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Generic, TypeVar
 
 import numpy as np
@@ -34,12 +34,14 @@ from transforms import (
 from transforms import selection as select
 from transforms.arrays import as_direction
 from transforms.frames import FACING_AGREEMENT_DEG, facing_disagreement_deg
+from transforms.topology import representatives, welded_by
 
 from ...errors import InvalidInput
 from ...meshio import Mesh
 from ..context import MAP_BYTES_PER_FACE, Context
 from ..inputs import PngFile
 from ..units import mm_per_unit
+from ..warnings import WarningCode
 from .params import DEFAULT_SIGMA, AutoPole, ChartParams, MeshParams, PoleUp
 
 P = TypeVar("P", bound=MeshParams)
@@ -89,17 +91,27 @@ def frame_of(params: ChartParams, center: np.ndarray) -> Frame:
 @dataclass(frozen=True)
 class Selection:
     """The region a request names: its file face ids (ascending), the centre the
-    parameters ask for (before any fit), and the region as answers repeat it (a cone with
-    its apex resolved; None for the whole mesh), so that sent back it selects these faces."""
+    parameters ask for (before any fit), the region as answers repeat it (a cone with its
+    apex resolved; None for the whole mesh), so that sent back it selects these faces, its
+    connected pieces (``region.pieces`` applied: the largest alone is one piece), and its
+    faces welded (``links``: file vertex ids, each the lowest at its position; None when no
+    corner of the region shares its position with another vertex), what the fit reads.
+
+    ``pieces.count > 1`` is where a warning that the region is several pieces belongs."""
 
     faces: np.ndarray
     center: np.ndarray
     region: dict | None
+    pieces: select.RegionPieces
+    links: np.ndarray | None = None
 
 
 def select_region(given: MeshInput, ctx: Context) -> Selection:
     """The faces and the centre of ``params.region`` and ``params.center``
-    (:mod:`transforms.selection`); a cone is taken around the centre of the whole mesh.
+    (:mod:`transforms.selection`), only the largest piece of them for ``region.pieces``
+    ``"largest"``; a named centre is the selected faces', a cone's apex by default the
+    whole mesh's box centre. Corners at one position are one vertex for the pieces and the
+    fit (:func:`transforms.topology.representatives`).
 
     Raises
     ------
@@ -115,26 +127,53 @@ def select_region(given: MeshInput, ctx: Context) -> Selection:
         raise InvalidInput(
             "mask", "a mask part is read for a region.texture_mask only, and the region is another"
         )
+    resolved = None if region is None else region.resolved()
     if region is not None and region.cone is not None:
-        return _cone_selection(mesh, params)
-    faces = select.nonempty(_region_faces(given, ctx))
-    resolved = None if region is None else region.model_dump(exclude_none=True)
-    return Selection(faces, _center(mesh, faces, params.center), resolved)
+        faces, apex = _cone_faces(mesh, region.cone)
+        resolved["cone"]["apex"] = apex.tolist()
+    else:
+        faces = select.nonempty(_region_faces(given, ctx))
+    whole = len(faces) == len(mesh.faces)  # ascending and distinct: every face, in order
+    own = mesh.faces if whole else mesh.faces[faces]
+    links = welded_by(own, representatives(mesh.vertices))
+    joined = links is not own  # some corner shares its position with another vertex
+    pieces, largest = select.region_pieces(links, faces)
+    if region is not None and region.pieces is select.Pieces.LARGEST and not largest.all():
+        faces, links = faces[largest], links[largest]
+        pieces = select.RegionPieces(pieces.sizes[:1], faces[:0])
+    if pieces.count > 1:
+        _warn_of_pieces(pieces, ctx)
+    center = _center(mesh, faces, params.center)
+    return Selection(faces, center, resolved, pieces, links if joined else None)
 
 
-def _cone_selection(mesh: Mesh, params: MeshParams) -> Selection:
-    """A cone's faces, its apex resolved (by default the whole mesh's box centre)."""
-    cone = params.region.cone
-    center = _center(mesh, None, params.center)
+#: How many pieces' face counts a warning lists before it says how many more there are.
+LISTED_PIECES = 5
+
+
+def _warn_of_pieces(pieces: select.RegionPieces, ctx: Context) -> None:
+    """The ``region_pieces`` warning: the region is several pieces."""
+    sizes = [f"{size:,}" for size in pieces.sizes[:LISTED_PIECES].tolist()]
+    if pieces.count > LISTED_PIECES:
+        sizes.append(f"and {pieces.count - LISTED_PIECES:,} more")
+    ctx.warn(
+        WarningCode.REGION_PIECES,
+        "region",
+        f"the region is {pieces.count:,} pieces that share no edge, of {', '.join(sizes)} "
+        f"faces; the {len(pieces.stray):,} faces outside the largest are "
+        'validation.stray_faces, and region.pieces "largest" keeps the largest alone',
+    )
+
+
+def _cone_faces(mesh: Mesh, cone) -> tuple[np.ndarray, np.ndarray]:
+    """A cone's faces and its apex (by default the whole mesh's box centre, whatever the
+    centre is: a fitted centre sent back selects the same faces)."""
     if cone.apex is not None:
         apex = np.asarray(cone.apex, dtype=np.float64)
-    elif params.center in ("bbox_center", "auto"):
-        apex = center  # the same box centre, of the whole mesh: found once
     else:
         apex = select.bbox_center(mesh.vertices, mesh.faces)
     faces = select.cone_faces(mesh.vertices, mesh.faces, apex, cone.axis, cone.half_angle_deg)
-    resolved = {"cone": {**cone.model_dump(), "apex": apex.tolist()}}
-    return Selection(select.nonempty(faces), center, resolved)
+    return select.nonempty(faces), apex
 
 
 def _region_faces(given: MeshInput, ctx: Context) -> np.ndarray:
@@ -225,13 +264,19 @@ def region_faces(mesh: Mesh, selection: Selection) -> np.ndarray:
     return mesh.faces[selection.faces]
 
 
-def _center(mesh: Mesh, face_ids: np.ndarray | None, center) -> np.ndarray:
-    """A world point, or the centre named (``auto`` starts from the bounding-box centre) of
-    the faces ``face_ids`` (None: all), which are copied out only then."""
+def welded_faces(mesh: Mesh, selection: Selection) -> np.ndarray:
+    """(m, 3) int: the region's faces welded (``selection.links``), what the fit reads: a
+    triangle soup is fitted as the surface it shows."""
+    return region_faces(mesh, selection) if selection.links is None else selection.links
+
+
+def _center(mesh: Mesh, face_ids: np.ndarray, center) -> np.ndarray:
+    """A world point, or the centre named (``auto`` starts from the box centre) of the
+    faces ``face_ids``, copied out only then (not for the whole mesh)."""
     if not isinstance(center, str):
         return np.asarray(center, dtype=np.float64)
     name = "bbox_center" if center == "auto" else center
-    faces = mesh.faces if face_ids is None else mesh.faces[face_ids]
+    faces = mesh.faces if len(face_ids) == len(mesh.faces) else mesh.faces[face_ids]
     return select.named_center(mesh.vertices, faces, name)
 
 
@@ -322,6 +367,11 @@ class MeshRegion:
         """(m,) int: the region's file face ids, ascending."""
         return self.selection.faces
 
+    @property
+    def pieces(self) -> select.RegionPieces:
+        """The region's connected pieces (``count > 1``: the region is several pieces)."""
+        return self.selection.pieces
+
 
 def resolve(
     mesh: Mesh, selection: Selection, params: MeshParams, ctx: Context
@@ -341,7 +391,7 @@ def resolve(
     choose = fit_region if params.auto else default_choice  # a search, or its start alone
     fit = choose(
         mesh.vertices,
-        region_faces(mesh, selection),
+        welded_faces(mesh, selection),
         fixed,
         fit_bounds(params),
         method=params.method,
@@ -442,8 +492,8 @@ def flatten(given: MeshInput, ctx: Context) -> MeshRegion:
     mesh, params = given.mesh, given.params
     selection = select_region(given, ctx)
     chart, frame, fit = resolve(mesh, selection, params, ctx)
-    if fit is not None:
-        flat = fit.region
+    if fit is not None and selection.links is None:
+        flat = fit.region  # else fitted on the faces welded: flattened with the file's ids
     else:
         faces = region_faces(mesh, selection)
         flat = flatten_region(
@@ -454,10 +504,16 @@ def flatten(given: MeshInput, ctx: Context) -> MeshRegion:
 
 
 def untangle_layout(mesh: Mesh, flat: FlatRegion) -> Untangled:
-    """The region's layout made fold-free (:func:`transforms.untangle`)."""
+    """The region's layout made fold-free (:func:`transforms.untangle`), on the faces
+    welded (``flat.links``): a vertex that repeats another's position moves with it."""
     shapes = mesh.vertices[flat.vertex_ids]
     front = flat.layout.front_orientation(flat.validation.winding)
-    return untangle(flat.x, flat.y, flat.faces, shapes, front)
+    done = untangle(flat.x, flat.y, flat.links, shapes, front)
+    if not len(done.moved):
+        return done
+    x, y = done.x[flat.weld], done.y[flat.weld]
+    moved = np.flatnonzero((x != flat.x) | (y != flat.y))
+    return replace(done, x=x, y=y, moved=moved)
 
 
 def map_triangles(region: MeshRegion, ctx: Context) -> MapTriangles:

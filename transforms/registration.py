@@ -357,6 +357,20 @@ class RegionScans:
         moved = apply(matrix, self.follow_vertices[self.follow_faces].mean(axis=1))
         return inside[tree.query(moved)[1]]
 
+    def agreement(self, matrix: np.ndarray, within: float) -> tuple[float, float]:
+        """How far the whole scans agree under the 4x4 ``matrix``: the share of the
+        follow-up's samples within ``within`` of the baseline's (along its normals, and no
+        farther than ``within`` plus twice their spacing from the nearest), and the share of
+        the baseline's within it of the moved follow-up's."""
+        moved = Surface(apply(matrix, self.follow.points), unit_rows(
+            self.follow.normals @ matrix[:3, :3].T)[0])  # fmt: skip
+        shares = []
+        for source, target, pose in ((self.follow, self.base, matrix), (self.base, moved, None)):
+            found = measured(source, target, np.eye(4) if pose is None else pose)
+            near = found.distances <= within + on_surface_distance(target)
+            shares.append(float(np.mean((found.residuals <= within) & near)))
+        return shares[0], shares[1]
+
     def surface_over(self, over: np.ndarray) -> Surface | None:
         """The samples of the follow-up faces ``over`` ((m,) bool), or None if none is."""
         if not over.any():
@@ -383,21 +397,14 @@ class OnRegion:
 REGION_ROUNDS = 3
 
 
-def register_region(
-    scans: RegionScans, pairs: tuple[np.ndarray, np.ndarray] | None = None, scale: bool = False
-) -> OnRegion:
-    """The follow-up registered on the baseline's region (section 15): started on the whole
-    scans (:func:`register`, which a cropped follow-up survives), then, up to
-    ``REGION_ROUNDS`` times, the follow-up's faces over the region chosen (:meth:`over`) and
-    their samples aligned by :func:`icp` on the region's, until the choice holds. The
-    residuals are the follow-up's region's, against the baseline's region alone.
-
-    Raises
-    ------
-    RegistrationAmbiguous
-        As :func:`register`.
-    """
-    found = register(scans.follow, scans.base, pairs, scale)
+def register_region(scans: RegionScans, whole: Registration, scale: bool = False) -> OnRegion:
+    """The follow-up registered on the baseline's region (section 15), from ``whole``, its
+    registration on the whole scans (:func:`register`, which a cropped follow-up survives):
+    up to ``REGION_ROUNDS`` times, the follow-up's faces over the region chosen
+    (:meth:`RegionScans.over`) and their samples aligned by :func:`icp` on the region's,
+    until the choice holds. The residuals are the follow-up's region's, against the
+    baseline's region alone."""
+    found = whole
     over = np.zeros(len(scans.follow_faces), dtype=bool)
     source = None
     for _ in range(REGION_ROUNDS):

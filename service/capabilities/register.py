@@ -18,6 +18,7 @@ from transforms.registration import (
     RegionScans,
     RegistrationAmbiguous,
     Surface,
+    register,
     register_region,
 )
 
@@ -114,9 +115,13 @@ OVERLAP_MM = 2.0
 #: ... or, without ``units``, within this share of the region's RMS distance from its
 #: centroid (2 mm on the bundled fsaverage scalp, whose spread is 83 mm).
 OVERLAP_SHARE = 1 / 40
-#: The least share of the follow-up's area on the baseline for a registration to be given:
-#: most of it (a cropped follow-up lies on the baseline whole; a rigid fit of a scan 5 %
-#: larger leaves about a third on it).
+#: The least share of the follow-up's region's area on the baseline's region for a
+#: registration to be given: most of it (a cropped follow-up lies on the baseline whole; a
+#: rigid fit of a scan 5 % larger leaves about a third on it). The whole scans must agree as
+#: far (the larger of the follow-up's share on the baseline and the baseline's on it): a
+#: region alone, turned half round or scaled, may fit where the scans do not (the scalp's
+#: dome on another part of a half head: 57-67 % of its region on the scalp, 31-44 % of the
+#: follow-up on the baseline).
 MIN_OVERLAP = 0.5
 
 
@@ -188,15 +193,18 @@ def register_scans(given: RegisterInput, ctx: Context) -> Registered:
     if not similar and outside is not None:
         raise _unregistered("a rigid motion keeps sizes", outside, similar, landmarks_help=False)
     try:
-        on = register_region(scans, pairs, scale=similar)
+        whole = register(scans.follow, scans.base, pairs, scale=similar)
     except RegistrationAmbiguous as error:
         raise _unregistered(str(error), _mismatch(scans, None), similar) from None
     within = OVERLAP_MM / scale if scale is not None else OVERLAP_SHARE * scans.target.size
+    _check_agreement(scans, whole.matrix, within, scale, similar, None)
+    on = register_region(scans, whole, scale=similar)
     on_base = on.found.residuals <= within
     overlap = float(on_base.mean()) if on_base.size else 0.0
     if overlap < MIN_OVERLAP:
         why = _too_little(on, overlap, within, scale)
         raise _unregistered(why, _mismatch(scans, on), similar)
+    _check_agreement(scans, on.found.matrix, within, scale, similar, on)
     residuals = on.found.residuals[on_base]
     rms, p95 = float(np.sqrt(np.mean(residuals**2))), float(np.percentile(residuals, 95))
     # Baseline local = R (s A p + t - c) = s R A (p - A^T (c - t) / s): the same angles.
@@ -218,15 +226,35 @@ def _too_little(on: OnRegion, overlap: float, within: float, scale: float | None
     distance it counts within, mesh units)."""
     if on.source is None:
         return "after the best alignment found none of it lies over the baseline's region"
-    distance = (
-        f"{OVERLAP_MM:g} mm"
-        if scale is not None
-        else f"{within:.3g} mesh units (1/{1 / OVERLAP_SHARE:g} of the region's spread)"
-    )
     return (
         f"after the best alignment found only {overlap:.0%} of its area over the baseline's "
-        f"region lies within {distance} of that region (at least {MIN_OVERLAP:.0%})"
+        f"region lies within {_distance(within, scale)} of that region (at least "
+        f"{MIN_OVERLAP:.0%})"
     )
+
+
+def _check_agreement(scans: RegionScans, matrix, within, scale, similar, on) -> None:
+    """Refuse a registration under whose 4x4 ``matrix`` the whole scans disagree: checked
+    on the whole scans' alignment (before the regions', which a misplaced start would only
+    spend time on) and on the regions' (``on``), which must not slide the scans apart."""
+    agree = scans.agreement(matrix, within)
+    if max(agree) >= MIN_OVERLAP:
+        return
+    stage = "the whole scans'" if on is None else "the regions'"
+    distance = _distance(within, scale)
+    why = (
+        f"after the best alignment found ({stage}) only {agree[0]:.0%} of the follow-up lies "
+        f"within {distance} of the baseline, and {agree[1]:.0%} of the baseline within it of "
+        f"the follow-up (at least {MIN_OVERLAP:.0%} of either)"
+    )
+    raise _unregistered(why, _mismatch(scans, on), similar)
+
+
+def _distance(within: float, scale: float | None) -> str:
+    """The overlap's distance as the refusals say it."""
+    if scale is not None:
+        return f"{OVERLAP_MM:g} mm"
+    return f"{within:.3g} mesh units (1/{1 / OVERLAP_SHARE:g} of the region's spread)"
 
 
 #: Follow-ups whose samples spread this many times as far as the baseline's, or as few, are
@@ -406,7 +434,9 @@ ROWS = (
         "so that the follow-up's map lands on the baseline's; refuses (422) when after the "
         f"best alignment less than {MIN_OVERLAP:.0%} of the follow-up's region lies within "
         f"{OVERLAP_MM:g} mm (without `units`, {OVERLAP_SHARE:.3g} of the region's spread) of "
-        "the baseline's region. Or, by the Accept header or params.output, the overlay: the "
+        "the baseline's region, or when the whole scans disagree (less than "
+        f"{MIN_OVERLAP:.0%} of the follow-up within it of the baseline and of the baseline of "
+        "the follow-up). Or, by the Accept header or params.output, the overlay: the "
         "baseline's map with both regions' boundaries and the zones (SVG or PNG).",
         params=RegisterParams,
         mesh=MeshPart("baseline"),

@@ -473,3 +473,18 @@ async def test_the_document_requires_both_scans_and_nothing_else(client):
     files = {"baseline": (NAME, data), "follow_up": (NAME, data)}
     answer = (await client.post("/v1/register", files=files)).json()  # no params at all
     assert_identity(answer)
+
+
+async def test_a_follow_up_far_smaller_than_the_region_is_told_so_in_rigid_mode(client):
+    """A follow-up a tenth of the baseline's size (in cm on a baseline in mm) is refused before
+    any alignment, weighed against the baseline's region (a head-only crop of a body is as
+    large as its head, not as the body): the ratio it is told is its spread over the scalp's,
+    each integrated exactly over its triangles."""
+    data, kept, _, moved = follow_up(scale=0.1)
+    body = problem(await register(client, {}, data), 422, "follow_up")
+    told = re.search(r"it is ([\d.]+) times the baseline region's size", body["detail"])
+    vertices, faces = load_sample(NAME)
+    region = (await flatten(client, NAME, SCALP)).json()["faces"]["ids"]
+    ratio = spread(moved, kept) / spread(vertices, faces[region])
+    assert told and float(told.group(1)) == pytest.approx(ratio, rel=0.02), (body, ratio)
+    assert "send mode similarity" in body["detail"]

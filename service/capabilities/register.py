@@ -271,7 +271,7 @@ def _out_of_scale(follow: Surface, scans: RegionScans, factor: float) -> str | N
     """What is wrong with ``follow``'s size, when its samples spread more than ``factor``
     times as far as the whole baseline's, or less than 1/``factor`` of its region's; else
     None."""
-    if follow.size > factor * scans.base.size:
+    if follow.size > factor * scans.base.size > 0:
         return f"it is {follow.size / scans.base.size:.3g} times the baseline's size"
     if follow.size * factor < scans.target.size:
         return f"it is {follow.size / scans.target.size:.3g} times the baseline region's size"
@@ -281,7 +281,7 @@ def _out_of_scale(follow: Surface, scans: RegionScans, factor: float) -> str | N
 def _mismatch(scans: RegionScans, on: OnRegion | None) -> str | None:
     """The size hint of a refusal after an alignment: the follow-up's region against the
     baseline's once found, else the follow-up's whole (``SIZE_MISMATCH``)."""
-    if on is None or on.source is None:
+    if on is None or on.source is None or not scans.target.size > 0:
         return _out_of_scale(scans.follow, scans, SIZE_MISMATCH)
     ratio = on.source.size / scans.target.size
     if 1 / SIZE_MISMATCH <= ratio <= SIZE_MISMATCH:

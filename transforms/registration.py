@@ -1,7 +1,9 @@
 """A follow-up scan registered to a baseline (docs/math.md, section 15): seeded by landmarks
 (Umeyama's least squares, :func:`trimesh.registration.procrustes`) or by the surfaces'
 moments from several starts, refined by point-to-plane ICP over area-weighted samples with
-the pairs beyond a trimming distance left out, so that a cropped follow-up still aligns.
+the pairs beyond a trimming distance left out, so that a cropped follow-up still aligns:
+first on the whole scans, then region to region (the follow-up's faces over the baseline's
+region on that region, :func:`register_region`).
 
 The ICP is small_gicp's (``PLANE_ICP``: about 1 MB installed, numpy only); Open3D ships the
 same at about 900 MB, and trimesh's ICP is point-to-point, which slides along a smooth head

@@ -1,7 +1,8 @@
-"""``POST /v1/register``: a follow-up scan registered to the baseline (landmarks or the
-scans' moments, then point-to-plane ICP), answered with the transform, the residuals and the
-baseline's frame expressed for the follow-up, so that both scans get the same map
-(docs/math.md, section 15)."""
+"""``POST /v1/register``: a follow-up scan registered to the baseline on its region
+(landmarks or the scans' moments, then point-to-plane ICP on the whole scans and region to
+region), answered with the transform, the regions' residuals and the baseline's frame
+expressed for the follow-up, so that both scans get the same map (docs/math.md, section
+15)."""
 
 from __future__ import annotations
 

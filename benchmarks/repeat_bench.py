@@ -51,7 +51,12 @@ from transforms import (
     PoleCap,
     flatten_region,
 )
-from transforms.registration import RegistrationAmbiguous, Surface, register
+from transforms.registration import (
+    RegionScans,
+    RegistrationAmbiguous,
+    register,
+    register_region,
+)
 
 SIGMA = 0.3
 OFFSET_MM = 10.0
@@ -219,12 +224,9 @@ def follow_up_rows(head: Head) -> list[str]:
             pairs = (np.asarray(follow_marks), np.asarray(list(head.marks.values())))
         start = time.perf_counter()
         try:
-            found = register(
-                Surface.of(moved, kept),
-                Surface.of(v, f),
-                pairs,
-                focus=Surface.of(v, f[region]),
-            )
+            scans = RegionScans(moved, kept, v, f, np.unique(region))
+            whole = register(scans.follow, scans.base, pairs)
+            found = register_region(scans, whole).found
         except RegistrationAmbiguous as refused:
             rows.append(f"| {head.scan.name} | {seeded} | refused: {refused} | | | | | |")
             continue

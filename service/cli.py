@@ -11,7 +11,7 @@
     meshflat locate MESH ... --params '{"theta": [...], "phi": [...]}'
     meshflat measure MESH ... --zones zones.json [--units mm] [--out FILE.json|.svg|.png]
     meshflat sites MESH ... [--density 40] [--zones zones.json] [--units mm] [--out sites.ply]
-    meshflat register BASE FOLLOW_UP ... --units mm [--params '{"landmarks": ...}'] --out frame.json
+    meshflat register BASE FOLLOW_UP ... [--units mm] [--params JSON] --out frame.json
                       [--density-map map.png --params '{"density_range": [20, 60]}']
     meshflat batch MANIFEST.jsonl --out DIR [--processes N] [--shard-count N [--shard-index I]]
 

@@ -10,6 +10,7 @@ from pydantic import BaseModel
 from pydantic.json_schema import models_json_schema
 
 from .capabilities import JSON_CAPABILITIES, MESH_CAPABILITIES, MeshCapability
+from .capabilities.inputs import MeshPart
 from .meshio import reading_rules
 from .problems import PROBLEMS, ProblemDetails
 from .server.auth import PROTECTED_PREFIX
@@ -59,7 +60,8 @@ def multipart_body(capability: MeshCapability) -> dict:
     form = {
         "schema": {
             "type": "object",
-            "required": [capability.mesh.name],
+            # Every mesh part is read (a missing one is refused); the PNG parts may be left out.
+            "required": [part.name for part in capability.parts if isinstance(part, MeshPart)],
             "properties": {"params": params, **parts},
             "additionalProperties": False,  # a part the route does not read is refused
         },

@@ -1,7 +1,9 @@
 """A follow-up scan registered to a baseline (docs/math.md, section 15): seeded by landmarks
 (Umeyama's least squares, :func:`trimesh.registration.procrustes`) or by the surfaces'
 moments from several starts, refined by point-to-plane ICP over area-weighted samples with
-the pairs beyond a trimming distance left out, so that a cropped follow-up still aligns.
+the pairs beyond a trimming distance left out, so that a cropped follow-up still aligns:
+first on the whole scans, then region to region (the follow-up's faces over the baseline's
+region on that region, :func:`register_region`).
 
 The ICP is small_gicp's (``PLANE_ICP``: about 1 MB installed, numpy only); Open3D ships the
 same at about 900 MB, and trimesh's ICP is point-to-point, which slides along a smooth head
@@ -262,16 +264,14 @@ def register(
     target: Surface,
     pairs: tuple[np.ndarray, np.ndarray] | None = None,
     scale: bool = False,
-    focus: Surface | None = None,
 ) -> Registration:
     """The follow-up (``source``) registered to the baseline (``target``, the whole scan):
     from the landmarks' ``pairs`` ((k, 3) each, follow-up then baseline) when given; else
     each of :func:`moment_starts` is refined on every ``COARSE_EVERY``-th sample, the two
     best distinct ones (by the share of samples on the target) on all of them, and the better
     kept, unless the other fits about as well (``AMBIGUOUS``) and either fits (``PLAUSIBLE``).
-    Then refined on ``focus`` (the
-    part of the baseline to align on) when given; the residuals are against the whole
-    baseline.
+    The residuals are against the whole baseline (:func:`register_region` goes on to the
+    region).
 
     Raises
     ------
@@ -280,12 +280,8 @@ def register(
         the baseline within ``AMBIGUOUS`` of each other, the better at least ``PLAUSIBLE``.
     """
     if pairs is not None:
-        found = icp(source, target, from_pairs(*pairs, scale=scale), scale)
-    else:
-        found = _best_of_moments(source, target, scale)
-    if focus is not None:
-        found = measured(source, target, icp(source, focus, found.matrix, scale).matrix)
-    return found
+        return icp(source, target, from_pairs(*pairs, scale=scale), scale)
+    return _best_of_moments(source, target, scale)
 
 
 def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registration:
@@ -317,6 +313,116 @@ def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registrat
         if shares[0] >= PLAUSIBLE and shares[0] - shares[1] < AMBIGUOUS:
             raise RegistrationAmbiguous(_angle(refined[0].matrix, refined[1].matrix), shares)
     return refined[0]
+
+
+@dataclass(frozen=True)
+class RegionScans:
+    """The follow-up (``follow_vertices`` (n, 3) float, ``follow_faces`` (m, 3) int), the
+    baseline (``base_vertices``, ``base_faces``) and its region (``region``: (k,) int, ids of
+    ``base_faces``, ascending and distinct), each sampled once (section 15)."""
+
+    follow_vertices: np.ndarray
+    follow_faces: np.ndarray
+    base_vertices: np.ndarray
+    base_faces: np.ndarray
+    region: np.ndarray
+
+    @cached_property
+    def follow(self) -> Surface:
+        """The whole follow-up's samples."""
+        return Surface.of(self.follow_vertices, self.follow_faces)
+
+    @cached_property
+    def base(self) -> Surface:
+        """The whole baseline's samples."""
+        return Surface.of(self.base_vertices, self.base_faces)
+
+    @cached_property
+    def target(self) -> Surface:
+        """The baseline's region's samples (``SAMPLES`` of them, whatever its share)."""
+        if len(self.region) == len(self.base_faces):
+            return self.base
+        return Surface.of(self.base_vertices, self.base_faces[self.region])
+
+    @cached_property
+    def _centroids(self) -> tuple[cKDTree, np.ndarray]:
+        """A k-d tree of the baseline's face centroids, and which lie in the region."""
+        inside = np.zeros(len(self.base_faces), dtype=bool)
+        inside[self.region] = True
+        return cKDTree(self.base_vertices[self.base_faces].mean(axis=1)), inside
+
+    def over(self, matrix: np.ndarray) -> np.ndarray:
+        """(m,) bool: the follow-up's region under the 4x4 ``matrix``: its faces whose moved
+        centroid's nearest baseline face centroid is a region face's (a scan registered to
+        itself has the region's own faces)."""
+        tree, inside = self._centroids
+        moved = apply(matrix, self.follow_vertices[self.follow_faces].mean(axis=1))
+        return inside[tree.query(moved)[1]]
+
+    def agreement(self, matrix: np.ndarray, within: float) -> tuple[float, float]:
+        """How far the whole scans agree under the 4x4 ``matrix``: the share of the
+        follow-up's samples within ``within`` of the baseline's (along its normals, and no
+        farther than ``within`` plus twice their spacing from the nearest), and the share of
+        the baseline's within it of the moved follow-up's."""
+        moved = Surface(apply(matrix, self.follow.points), unit_rows(
+            self.follow.normals @ matrix[:3, :3].T)[0])  # fmt: skip
+        shares = []
+        for source, target, pose in ((self.follow, self.base, matrix), (self.base, moved, None)):
+            found = measured(source, target, np.eye(4) if pose is None else pose)
+            near = found.distances <= within + on_surface_distance(target)
+            shares.append(float(np.mean((found.residuals <= within) & near)))
+        return shares[0], shares[1]
+
+    def surface_over(self, over: np.ndarray) -> Surface | None:
+        """The samples of the follow-up faces ``over`` ((m,) bool), or None if none is."""
+        if not over.any():
+            return None
+        if over.all():
+            return self.follow
+        return Surface.of(self.follow_vertices, self.follow_faces[over])
+
+
+@dataclass(frozen=True)
+class OnRegion:
+    """A follow-up registered on the baseline's region: ``found``, with the residuals of the
+    follow-up's region's samples (``source``, None when no follow-up face lies over the
+    region; its residuals then are empty) against the baseline's region; ``faces``, (m,)
+    bool, the follow-up's faces over the region."""
+
+    found: Registration
+    faces: np.ndarray
+    source: Surface | None
+
+
+#: Times the follow-up's region is chosen again and aligned on the baseline's at the most:
+#: each alignment moves its border, which the next choice follows.
+REGION_ROUNDS = 3
+
+
+def register_region(scans: RegionScans, whole: Registration, scale: bool = False) -> OnRegion:
+    """The follow-up registered on the baseline's region (section 15), from ``whole``, its
+    registration on the whole scans (:func:`register`, which a cropped follow-up survives):
+    up to ``REGION_ROUNDS`` times, the follow-up's faces over the region chosen
+    (:meth:`RegionScans.over`) and their samples aligned by :func:`icp` on the region's,
+    until the choice holds. The residuals are the follow-up's region's, against the
+    baseline's region alone."""
+    found = whole
+    over = np.zeros(len(scans.follow_faces), dtype=bool)
+    source = None
+    for _ in range(REGION_ROUNDS):
+        chosen = scans.over(found.matrix)
+        if np.array_equal(chosen, over):
+            break
+        over, source = chosen, scans.surface_over(chosen)
+        if source is None:
+            break
+        if source is scans.follow and scans.target is scans.base:  # the start's own pair
+            break
+        found = icp(source, scans.target, found.matrix, scale)
+    if source is None:
+        empty = np.empty(0)
+        return OnRegion(Registration(found.matrix, found.scale, empty, empty), over, None)
+    return OnRegion(measured(source, scans.target, found.matrix), over, source)
 
 
 def on_surface_distance(surface: Surface) -> float:

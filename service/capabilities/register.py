@@ -1,7 +1,8 @@
-"""``POST /v1/register``: a follow-up scan registered to the baseline (landmarks or the
-scans' moments, then point-to-plane ICP), answered with the transform, the residuals and the
-baseline's frame expressed for the follow-up, so that both scans get the same map
-(docs/math.md, section 15)."""
+"""``POST /v1/register``: a follow-up scan registered to the baseline on its region
+(landmarks or the scans' moments, then point-to-plane ICP on the whole scans and region to
+region), answered with the transform, the regions' residuals and the baseline's frame
+expressed for the follow-up, so that both scans get the same map (docs/math.md, section
+15)."""
 
 from __future__ import annotations
 
@@ -14,12 +15,12 @@ from pydantic import ConfigDict, Field, model_validator
 
 from transforms import Frame, flatten_region
 from transforms.registration import (
-    Registration,
+    OnRegion,
+    RegionScans,
     RegistrationAmbiguous,
     Surface,
-    apply,
-    on_surface_distance,
     register,
+    register_region,
 )
 
 from ..errors import InvalidInput
@@ -33,9 +34,9 @@ from .inputs import MeshPart, PngFile
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, Landmarks, MeshParams
 from .region.pictures import map_renderers
-from .region.resolve import MeshInput, MeshRegion, checked_landmarks, flatten, region_faces
+from .region.resolve import MeshInput, MeshRegion, checked_landmarks, flatten
 from .rows import MeshCapability
-from .units import KnownDistance, LengthUnit, mm_per_unit, warn_of_size
+from .units import KnownDistance, LengthUnit, Units, in_mm, mm_per_unit, warn_of_size
 from .warnings import WarnedAnswer
 
 #: Landmarks at vertices of the examples' unit icosahedron (the left and right tragi on
@@ -64,8 +65,8 @@ class ScanLandmarks(Strict):
 
 class RegisterParams(MeshParams, PictureParams):
     """The JSON of the ``params`` field of /v1/register: the baseline's region and frame as
-    for /v1/flatten (``region`` is the part to align on), the landmarks, the mode and the
-    units; zones to draw on the overlay picture."""
+    for /v1/flatten (``region`` is the part to align on and to measure on), the landmarks, the
+    mode and the units; zones to draw on the overlay picture."""
 
     landmarks: ScanLandmarks | None = Field(
         None,
@@ -76,8 +77,12 @@ class RegisterParams(MeshParams, PictureParams):
         RegisterMode.RIGID,
         description="rigid (a rotation and a translation) or similarity (and a scale).",
     )
-    units: choice(LengthUnit) | KnownDistance = Field(
-        description="The baseline's length unit, or a known distance: the residuals in mm."
+    units: choice(LengthUnit) | KnownDistance | None = Field(
+        None,
+        description="The baseline's length unit (mm, cm or m), or its scale from a known "
+        "distance: the residuals in mm too, and the overlap counted within 2 mm. Without it, "
+        "the residuals are in mesh units alone and the overlap is counted within 1/40 of the "
+        "baseline region's spread about its centroid.",
     )
     zones: Annotated[list[Zone], Field(max_length=256)] = Field(
         [], description="Zones drawn on the baseline's map (as for /v1/measure), for the picture."
@@ -106,42 +111,52 @@ class RegisterParams(MeshParams, PictureParams):
     )
 
 
-#: A follow-up point lies on the baseline when within this distance of it (mm).
+#: A follow-up point lies on the baseline's region when within this distance of it (mm)...
 OVERLAP_MM = 2.0
-#: The least share of the follow-up's area on the baseline for a registration to be given:
-#: most of it (a cropped follow-up lies on the baseline whole; a rigid fit of a scan 5 %
-#: larger leaves about a third on it).
+#: ... or, without ``units``, within this share of the region's RMS distance from its
+#: centroid (2 mm on the bundled fsaverage scalp, whose spread is 83 mm).
+OVERLAP_SHARE = 1 / 40
+#: The least share of the follow-up's region's area on the baseline's region for a
+#: registration to be given: most of it (a cropped follow-up lies on the baseline whole; a
+#: rigid fit of a scan 5 % larger leaves about a third on it). The whole scans must agree as
+#: far (the larger of the follow-up's share on the baseline and the baseline's on it): a
+#: region alone, turned half round or scaled, may fit where the scans do not (the scalp's
+#: dome on another part of a half head: 57-67 % of its region on the scalp, 31-44 % of the
+#: follow-up on the baseline).
 MIN_OVERLAP = 0.5
 
 
 @dataclass(frozen=True)
 class Registered:
-    """A follow-up registered to the baseline (docs/math.md, section 15).
+    """A follow-up registered to the baseline on its region (docs/math.md, section 15).
 
     Attributes
     ----------
     region : MeshRegion, the baseline's region, flattened with its frame
-    found : Registration, the transform and the residuals
+    on : OnRegion, the transform, the follow-up's region and its residuals against the
+        baseline's region (mesh units)
     follow_boundary : (k, 2, 2) float, the follow-up's region's boundary edges on the
-        baseline's map (its faces over the baseline's region, mapped with ``frame``)
+        baseline's map (mapped with ``frame``)
     zones : tuple of Outline, checked, to draw
     seeded_by : "landmarks" or "moments"
-    overlap : float, the share of the follow-up's area within ``overlap_mm`` of the baseline
-    overlap_mm : float, ``OVERLAP_MM``
-    rms_mm, p95_mm : float, the residuals over that overlap
+    overlap : float, the share of the follow-up's region's area within
+        ``overlap_distance`` of the baseline's region
+    overlap_distance : float, mesh units: ``OVERLAP_MM`` with units, else ``OVERLAP_SHARE``
+        of the baseline region's spread
+    rms, p95 : float, mesh units, the residuals over that overlap
     frame : Frame, the baseline's frame expressed for the follow-up
-    mm_per_unit : float
+    mm_per_unit : float or None, from params.units
     """
 
     region: MeshRegion
-    found: Registration
+    on: OnRegion
     seeded_by: str
     overlap: float
-    overlap_mm: float
-    rms_mm: float
-    p95_mm: float
+    overlap_distance: float
+    rms: float
+    p95: float
     frame: Frame
-    mm_per_unit: float
+    mm_per_unit: float | None
     follow_boundary: np.ndarray
     zones: tuple[Outline, ...]
 
@@ -164,46 +179,47 @@ class RegisterInput:
 
 
 def register_scans(given: RegisterInput, ctx: Context) -> Registered:
-    """The follow-up registered to the baseline (:func:`transforms.registration.register`),
-    on the baseline's ``region``; refused when too little of it lies on the baseline
+    """The follow-up registered to the baseline on the baseline's ``region``
+    (:func:`transforms.registration.register_region`): its sizes, overlap and residuals are
+    the regions'; refused when too little of the follow-up's region lies on the baseline's
     afterwards."""
     mesh, follow, params = given.baseline, given.follow_up, given.params
     scale = mm_per_unit(params.units)
     region = flatten(MeshInput(mesh, params, given.mask), ctx)
-    base = Surface.of(mesh.vertices, mesh.faces)
-    focus = Surface.of(mesh.vertices, region_faces(mesh, region.selection))
-    moving = Surface.of(follow.vertices, follow.faces)
+    scans = RegionScans(follow.vertices, follow.faces, mesh.vertices, mesh.faces,
+                        region.selection.faces)  # fmt: skip
     pairs = _landmark_pairs(mesh, follow, params)
     similar = params.mode is RegisterMode.SIMILARITY
-    ratio = moving.size / base.size
-    if not similar and not 1 / OTHER_UNITS < ratio < OTHER_UNITS:
-        raise _unregistered("a rigid motion keeps sizes", ratio, similar, landmarks_help=False)
+    outside = _out_of_scale(scans.follow, scans, OTHER_UNITS)
+    if not similar and outside is not None:
+        raise _unregistered("a rigid motion keeps sizes", outside, similar, landmarks_help=False)
     try:
-        found = register(moving, base, pairs, scale=similar, focus=focus)
+        whole = register(scans.follow, scans.base, pairs, scale=similar)
     except RegistrationAmbiguous as error:
-        raise _unregistered(str(error), ratio, similar) from None
-    on_base = found.residuals * scale <= OVERLAP_MM
-    overlap = float(on_base.mean())
+        raise _unregistered(str(error), _mismatch(scans, None), similar) from None
+    within = OVERLAP_MM / scale if scale is not None else OVERLAP_SHARE * scans.target.size
+    _check_agreement(scans, whole.matrix, within, scale, similar, None)
+    on = register_region(scans, whole, scale=similar)
+    on_base = on.found.residuals <= within
+    overlap = float(on_base.mean()) if on_base.size else 0.0
     if overlap < MIN_OVERLAP:
-        raise _unregistered(
-            f"after the best alignment found only {overlap:.0%} of its area lies within "
-            f"{OVERLAP_MM:g} mm of the baseline (at least {MIN_OVERLAP:.0%})",
-            ratio,
-            similar,
-        )
-    residuals = found.residuals[on_base] * scale
+        why = _too_little(on, overlap, within, scale)
+        raise _unregistered(why, _mismatch(scans, on), similar)
+    _check_agreement(scans, on.found.matrix, within, scale, similar, on)
+    residuals = on.found.residuals[on_base]
     rms, p95 = float(np.sqrt(np.mean(residuals**2))), float(np.percentile(residuals, 95))
     # Baseline local = R (s A p + t - c) = s R A (p - A^T (c - t) / s): the same angles.
+    found = on.found
     turn, shift = found.matrix[:3, :3] / found.scale, found.matrix[:3, 3]
     rotation = region.frame.rotation @ turn
     center = turn.T @ (region.frame.center - shift) / found.scale
     frame = Frame.from_matrix(rotation, center)
     seeded = "landmarks" if pairs is not None else "moments"
-    boundary = _follow_boundary(follow, found, focus, frame, region)
+    boundary = _follow_boundary(follow, on.faces, frame, region)
     zones = tuple(checked_zone(zone, k) for k, zone in enumerate(params.zones))
     _warn(ctx, params, region, zones, scale)
     return Registered(
-        region, found, seeded, overlap, OVERLAP_MM, rms, p95, frame, scale, boundary, zones,
+        region, on, seeded, overlap, within, rms, p95, frame, scale, boundary, zones,
     )  # fmt: skip
 
 
@@ -216,41 +232,98 @@ def _warn(ctx: Context, params: RegisterParams, region, zones: tuple[Outline, ..
             warn_outside(ctx, region, f"zones.{k}", outline.name, outline.rings[0])
 
 
+def _too_little(on: OnRegion, overlap: float, within: float, scale: float | None) -> str:
+    """Why a registration whose overlap is below ``MIN_OVERLAP`` is refused (``within``: the
+    distance it counts within, mesh units)."""
+    if on.source is None:
+        return "after the best alignment found none of it lies over the baseline's region"
+    return (
+        f"after the best alignment found only {overlap:.0%} of its area over the baseline's "
+        f"region lies within {_distance(within, scale)} of that region (at least "
+        f"{MIN_OVERLAP:.0%})"
+    )
+
+
+def _check_agreement(scans: RegionScans, matrix, within, scale, similar, on) -> None:
+    """Refuse a registration under whose 4x4 ``matrix`` the whole scans disagree: checked
+    on the whole scans' alignment (before the regions', which a misplaced start would only
+    spend time on) and on the regions' (``on``), which must not slide the scans apart."""
+    agree = scans.agreement(matrix, within)
+    if max(agree) >= MIN_OVERLAP:
+        return
+    stage = "the whole scans'" if on is None else "the regions'"
+    distance = _distance(within, scale)
+    why = (
+        f"after the best alignment found ({stage}) only {agree[0]:.0%} of the follow-up lies "
+        f"within {distance} of the baseline, and {agree[1]:.0%} of the baseline within it of "
+        f"the follow-up (at least {MIN_OVERLAP:.0%} of either)"
+    )
+    raise _unregistered(why, _mismatch(scans, on), similar)
+
+
+def _distance(within: float, scale: float | None) -> str:
+    """The overlap's distance as the refusals say it."""
+    if scale is not None:
+        return f"{OVERLAP_MM:g} mm"
+    return f"{within:.3g} mesh units (1/{1 / OVERLAP_SHARE:g} of the region's spread)"
+
+
 #: Follow-ups whose samples spread this many times as far as the baseline's, or as few, are
 #: told that their units or scales may differ (a part of a head spreads at least 0.39 as far
 #: as the whole: the top tenth of each sample scan); in rigid mode, those beyond
-#: ``OTHER_UNITS`` times are refused before any alignment is tried.
+#: ``OTHER_UNITS`` times are refused before any alignment is tried. The follow-up's whole is
+#: weighed against the baseline's whole above and against its region below (a follow-up
+#: cropped to the region is as large as the region); the follow-up's region, once found,
+#: against the baseline's region.
 SIZE_MISMATCH, OTHER_UNITS = 2.5, 4.0
 
 
+def _out_of_scale(follow: Surface, scans: RegionScans, factor: float) -> str | None:
+    """What is wrong with ``follow``'s size, when its samples spread more than ``factor``
+    times as far as the whole baseline's, or less than 1/``factor`` of its region's; else
+    None."""
+    if follow.size > factor * scans.base.size > 0:
+        return f"it is {follow.size / scans.base.size:.3g} times the baseline's size"
+    if follow.size * factor < scans.target.size:
+        return f"it is {follow.size / scans.target.size:.3g} times the baseline region's size"
+    return None
+
+
+def _mismatch(scans: RegionScans, on: OnRegion | None) -> str | None:
+    """The size hint of a refusal after an alignment: the follow-up's region against the
+    baseline's once found, else the follow-up's whole (``SIZE_MISMATCH``)."""
+    if on is None or on.source is None or not scans.target.size > 0:
+        return _out_of_scale(scans.follow, scans, SIZE_MISMATCH)
+    ratio = on.source.size / scans.target.size
+    if 1 / SIZE_MISMATCH <= ratio <= SIZE_MISMATCH:
+        return None
+    return f"its part over the baseline's region is {ratio:.3g} times that region's size"
+
+
 def _unregistered(
-    why: str, size_ratio: float, similar: bool, landmarks_help: bool = True
+    why: str, outside: str | None, similar: bool, landmarks_help: bool = True
 ) -> InvalidInput:
     """The refusal of a follow-up that could not be registered: ``why``, and what may help
-    (``size_ratio``: how far its samples spread from their centroid, over the baseline's)."""
+    (``outside``: how its size differs from the baseline's, when it does by far)."""
     hints = ["give the landmarks of both scans, or a region both show"] if landmarks_help else []
-    if not similar and not 1 / SIZE_MISMATCH <= size_ratio <= SIZE_MISMATCH:
+    if not similar and outside is not None:
         hints.insert(
             0,
-            f"it is {size_ratio:.3g} times the baseline's size (its spread about its "
-            "centroid): if the scans' units or scales differ, send mode similarity (or the "
-            "follow-up in the baseline's units)",
+            f"{outside} (its spread about its centroid): if the scans' units or scales "
+            "differ, send mode similarity (or the follow-up in the baseline's units)",
         )
     elif not similar:
         hints.append("or mode similarity, if the scans differ in scale")
     return InvalidInput("follow_up", f"could not register it: {why}; {'; '.join(hints)}")
 
 
-def _follow_boundary(follow: Mesh, found, focus: Surface, frame: Frame, region) -> np.ndarray:
-    """(k, 2, 2) float: the boundary edges, on the map, of the follow-up's faces whose
-    registered centroids lie on the baseline's region (within two sample spacings of its
-    samples), flattened with the baseline's frame expressed for the follow-up."""
-    centroids = follow.vertices[follow.faces].mean(axis=1)
-    moved = apply(found.matrix, centroids)
-    near = focus.tree.query(moved)[0] <= on_surface_distance(focus)
-    if not near.any():
+def _follow_boundary(follow: Mesh, over: np.ndarray, frame: Frame, region) -> np.ndarray:
+    """(k, 2, 2) float: the boundary edges, on the map, of the follow-up's region (its faces
+    ``over`` the baseline's region), flattened with the baseline's frame expressed for the
+    follow-up."""
+    if not over.any():
         return np.empty((0, 2, 2))
-    flat = flatten_region(follow.vertices, follow.faces[near], frame, region.chart,
+    flat = flatten_region(follow.vertices, follow.faces[over], frame, region.chart,
                           layout=region.flat.layout)  # fmt: skip
     points = np.column_stack([flat.x, flat.y])
     return points[flat.validation.boundary_edges]
@@ -283,12 +356,25 @@ class RegisterResponse(WarnedAnswer):
         "the scans' moments (their principal axes in 24 turns, the best kept)."
     )
     overlap: float = Field(
-        description="The share of the follow-up's area within overlap_distance_mm of the "
-        "baseline's region after registration (a registration below half is refused)."
+        description="The share of the follow-up's region (its faces over the baseline's "
+        "region, as registered) whose area lies within overlap_distance of the baseline's "
+        "region after registration (a registration below half is refused)."
     )
-    overlap_distance_mm: float = Field(description="The distance overlap counts within, mm.")
-    rms_mm: float = Field(description="RMS of the residuals over the overlap, mm.")
-    p95_mm: float = Field(description="Their 95th percentile, mm.")
+    overlap_distance: float = Field(
+        description="The distance overlap counts within, mesh units: 2 mm with params.units, "
+        "else 1/40 of the baseline region's RMS distance from its centroid."
+    )
+    overlap_distance_mm: float | None = Field(
+        description="The same in mm (2; with params.units, else null)."
+    )
+    rms: float = Field(
+        description="RMS of the residuals (the follow-up's region against the baseline's "
+        "region) over the overlap, mesh units."
+    )
+    p95: float = Field(description="Their 95th percentile, mesh units.")
+    rms_mm: float | None = Field(description="rms in mm (with params.units, else null).")
+    p95_mm: float | None = Field(description="p95 in mm (with params.units, else null).")
+    units: Units | None = Field(description="The scale used; null without params.units.")
     frame: ResolvedParams = Field(
         description="The baseline's frame expressed for the follow-up: sent as the "
         "follow-up's params (method, sigma, center, rotation), its map lands on the "
@@ -297,16 +383,20 @@ class RegisterResponse(WarnedAnswer):
 
     @classmethod
     def of(cls, registered: Registered) -> RegisterResponse:
-        region = registered.region
+        region, found, scale = registered.region, registered.on.found, registered.mm_per_unit
         return cls.build(
             params=ResolvedParams.of_region(region),
-            transform=registered.found.matrix,
-            scale=registered.found.scale,
+            transform=found.matrix,
+            scale=found.scale,
             seeded_by=registered.seeded_by,
             overlap=registered.overlap,
-            overlap_distance_mm=registered.overlap_mm,
-            rms_mm=registered.rms_mm,
-            p95_mm=registered.p95_mm,
+            overlap_distance=registered.overlap_distance,
+            overlap_distance_mm=in_mm(registered.overlap_distance, scale),
+            rms=registered.rms,
+            p95=registered.p95,
+            rms_mm=in_mm(registered.rms, scale),
+            p95_mm=in_mm(registered.p95, scale),
+            units=None if scale is None else Units.build(mm_per_unit=scale),
             frame=ResolvedParams.of(region.chart, registered.frame),
         )
 
@@ -337,24 +427,28 @@ ROWS = (
         path="/v1/register",
         summary="Register a follow-up scan to the baseline",
         description="Multipart: the `baseline` and `follow_up` meshes and a `params` JSON "
-        "field: the baseline's region (the part to align on: the scalp changes over time, the "
-        "face and ears less) and frame as for /v1/flatten, `landmarks` of either scan, `mode` "
-        "(rigid or similarity) and `units`. Seeded by the landmarks of both scans when given, "
-        "else by the scans' moments (their principal axes in 24 turns, centroids or ends "
-        "matched, and in similarity mode also scaled to the scans' spreads; refused when two "
-        "distinct alignments fit about as well); refined by small_gicp's point-to-plane ICP "
-        "over area-weighted samples, trimmed so that a cropped follow-up still aligns "
-        "(docs/math.md, section 15). In rigid mode a follow-up more than "
-        f"{OTHER_UNITS:g} times the baseline's size, or less than "
-        f"1/{OTHER_UNITS:g} of it, is refused at once as in other units. Answers "
-        "the 4x4 transform onto the baseline, the RMS "
-        "and 95th percentile of the residuals over the overlap (mm), the overlap, and the "
-        "baseline's frame expressed for the follow-up, so that the follow-up's map lands on "
-        f"the baseline's; refuses (422) when after the best alignment less than "
-        f"{MIN_OVERLAP:.0%} of the follow-up lies within {OVERLAP_MM:g} "
-        "mm of the baseline. Or, by the Accept header or "
-        "params.output, the overlay: the baseline's map with both regions' boundaries and "
-        "the zones (SVG or PNG).",
+        "field: the baseline's region (the part to align on and to measure on: the scalp "
+        "changes over time, the face and ears less) and frame as for /v1/flatten, `landmarks` "
+        "of either scan, `mode` (rigid or similarity) and, optionally, `units`. Seeded by the "
+        "landmarks of both scans when given, else by the scans' moments (their principal axes "
+        "in 24 turns, centroids or ends matched, and in similarity mode also scaled to the "
+        "scans' spreads; refused when two distinct alignments fit about as well); refined by "
+        "small_gicp's point-to-plane ICP over area-weighted samples, trimmed so that a cropped "
+        "follow-up still aligns, first on the whole scans, then on the regions: the "
+        "follow-up's faces over the baseline's region aligned on that region (docs/math.md, "
+        "section 15). In rigid mode a follow-up more than "
+        f"{OTHER_UNITS:g} times the whole baseline's size, or less than "
+        f"1/{OTHER_UNITS:g} of its region's, is refused at once as in other units. Answers "
+        "the 4x4 transform onto the baseline, the RMS and 95th percentile of the residuals "
+        "of the follow-up's region against the baseline's over the overlap (mesh units, and "
+        "mm with `units`), the overlap, and the baseline's frame expressed for the follow-up, "
+        "so that the follow-up's map lands on the baseline's; refuses (422) when after the "
+        f"best alignment less than {MIN_OVERLAP:.0%} of the follow-up's region lies within "
+        f"{OVERLAP_MM:g} mm (without `units`, {OVERLAP_SHARE:.3g} of the region's spread) of "
+        "the baseline's region, or when the whole scans disagree (less than "
+        f"{MIN_OVERLAP:.0%} of the follow-up within it of the baseline and of the baseline of "
+        "the follow-up). Or, by the Accept header or params.output, the overlay: the "
+        "baseline's map with both regions' boundaries and the zones (SVG or PNG).",
         params=RegisterParams,
         mesh=MeshPart("baseline"),
         extra_parts=(FOLLOW_UP,),

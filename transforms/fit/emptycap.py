@@ -7,6 +7,15 @@ Every facet of the convex hull of unit directions cuts off a cap that holds none
 circle passes through at least three directions. So the pole is the outward normal of the
 facet whose plane lies nearest the origin (the smaller that distance, the larger the cap it
 cuts off), and the cap's angular radius is ``acos`` of that distance.
+
+A hull of every direction of a large region is slow (every direction on a sphere is a hull
+vertex), so :func:`exact_empty_cap` builds it on a subset first and adds the directions its
+cap holds until it holds none: a subset's largest empty cap is at least as large as the whole
+set's, so one that holds none of the whole set is the whole set's.
+
+:func:`free_cap` is the cap free of the region itself, not only of its vertices: a face
+whose corners lie round the pole covers it (radius 0), and a long edge may dip into the cap
+between its ends (the radius is then the arc's distance, :func:`transforms.margins.arcs_to_point`).
 """
 
 from __future__ import annotations
@@ -17,6 +26,13 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from ..arrays import unit_rows
+from ..margins import arcs_to_point
+
+#: Rounds of :func:`exact_empty_cap`, and the most directions a round adds (a region that
+#: covers nearly every direction has only gaps between its vertices, which take many rounds
+#: to close and matter little: after the last its pole is kept with its true radius).
+_ROUNDS = 4
+_ADDED = 2048
 
 
 def largest_empty_cap(directions: np.ndarray) -> tuple[np.ndarray, float]:
@@ -52,3 +68,102 @@ def cap_radius(directions: np.ndarray, pole: np.ndarray) -> float:
     the unit ``directions`` (k, 3): the angle to the nearest one."""
     cosine = float(np.clip((directions @ pole).max(), -1.0, 1.0))
     return math.acos(cosine)
+
+
+def exact_empty_cap(
+    directions: np.ndarray, rows: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
+    """The largest cap holding none of ``directions`` (k, 3), non-zero: the hull of the
+    ``rows`` first (None: all), then of those and the directions its cap holds, until it holds
+    none (docs/math.md, section 9). After ``_ROUNDS`` rounds the last pole is kept with its
+    true radius (a cap free of every direction, perhaps not the largest).
+
+    Returns
+    -------
+    pole : (3,) float, unit
+    radius : float, radians in ``[0, pi]``, the angle from ``pole`` to the nearest direction
+    """
+    units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
+    subset = np.arange(len(units)) if rows is None else np.unique(rows)
+    for _ in range(_ROUNDS):
+        pole, _ = largest_empty_cap(units[subset])
+        cosine = units @ pole
+        held = np.flatnonzero(cosine > cosine[subset].max())
+        if len(held) == 0:
+            break
+        held = held[np.argsort(-cosine[held], kind="stable")[:_ADDED]]
+        subset = np.union1d(subset, held)
+    return pole, cap_radius(units, pole)
+
+
+def free_cap(
+    directions: np.ndarray, faces: np.ndarray, rows: np.ndarray | None = None
+) -> tuple[np.ndarray, float, float]:
+    """The largest cap free of a region's vertices' directions and how much of it the region
+    leaves free (docs/math.md, section 9).
+
+    Parameters
+    ----------
+    directions : (n, 3) float, non-zero, from the centre to each of the region's vertices
+    faces : (m, 3) int, the region's faces, indices into ``directions``
+    rows : (k,) int or None, the rows the hull starts from (:func:`exact_empty_cap`)
+
+    Returns
+    -------
+    pole : (3,) float, unit, the middle of the largest cap free of vertex directions
+    free : float, radians: the angle from ``pole`` to the nearest point of the region seen
+        from the centre (0 when a face covers ``pole``: the region closes round it)
+    vertex_cap : float, radians: the angle from ``pole`` to the nearest vertex direction
+    """
+    units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
+    pole, vertex_cap = exact_empty_cap(units, rows)
+    a, b, c = units[faces[:, 0]], units[faces[:, 1]], units[faces[:, 2]]
+    if _covers(a, b, c, pole).any():
+        return pole, 0.0, vertex_cap
+    # An arc of length L whose nearer end is d from the pole comes no nearer than d - L / 2:
+    # only the arcs that may come nearer than the vertices are measured.
+    free = vertex_cap
+    for start, end in ((a, b), (b, c), (c, a)):
+        ends = np.stack([start @ pole, end @ pole], axis=1)
+        nearest = np.arccos(np.clip(ends.max(axis=1), -1.0, 1.0))
+        length = np.arccos(np.clip(np.einsum("ij,ij->i", start, end), -1.0, 1.0))
+        dips = np.flatnonzero(nearest - length / 2.0 < free)
+        if len(dips):
+            free = min(free, float(arcs_to_point(start[dips], end[dips], pole).min()))
+    return pole, free, vertex_cap
+
+
+def _covers(a: np.ndarray, b: np.ndarray, c: np.ndarray, pole: np.ndarray) -> np.ndarray:
+    """(m,) bool: whether the spherical triangle of unit ``a, b, c`` (m, 3) holds ``pole``
+    (the same side of its three great circles, and on the triangle's side of the sphere)."""
+    sides = np.stack([np.cross(a, b) @ pole, np.cross(b, c) @ pole, np.cross(c, a) @ pole], axis=1)
+    same = (sides >= 0).all(axis=1) | (sides <= 0).all(axis=1)
+    facing = (a + b + c) @ pole > 0
+    return same & facing & (np.abs(sides).sum(axis=1) > 0)
+
+
+def region_free_cap(
+    points: np.ndarray, faces: np.ndarray, center: np.ndarray, boundary: np.ndarray, spread: int
+) -> tuple[np.ndarray, float, float]:
+    """:func:`free_cap` of a region seen from ``center``: its hull started on the
+    ``boundary`` vertices and ``spread`` others, both thinned evenly to ``spread`` at most.
+
+    Parameters
+    ----------
+    points : (n, 3) float, the region's vertices (every one used by ``faces``)
+    faces : (m, 3) int, indices into ``points``
+    center : (3,) float, not one of ``points``
+    boundary : (b,) int, rows of ``points`` on the region's boundary
+    spread : int >= 1
+
+    Returns
+    -------
+    as :func:`free_cap`
+    """
+    directions = unit_rows(np.asarray(points, dtype=np.float64) - center)[0]
+    n = len(directions)
+    rows = np.linspace(0, n - 1, min(spread, n)).astype(np.int64)
+    edge = np.unique(boundary)
+    if len(edge) > spread:
+        edge = edge[np.linspace(0, len(edge) - 1, spread).astype(np.int64)]
+    return free_cap(directions, faces, np.union1d(rows, edge))

@@ -17,7 +17,7 @@ import numpy as np
 from ..arrays import as_direction, as_vector
 from ..chart import Method
 from ..frames import Frame
-from .emptycap import cap_radius, largest_empty_cap
+from .emptycap import cap_radius, exact_empty_cap
 from .kernel import Kernel, chebyshev_center
 from .problem import FitBounds, FitFixed, _Candidate, _Problem
 
@@ -110,10 +110,17 @@ def _frame_and_sigma(
 def _start_rotation(
     directions: np.ndarray, hull_rows: np.ndarray, up, notes: list[str]
 ) -> np.ndarray:
-    """(3, 3): the pole in the middle of the largest empty cap of the directions
-    ``hull_rows`` (:func:`.problem._hull_rows`), the roll by ``up`` (unless it is parallel to the
-    pole: then a note) or :func:`roll_axis` (of every direction)."""
-    pole, _ = largest_empty_cap(directions[hull_rows])
+    """(3, 3): the pole in the middle of the largest cap free of every direction (its hull
+    started on ``hull_rows``, :func:`.problem._hull_rows`, and :func:`.emptycap.exact_empty_cap`
+    adding the directions it holds), the roll by ``up`` (unless it is parallel to the pole:
+    then a note) or :func:`roll_axis` (of every direction)."""
+    pole, _ = exact_empty_cap(directions, hull_rows)
+    return pole_and_roll(directions, pole, up, notes)
+
+
+def pole_and_roll(directions: np.ndarray, pole: np.ndarray, up, notes: list[str]) -> np.ndarray:
+    """(3, 3): the rotation with local ``+Y`` along ``pole`` and the roll by ``up`` (unless it
+    is parallel to the pole: then a note) or :func:`roll_axis` of ``directions``."""
     if up is not None:
         up = as_direction(up, "up")
         if np.linalg.norm(np.cross(up, pole)) < _PARALLEL:

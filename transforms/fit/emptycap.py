@@ -23,6 +23,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
 from ..arrays import unit_rows
@@ -33,6 +35,8 @@ from ..margins import arcs_to_point
 #: to close and matter little: after the last its pole is kept with its true radius).
 _ROUNDS = 4
 _ADDED = 2048
+#: The boundary loops whose two sides :func:`free_cap` also measures (the longest).
+_FREE_TRIES = 3
 
 
 def largest_empty_cap(directions: np.ndarray) -> tuple[np.ndarray, float]:
@@ -97,40 +101,84 @@ def exact_empty_cap(
 
 
 def free_cap(
-    directions: np.ndarray, faces: np.ndarray, rows: np.ndarray | None = None
+    directions: np.ndarray,
+    faces: np.ndarray,
+    rows: np.ndarray | None = None,
+    boundary: np.ndarray | None = None,
 ) -> tuple[np.ndarray, float, float]:
-    """The largest cap free of a region's vertices' directions and how much of it the region
-    leaves free (docs/math.md, section 9).
+    """A cap free of a region seen from its centre, as large as found, and the largest gap
+    between the region's vertices' directions (docs/math.md, section 9).
+
+    The candidates for its middle: that of the largest cap free of every vertex direction
+    (:func:`exact_empty_cap`, its hull started on ``rows``), and those of caps free of the
+    ``boundary``'s directions (:func:`_boundary_poles`: the region's edge bounds the
+    directions it leaves free, where no fold does). Each is measured exactly
+    (:func:`_clear`) and the clearest kept.
 
     Parameters
     ----------
     directions : (n, 3) float, non-zero, from the centre to each of the region's vertices
     faces : (m, 3) int, the region's faces, indices into ``directions``
     rows : (k,) int or None, the rows the hull starts from (:func:`exact_empty_cap`)
+    boundary : (b, 2) int or None, the region's boundary edges (rows of ``directions``)
 
     Returns
     -------
-    pole : (3,) float, unit, the middle of the largest cap free of vertex directions
+    pole : (3,) float, unit, the cap's middle
     free : float, radians: the angle from ``pole`` to the nearest point of the region seen
-        from the centre (0 when a face covers ``pole``: the region closes round it)
-    vertex_cap : float, radians: the angle from ``pole`` to the nearest vertex direction
+        from the centre; 0 when every candidate is covered by a face (the region closes
+        round the centre)
+    vertex_gap : float, radians: the radius of the largest cap free of vertex directions
     """
     units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
-    pole, vertex_cap = exact_empty_cap(units, rows)
-    a, b, c = units[faces[:, 0]], units[faces[:, 1]], units[faces[:, 2]]
+    pole, vertex_gap = exact_empty_cap(units, rows)
+    corners = units[faces[:, 0]], units[faces[:, 1]], units[faces[:, 2]]
+    poles = [pole, *_boundary_poles(units, boundary)]
+    clear = [_clear(units, corners, candidate) for candidate in poles]
+    best = int(np.argmax(clear))
+    return poles[best], clear[best], vertex_gap
+
+
+def _boundary_poles(units: np.ndarray, boundary: np.ndarray | None) -> list[np.ndarray]:
+    """Middles of caps free of the boundary's directions: for each of the ``_FREE_TRIES``
+    longest loops, the mean of its directions and its opposite (the two sides of the loop),
+    and the largest cap free of every boundary direction (:func:`largest_empty_cap`).
+
+    ``boundary``: (k, 2) int, the boundary edges (rows of ``units``)."""
+    if boundary is None or len(boundary) == 0:
+        return []
+    ends = np.asarray(boundary, dtype=np.int64).reshape(-1, 2)
+    n = len(units)
+    graph = coo_matrix((np.ones(len(ends)), (ends[:, 0], ends[:, 1])), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    vertices = np.unique(ends)
+    loops, sizes = np.unique(labels[vertices], return_counts=True)
+    poles = [largest_empty_cap(units[vertices])[0]]
+    for loop in loops[np.argsort(-sizes, kind="stable")[:_FREE_TRIES]]:
+        mean = units[vertices[labels[vertices] == loop]].sum(axis=0)
+        length = float(np.linalg.norm(mean))
+        if length > 0:
+            poles += [mean / length, -mean / length]
+    return poles
+
+
+def _clear(units: np.ndarray, corners: tuple, pole: np.ndarray) -> float:
+    """Radians from unit ``pole`` to the nearest point of the region seen from the centre:
+    0 when a face's spherical triangle holds it, else the nearest vertex or edge arc (an
+    arc of length L whose nearer end is d away comes no nearer than d - L / 2, so only the
+    arcs that may come nearer than the vertices are measured)."""
+    a, b, c = corners
     if _covers(a, b, c, pole).any():
-        return pole, 0.0, vertex_cap
-    # An arc of length L whose nearer end is d from the pole comes no nearer than d - L / 2:
-    # only the arcs that may come nearer than the vertices are measured.
-    free = vertex_cap
+        return 0.0
+    free = cap_radius(units, pole)
     for start, end in ((a, b), (b, c), (c, a)):
-        ends = np.stack([start @ pole, end @ pole], axis=1)
-        nearest = np.arccos(np.clip(ends.max(axis=1), -1.0, 1.0))
+        ends = np.maximum(start @ pole, end @ pole)
+        nearest = np.arccos(np.clip(ends, -1.0, 1.0))
         length = np.arccos(np.clip(np.einsum("ij,ij->i", start, end), -1.0, 1.0))
         dips = np.flatnonzero(nearest - length / 2.0 < free)
         if len(dips):
             free = min(free, float(arcs_to_point(start[dips], end[dips], pole).min()))
-    return pole, free, vertex_cap
+    return free
 
 
 def _covers(a: np.ndarray, b: np.ndarray, c: np.ndarray, pole: np.ndarray) -> np.ndarray:
@@ -153,7 +201,7 @@ def region_free_cap(
     points : (n, 3) float, the region's vertices (every one used by ``faces``)
     faces : (m, 3) int, indices into ``points``
     center : (3,) float, not one of ``points``
-    boundary : (b,) int, rows of ``points`` on the region's boundary
+    boundary : (b, 2) int, the region's boundary edges (rows of ``points``)
     spread : int >= 1
 
     Returns
@@ -166,4 +214,4 @@ def region_free_cap(
     edge = np.unique(boundary)
     if len(edge) > spread:
         edge = edge[np.linspace(0, len(edge) - 1, spread).astype(np.int64)]
-    return free_cap(directions, faces, np.union1d(rows, edge))
+    return free_cap(directions, faces, np.union1d(rows, edge), boundary)

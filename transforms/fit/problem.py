@@ -27,6 +27,7 @@ from ..frames import Frame
 from ..layouts import Layout
 from ..region import FlatRegion, flatten_region
 from ..sampling import area_sample
+from ..topology import region_edges
 from ..viewpoint import check_center_sees_area
 from .kernel import Kernel, kernel_planes
 from .objective import Candidates, FaceEnergy, region_energy
@@ -201,10 +202,26 @@ class _Problem:
         picked = area_sample(self.areas, COARSE_SAMPLE_FACES)
         return FaceEnergy(*_compacted(self.points, self.faces[picked]), self.method, self.layout)
 
+    @cached_property
+    def region_faces(self) -> np.ndarray:
+        """(m, 3) int: the region's faces as rows of ``region_points``."""
+        position = np.zeros(len(self.points), dtype=np.int64)
+        position[self.used] = np.arange(len(self.used))
+        return position[self.faces]
+
+    @cached_property
+    def boundary_edges(self) -> np.ndarray:
+        """(b, 2) int: the region's boundary edges, rows of ``region_points``."""
+        faces = self.region_faces
+        return region_edges(faces, np.ones(len(faces), dtype=np.int8), len(self.used)).boundary
+
     def release(self) -> None:
         """Let go of what only the search reads: the kernel's planes, the region's own
-        vertices and the hull's (the flatten and the energies read the input's arrays)."""
+        vertices and faces and the hull's (the flatten and the energies read the input's
+        arrays)."""
         self.planes = self.region_points = self.used = self.hull_points = self.hull_rows = None
+        self.__dict__.pop("region_faces", None)
+        self.__dict__.pop("boundary_edges", None)
 
     @property
     def closed(self) -> bool:

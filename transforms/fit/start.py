@@ -17,7 +17,7 @@ import numpy as np
 from ..arrays import as_direction, as_vector
 from ..chart import Method
 from ..frames import Frame
-from .emptycap import cap_radius, exact_empty_cap
+from .emptycap import cap_radius, free_cap
 from .kernel import Kernel, chebyshev_center
 from .problem import FitBounds, FitFixed, _Candidate, _Problem
 
@@ -89,7 +89,7 @@ def _frame_and_sigma(
     best sigma whose cap fits inside the empty cap less the margin unless fixed."""
     directions = problem.directions(center)
     if fixed.rotation is None:
-        rotation = _start_rotation(directions, problem.hull_rows, fixed.up, notes)
+        rotation = _start_rotation(problem, directions, fixed.up, notes)
     else:
         rotation = fixed.rotation.rotation
     margin = math.radians(bounds.min_margin_deg)
@@ -107,14 +107,15 @@ def _frame_and_sigma(
     return _Choice(_Candidate(center, rotation, sigma), margin, choose_sigma)
 
 
-def _start_rotation(
-    directions: np.ndarray, hull_rows: np.ndarray, up, notes: list[str]
-) -> np.ndarray:
-    """(3, 3): the pole in the middle of the largest cap free of every direction (its hull
-    started on ``hull_rows``, :func:`.problem._hull_rows`, and :func:`.emptycap.exact_empty_cap`
-    adding the directions it holds), the roll by ``up`` (unless it is parallel to the pole:
-    then a note) or :func:`roll_axis` (of every direction)."""
-    pole, _ = exact_empty_cap(directions, hull_rows)
+def _start_rotation(problem: _Problem, directions: np.ndarray, up, notes: list[str]) -> np.ndarray:
+    """(3, 3): the pole in the middle of the cap free of the region seen from the centre
+    (:func:`.emptycap.free_cap`: the largest cap free of every vertex direction, its hull
+    started on :func:`.problem._hull_rows`, or one free of the boundary's directions, whichever
+    the region leaves clearer), the roll by ``up`` (unless it is parallel to the pole: then
+    a note) or :func:`roll_axis` (of every direction)."""
+    pole, _, _ = free_cap(
+        directions, problem.region_faces, problem.hull_rows, problem.boundary_edges
+    )
     return pole_and_roll(directions, pole, up, notes)
 
 

@@ -30,7 +30,7 @@ The stages, each in a module of its own, composed here by :func:`fit_region` and
 * :mod:`.refine`: the refinement with L-BFGS-B (stage 3);
 * :mod:`.explain`: the margin on every face, the best of the searched answer, its start and
   the defaults, the free cap, and the :class:`Fit` with its :class:`FitExplanation`
-  (stages 4 to 6);
+  (stages 4 to 7);
 * :mod:`.pose`: the region in its own frame, and the answer taken back to the world;
 * :mod:`.objective`, :mod:`.kernel`, :mod:`.emptycap`: the objective for a batch of
   candidates, the kernel and its deepest point, the largest empty cap.

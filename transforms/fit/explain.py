@@ -1,5 +1,5 @@
 """The fit's answer on every face and why it is what it is (docs/math.md, section 9,
-stages 4 to 6).
+stages 4 to 7).
 
 The search saw a sample: on every face the cap is narrowed until the margin holds
 (:func:`_keep_margin`); the searched answer, the start and the defaults are ranked by one
@@ -178,7 +178,7 @@ def _keep_margin(
 
 
 def _rank(contender: _Flattened, search: _Search) -> tuple[int, float]:
-    """The order of "the better kept" (docs/math.md, section 9, stage 5): first whether the
+    """The order of "keep the best" (docs/math.md, section 9, stage 5): first whether the
     seam and the singular points stay off the region with ``min_margin_deg`` (0), off it with
     less (1) or on it (2), for a region with a boundary (a closed one is on it whatever is
     chosen); then the isometric energy on every face (section 7)."""

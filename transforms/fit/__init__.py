@@ -54,6 +54,7 @@ from .explain import (
     _free_cap_seen,
     _keep_margin,
     _keep_the_best,
+    _key,
     _onto_free_cap,
     _Seen,
     _sound,
@@ -178,20 +179,33 @@ def fit_region(
     contenders, measured = [best], None
     energy = best.flat.distortion.isometric.mean
     # The others are flattened only when they may win: their estimated energy is lower, or
-    # the answer lets the seam onto the region (when the start is the answer, it is not).
+    # the answer lets the seam onto the region and theirs may not (when the start is the
+    # answer, it is not flattened again)
+    # (a cap free of the region seen from their centre, when it is known).
     unsound = not _sound(best, search)
     if any(search.free) and start is not search.initial:
-        if unsound or seen.energy_start < energy:
+        if (unsound and _may_be_free(search.free_cap)) or seen.energy_start < energy:
             contenders.append(_start_contender(problem, search, fixed))
-    if defaults is not None and (unsound or seen.energy_defaults < energy):
-        measured = _measured(problem, defaults, search)
-        contenders += [] if measured is None else [measured]
+    if defaults is not None:
+        if (unsound and _may_be_free(defaults.free_cap)) or seen.energy_defaults < energy:
+            measured = _measured(problem, defaults, search)
+            contenders += [] if measured is None else [measured]
     best = _keep_the_best(search, contenders)
-    cap = _free_cap_seen(problem, best.flat, best.candidate.center)
+    known = {_key(search.initial.center): search.free_cap}
+    if defaults is not None:
+        known[_key(defaults.candidate.center)] = defaults.free_cap
+    known = {key: cap for key, cap in known.items() if cap is not None}
+    cap = _free_cap_seen(problem, best.flat, best.candidate.center, known)
     if not _sound(best, search):
         moved = _onto_free_cap(problem, search, best, cap, fixed.up)
         best = best if moved is None else _keep_the_best(search, [best, moved])
     return posed.to_world(_explain(problem, search, best, seen, measured, cap))
+
+
+def _may_be_free(cap: tuple | None) -> bool:
+    """Whether a cap may be free of the region seen from a centre (:func:`.emptycap.free_cap`'s
+    answer there, or None when it was not found)."""
+    return cap is None or cap[1] > 0.0
 
 
 def _start_contender(problem: _Problem, search: _Search, fixed: FitFixed) -> _Flattened:

@@ -214,13 +214,20 @@ class _FreeCap:
     directions: np.ndarray
 
 
-def _free_cap_seen(problem: _Problem, flat: FlatRegion, center: np.ndarray) -> _FreeCap:
-    """The free cap seen from ``center`` of the region as ``flat`` holds it; the hull starts
-    on its boundary vertices and ``HULL_VERTICES`` spread over the rest."""
+def _free_cap_seen(
+    problem: _Problem, flat: FlatRegion, center: np.ndarray, known: dict
+) -> _FreeCap:
+    """The free cap seen from ``center`` of the region as ``flat`` holds it: ``known``'s, by
+    centre, when a stage found it there; else found, its hull started on the boundary's
+    vertices and ``HULL_VERTICES`` spread over the rest."""
     points = problem.points[flat.vertex_ids]
-    boundary = flat.validation.boundary_edges
-    pole, free, vertex_cap = region_free_cap(points, flat.faces, center, boundary, HULL_VERTICES)
-    return _FreeCap(pole, free, vertex_cap, unit_rows(points - center)[0])
+    directions = unit_rows(points - center)[0]
+    found = known.get(_key(center))
+    if found is None:
+        boundary = flat.validation.boundary_edges
+        found = region_free_cap(points, flat.faces, center, boundary, HULL_VERTICES)
+    pole, free, vertex_cap = found
+    return _FreeCap(pole, free, vertex_cap, directions)
 
 
 def _onto_free_cap(

@@ -155,6 +155,7 @@ def fit_region(
         explain_faces=explain_faces,
         explain_run=explain_run,
     )
+    posed.flatten_in_world(problem)
     search = _start(problem, fixed, bounds)
     start = search.initial
     if search.move_center:
@@ -289,6 +290,7 @@ def default_choice(
     posed = Posed.of(vertices, faces, fixed)
     fixed = posed.fixed
     problem = _Problem.checked(posed.points, posed.faces, fixed, method, threads, layout)
+    posed.flatten_in_world(problem)
     choice = _frame_and_sigma(problem, fixed.center, fixed, bounds, [])
     answer = _keep_margin(
         problem, choice.candidate, choice.choose_sigma, choice.margin, bounds.min_margin_deg

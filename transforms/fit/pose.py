@@ -6,9 +6,11 @@ directions, the kernel's box, the sigma search's ties, the refinement's steps, t
 relative to the region's size); rather than making each pose-free, the whole fit runs on the
 region's own coordinates (:class:`transforms.ownframe.OwnFrame`: centred on its area
 centroid, turned to its principal axes, divided by its RMS radius), and its answer is taken
-back: the centre moved, the rotation turned, the lengths scaled. The angles, the validation
-and the isometric energy (section 7: the layout is scaled to the region's 3D area, so a
-uniform scale changes no energy) need no taking back.
+back: the centre moved, the rotation turned, the lengths scaled. The region is flattened on
+every face in the input's own coordinates with that frame, so that the answer's params,
+sent back, give the same map to the last bit; its angles, validation and isometric energy
+(section 7: the layout is scaled to the region's 3D area, so a uniform scale changes no
+energy) are the same in any pose up to rounding.
 
 The own coordinates are found after a scale by a power of two (exact), so that no moment
 of a huge or tiny mesh over- or underflows.
@@ -24,6 +26,7 @@ from ..arrays import as_direction, as_faces, as_points, as_vector, unit_scale
 from ..errors import TransformInputError
 from ..frames import Frame
 from ..ownframe import OwnFrame
+from ..viewpoint import check_center_sees_area
 from .explain import Fit
 from .problem import FitFixed
 
@@ -35,6 +38,7 @@ class Posed:
     Attributes
     ----------
     points : (n, 3) float, every input vertex in the region's own coordinates
+    world_points : (n, 3) float, the input's vertices, checked
     faces : (m, 3) int, checked
     fixed : FitFixed, the caller's choices turned into the own frame
     given : FitFixed, the caller's choices as given (kept exactly in the answer)
@@ -44,6 +48,7 @@ class Posed:
     """
 
     points: np.ndarray
+    world_points: np.ndarray
     faces: np.ndarray
     fixed: FitFixed
     given: FitFixed
@@ -59,17 +64,26 @@ class Posed:
         Raises
         ------
         TransformInputError
-            Bad vertices or faces, no faces, every face of zero area.
+            Bad vertices or faces, no faces, every face of zero area, a fixed centre from which
+        every face is seen edge-on.
         """
         points = as_points(vertices, "vertices")
         faces = as_faces(faces, len(points))
         if len(faces) == 0:
             raise TransformInputError("faces", "the region has no faces")
+        if fixed.center is not None:
+            # Refused in the caller's coordinates, which its message quotes.
+            check_center_sees_area(points, faces, as_vector(fixed.center, "center"))
         unit = unit_scale(float(np.abs(points[faces]).max()))
-        own = OwnFrame.of_triangles(points * unit, faces)
+        zero_area = TransformInputError("faces", "every face of the region has zero area")
+        try:
+            with np.errstate(divide="ignore", invalid="ignore"):  # no area: refused below
+                own = OwnFrame.of_triangles(points * unit, faces)
+        except np.linalg.LinAlgError:  # its moments are NaN
+            raise zero_area from None
         if not (own.scale > 0 and np.isfinite(own.origin).all() and np.isfinite(own.axes).all()):
-            raise TransformInputError("faces", "every face of the region has zero area")
-        posed = cls(points, faces, fixed, fixed, default_center, own, unit)
+            raise zero_area
+        posed = cls(points, points, faces, fixed, fixed, default_center, own, unit)
         return replace(
             posed,
             points=own.to_own(points * unit),
@@ -99,19 +113,24 @@ class Posed:
         """World length of one own unit."""
         return self.own.scale / self.unit
 
-    def to_world(self, fit: Fit) -> Fit:
-        """``fit``, found in the own frame, in world terms: its frame's centre and rotation
-        (those the caller fixed exactly as given), the distances from the centre, the
-        kernel's radius and the centre's depth."""
+    def frame_of(self, center: np.ndarray, rotation: np.ndarray) -> Frame:
+        """The world frame of an own-frame centre and rotation; what the caller fixed exactly
+        as given."""
         own, given = self.own, self.given
-        center = own.from_own(fit.frame.center[None])[0] / self.unit
         if given.center is not None:
-            center = as_vector(given.center, "center")
-        rotation = fit.frame.rotation @ own.axes
+            world_center = as_vector(given.center, "center")
+        else:
+            world_center = own.from_own(np.asarray(center)[None])[0] / self.unit
+        world_rotation = np.asarray(rotation) @ own.axes
         if given.rotation is not None:
-            rotation = given.rotation.rotation
-        frame = Frame.from_matrix(rotation, center)
-        region = replace(fit.region, r=fit.region.r * self.length)
+            world_rotation = given.rotation.rotation
+        return Frame.from_matrix(world_rotation, world_center)
+
+    def to_world(self, fit: Fit) -> Fit:
+        """``fit``, found in the own frame (its region flattened in the input's coordinates
+        already), in world terms: its frame (:meth:`frame_of`), the kernel's radius and the
+        centre's depth."""
+        frame = self.frame_of(fit.frame.center, fit.frame.rotation)
         explanation = fit.explanation
         if explanation is not None:
             explanation = replace(
@@ -119,4 +138,10 @@ class Posed:
                 kernel_inscribed_radius=explanation.kernel_inscribed_radius * self.length,
                 center_depth=explanation.center_depth * self.length,
             )
-        return replace(fit, frame=frame, region=region, explanation=explanation)
+        return replace(fit, frame=frame, explanation=explanation)
+
+    def flatten_in_world(self, problem) -> None:
+        """Make ``problem`` (a :class:`.problem._Problem` of the own points) flatten in the
+        input's coordinates, with :meth:`frame_of`."""
+        problem.world_points = self.world_points
+        problem.world_frame = self.frame_of

@@ -13,6 +13,7 @@ and the energy of the region on every face, or on runs of them beyond ``EXPLAIN_
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from numbers import Integral
@@ -141,6 +142,11 @@ class _Problem:
         self.points, self.faces, self.method, self.threads = points, faces, method, threads
         self.layout = layout
         self.explain_faces, self.explain_run = explain_faces, explain_run
+        #: Where :meth:`flatten` flattens: these points, with a candidate's own frame, unless
+        #: the fit runs in the region's own frame (:mod:`.pose`), which sets the input's
+        #: points and the candidate's frame there.
+        self.world_points: np.ndarray = points
+        self.world_frame: Callable[[np.ndarray, np.ndarray], Frame] = _frame_of
         self.used = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(points)))
         self.region_points = points[self.used]
         self.planes = kernel_planes(points, faces)
@@ -250,9 +256,11 @@ class _Problem:
         return units
 
     def flatten(self, candidate: _Candidate) -> FlatRegion:
-        frame = Frame.from_matrix(candidate.rotation, candidate.center)
+        """The region flattened on every face with ``candidate``, in the input's coordinates
+        (so that the answer's params, sent back, give the same map to the last bit)."""
+        frame = self.world_frame(candidate.center, candidate.rotation)
         return flatten_region(
-            self.points,
+            self.world_points,
             self.faces,
             frame,
             self.chart(candidate.sigma),
@@ -379,6 +387,10 @@ class _Problem:
             return start
         sigma = float(sigmas[best - 1]) if start.sigma is not None else None
         return _Candidate(centers[best - 1], start.rotation, sigma)
+
+
+def _frame_of(center: np.ndarray, rotation: np.ndarray) -> Frame:
+    return Frame.from_matrix(rotation, center)
 
 
 def _cap_radii(points: np.ndarray, centers: np.ndarray, pole: np.ndarray) -> np.ndarray:

@@ -90,8 +90,9 @@ class Explain(Answer):
     notes: list[str] = Field(description="What the fit could not do, in words.")
     kept: Literal[KEPT] = Field(
         description="Where the answer comes from: the search; its start; the defaults (the "
-        "rotation and sigma a request naming neither gets, at the middle of the region's box "
-        "in its own axes when the centre is chosen, else at the centre given); or free_cap, "
+        "rotation and sigma a request naming neither gets: at the centre given, or when the "
+        "centre is chosen at the request's default centre and at the middle of the region's "
+        "box in its own axes); or free_cap, "
         "the pole moved into the cap free of the region. They are ranked by one order: the "
         "seam and the singular points off the region with min_margin_deg first, then the "
         "isometric energy on every triangle; so the answer is never worse than the defaults."

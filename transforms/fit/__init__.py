@@ -129,9 +129,9 @@ def fit_region(
         ``explain_faces``, beyond that on every k-th run of ``explain_run`` consecutive
         faces, about ``explain_faces`` in all (the answer's own energy is always measured
         on every face)
-    default_center : (3,) float or None, the centre the defaults are measured at when the
-        centre is chosen (a request's default centre); None: the middle of the region's box
-        in its own axes. A fixed centre is the defaults' too.
+    default_center : (3,) float or None, a centre the defaults are also measured at when the
+        centre is chosen (a request's default centre); they always are at the middle of the
+        region's box in its own axes. A fixed centre is the defaults' too.
 
     Returns
     -------
@@ -169,37 +169,36 @@ def fit_region(
     refine = any(search.free) and not search.kernel.empty
     if refine:
         start = refined(problem, start, search.free, search.kernel, search.min_depth, search.margin)
-    defaults = _defaults_choice(problem, posed, search, bounds)
-    seen = _Seen.of(problem, search, start, [] if defaults is None else [defaults.candidate])
+    defaults = _defaults_choices(problem, posed, bounds)
+    seen = _Seen.of(problem, search, start, [choice.candidate for choice in defaults])
     # The kernel's planes and the region's own vertices are let go before the answer is
     # flattened: the fit's peak is then its answer's flatten's.
     problem.release()
     best = _keep_margin(
         problem, start, search.choose_sigma, search.margin, search.bounds.min_margin_deg
     )
-    contenders, measured = [best], None
+    contenders = [best]
     energy = best.flat.distortion.isometric.mean
     # The others are flattened only when they may win: their estimated energy is lower, or
-    # the answer lets the seam onto the region and theirs may not (when the start is the
-    # answer, it is not flattened again)
-    # (a cap free of the region seen from their centre, when it is known).
+    # the answer lets the seam onto the region and a cap may be free from their centre (when
+    # the start is the answer, it is not flattened again).
     unsound = not _sound(best, search)
     if any(search.free) and start is not search.initial:
         if (unsound and _may_be_free(search.free_cap)) or seen.energy_start < energy:
             contenders.append(_start_contender(problem, search, fixed))
-    if defaults is not None:
-        if (unsound and _may_be_free(defaults.free_cap)) or seen.energy_defaults < energy:
-            measured = _measured(problem, defaults, search)
-            contenders += [] if measured is None else [measured]
-    best = _keep_the_best(search, contenders)
+    measured = []
+    for choice, estimate in zip(defaults, seen.energy_defaults, strict=True):
+        if (unsound and _may_be_free(choice.free_cap)) or estimate < energy:
+            measured += _measured(problem, choice, search)
+    best = _keep_the_best(search, contenders + measured)
     known = {_key(search.initial.center): search.free_cap}
-    if defaults is not None:
-        known[_key(defaults.candidate.center)] = defaults.free_cap
+    known.update({_key(choice.candidate.center): choice.free_cap for choice in defaults})
     known = {key: cap for key, cap in known.items() if cap is not None}
     cap = _free_cap_seen(problem, best.flat, best.candidate.center, known)
     if not _sound(best, search):
         moved = _onto_free_cap(problem, search, best, cap, fixed.up)
         best = best if moved is None else _keep_the_best(search, [best, moved])
+    measured = _keep_the_best(search, measured) if measured else None
     return posed.to_world(_explain(problem, search, best, seen, measured, cap))
 
 
@@ -218,29 +217,32 @@ def _start_contender(problem: _Problem, search: _Search, fixed: FitFixed) -> _Fl
     return replace(start, kept="start" if fixed.center is None else "defaults")
 
 
-def _defaults_choice(
-    problem: _Problem, posed: Posed, search: _Search, bounds: FitBounds
-) -> _Choice | None:
-    """The defaults' choice when the centre is chosen: the start's rule at the defaults'
-    centre (``posed.default_center``, else the middle of the region's box in its own axes),
-    the rotation and sigma the caller fixed kept. None with a fixed centre (the start is the
-    defaults then) or where no direction is defined from that centre."""
+def _defaults_choices(problem: _Problem, posed: Posed, bounds: FitBounds) -> list[_Choice]:
+    """The defaults' choices when the centre is chosen: the start's rule at the defaults'
+    centres, the rotation and sigma the caller fixed kept. The centres: the middle of the
+    region's box in its own axes (the same point in any pose) and ``posed.default_center``
+    (a request's default centre, which may be the box in world axes), if given. None with a
+    fixed centre (the start is the defaults then); a centre with a region vertex on it is
+    left out."""
     fixed = posed.fixed
     if fixed.center is not None:
-        return None
-    center = posed.default_center
-    if center is None:
-        points = problem.region_points
-        center = (points.min(axis=0) + points.max(axis=0)) / 2.0
-    at = FitFixed(center=center, rotation=fixed.rotation, up=fixed.up, sigma=fixed.sigma)
-    try:
-        return _frame_and_sigma(problem, center, at, bounds, [])
-    except TransformInputError:  # a region vertex at that centre
-        return None
+        return []
+    points = problem.region_points
+    centers = [(points.min(axis=0) + points.max(axis=0)) / 2.0]
+    if posed.default_center is not None:
+        centers.append(posed.default_center)
+    choices = []
+    for center in centers:
+        at = FitFixed(center=center, rotation=fixed.rotation, up=fixed.up, sigma=fixed.sigma)
+        try:
+            choices.append(_frame_and_sigma(problem, center, at, bounds, []))
+        except TransformInputError:  # a region vertex at that centre
+            continue
+    return choices
 
 
-def _measured(problem: _Problem, choice: _Choice, search: _Search) -> _Flattened | None:
-    """The defaults' choice on every face (:func:`.explain._keep_margin`); None where their
+def _measured(problem: _Problem, choice: _Choice, search: _Search) -> list[_Flattened]:
+    """The defaults' choice on every face (:func:`.explain._keep_margin`); none where their
     centre sees every face edge-on."""
     try:
         found = _keep_margin(
@@ -251,8 +253,8 @@ def _measured(problem: _Problem, choice: _Choice, search: _Search) -> _Flattened
             search.bounds.min_margin_deg,
         )
     except TransformInputError:
-        return None
-    return replace(found, kept="defaults")
+        return []
+    return [replace(found, kept="defaults")]
 
 
 def default_choice(

@@ -106,23 +106,22 @@ class _Seen:
     depths: dict
     energy_start: float
     energy_at_sigma: dict
-    energy_defaults: float = math.inf
+    energy_defaults: list = field(default_factory=list)
 
     @classmethod
     def of(cls, problem: _Problem, search: _Search, found: _Candidate, others: list) -> _Seen:
-        """``others``: the defaults' candidate, if any (its energy measured as the start's)."""
+        """``others``: the defaults' candidates (their energies measured as the start's)."""
         first = search.initial
         every = [first.center, found.center, *(c.center for c in others)]
         depth = problem.planes.depths(np.array(every))
         reported = _reported(problem, found)
         energies = problem.region_energies([first, *others, *reported])
+        k = len(others)
         return cls(
             depths={_key(c): float(d) for c, d in zip(every, depth, strict=True)},
             energy_start=float(energies[0]),
-            energy_at_sigma=dict(
-                zip(REPORTED_SIGMAS, energies[1 + len(others) :].tolist(), strict=False)
-            ),
-            energy_defaults=float(energies[1]) if others else math.inf,
+            energy_at_sigma=dict(zip(REPORTED_SIGMAS, energies[1 + k :].tolist(), strict=False)),
+            energy_defaults=energies[1 : 1 + k].tolist(),
         )
 
 

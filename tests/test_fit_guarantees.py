@@ -250,6 +250,28 @@ async def test_the_fit_at_a_centre_is_never_worse_than_the_defaults_there(client
     assert fit["explain"]["energy_end"] == pytest.approx(fitted, rel=1e-12)
 
 
+@pytest.mark.parametrize("mesh", ["whole head", "ridged skull", "bust's top"])
+async def test_the_fit_with_the_region_alone_is_never_worse_than_the_defaults(client, mesh):
+    """The region alone (the centre chosen): /v1/fit ranks at least as well as /v1/flatten's
+    defaults with the same params (the request's default centre, its pole and sigma): the
+    seam off the region if theirs is, and no more energy on every face if both are alike."""
+    if mesh == "whole head":
+        vertices, faces = load_sample("fsaverage-head.ply")
+    elif mesh == "ridged skull":
+        vertices, faces = ridged_skull()
+    else:
+        vertices, faces = load_sample("nefertiti-lowres.obj")
+        seen = vertices[faces].mean(axis=1) - (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+        faces = faces[seen[:, 2] / np.linalg.norm(seen, axis=1) > math.cos(math.radians(40))]
+    fit = ok(await post(client, "/v1/fit", vertices, faces, {}))
+    defaults = ok(await post(client, "/v1/flatten", vertices, faces, {}))
+    if defaults["validation"]["seam_free"]:
+        assert fit["validation"]["seam_free"]
+    if fit["validation"]["seam_free"] == defaults["validation"]["seam_free"]:
+        fitted = fit["metrics"]["isometric"]["mean"]
+        assert fitted <= defaults["metrics"]["isometric"]["mean"] * (1 + 1e-9)
+
+
 # -- seam-free wherever a cap is free -------------------------------------------------------
 
 

@@ -8,7 +8,7 @@ from typing import Literal
 
 from pydantic import ConfigDict, Field, model_validator
 
-from transforms.fit import EXPLAIN_FACES
+from transforms.fit import EXPLAIN_FACES, KEPT
 
 from ..encoding import Answer
 from .fields import Matrix3, Vector3
@@ -88,6 +88,29 @@ class Explain(Answer):
     )
     backfacing_faces: list[int] = Field(description="Triangles seen from behind, if any.")
     notes: list[str] = Field(description="What the fit could not do, in words.")
+    kept: Literal[KEPT] = Field(
+        description="Where the answer comes from: the search; its start; the defaults (the "
+        "rotation and sigma a request naming neither gets: at the centre given, or when the "
+        "centre is chosen at the request's default centre and at the middle of the region's "
+        "box in its own axes); or free_cap, "
+        "the pole moved into the cap free of the region. They are ranked by one order: the "
+        "seam and the singular points off the region with min_margin_deg first, then the "
+        "isometric energy on every triangle; so the answer is never worse than the defaults."
+    )
+    energy_defaults: float | None = Field(
+        description="The defaults' isometric energy on every triangle; null when they were "
+        "not flattened (their estimate could not win) or cannot be (their centre sees the "
+        "region edge-on)."
+    )
+    free_cap_deg: float = Field(
+        description="Angular radius of the largest cap free of the region seen from the "
+        "answer's centre (validation.free_cap_deg); 0: none, the region closes round it."
+    )
+    seam_off_region: bool = Field(
+        description="Whether the fit kept the seam and the singular points off the region "
+        "(validation.seam_free). Where a cap is free of the region (free_cap_deg > 0) and the "
+        "rotation and sigma are chosen, it does; otherwise notes say why not."
+    )
 
     @classmethod
     def of(cls, region: MeshRegion) -> Explain:
@@ -110,6 +133,10 @@ class Explain(Answer):
             ],
             backfacing_faces=region.faces[e.backfacing_faces],
             notes=list(e.notes),
+            kept=e.kept,
+            energy_defaults=e.energy_defaults,
+            free_cap_deg=e.free_cap_deg,
+            seam_off_region=region.flat.validation.seam_free,
         )
 
 

@@ -7,6 +7,15 @@ Every facet of the convex hull of unit directions cuts off a cap that holds none
 circle passes through at least three directions. So the pole is the outward normal of the
 facet whose plane lies nearest the origin (the smaller that distance, the larger the cap it
 cuts off), and the cap's angular radius is ``acos`` of that distance.
+
+A hull of every direction of a large region is slow (every direction on a sphere is a hull
+vertex), so :func:`exact_empty_cap` builds it on a subset first and adds the directions its
+cap holds until it holds none: a subset's largest empty cap is at least as large as the whole
+set's, so one that holds none of the whole set is the whole set's.
+
+:func:`free_cap` is the cap free of the region itself, not only of its vertices: a face
+whose corners lie round the pole covers it (radius 0), and a long edge may dip into the cap
+between its ends (the radius is then the arc's distance, :func:`transforms.margins.arcs_to_point`).
 """
 
 from __future__ import annotations
@@ -14,9 +23,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
 from ..arrays import unit_rows
+from ..margins import arcs_to_point
+
+#: Rounds of :func:`exact_empty_cap`, and the most directions a round adds (a region that
+#: covers nearly every direction has only gaps between its vertices, which take many rounds
+#: to close and matter little: after the last its pole is kept with its true radius).
+_ROUNDS = 4
+_ADDED = 2048
+#: The boundary loops whose two sides :func:`free_cap` also measures (the longest).
+_FREE_TRIES = 3
 
 
 def largest_empty_cap(directions: np.ndarray) -> tuple[np.ndarray, float]:
@@ -52,3 +72,146 @@ def cap_radius(directions: np.ndarray, pole: np.ndarray) -> float:
     the unit ``directions`` (k, 3): the angle to the nearest one."""
     cosine = float(np.clip((directions @ pole).max(), -1.0, 1.0))
     return math.acos(cosine)
+
+
+def exact_empty_cap(
+    directions: np.ndarray, rows: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
+    """The largest cap holding none of ``directions`` (k, 3), non-zero: the hull of the
+    ``rows`` first (None: all), then of those and the directions its cap holds, until it holds
+    none (docs/math.md, section 9). After ``_ROUNDS`` rounds the last pole is kept with its
+    true radius (a cap free of every direction, perhaps not the largest).
+
+    Returns
+    -------
+    pole : (3,) float, unit
+    radius : float, radians in ``[0, pi]``, the angle from ``pole`` to the nearest direction
+    """
+    units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
+    subset = np.arange(len(units)) if rows is None else np.unique(rows)
+    for _ in range(_ROUNDS):
+        pole, _ = largest_empty_cap(units[subset])
+        cosine = units @ pole
+        held = np.flatnonzero(cosine > cosine[subset].max())
+        if len(held) == 0:
+            break
+        held = held[np.argsort(-cosine[held], kind="stable")[:_ADDED]]
+        subset = np.union1d(subset, held)
+    return pole, cap_radius(units, pole)
+
+
+def free_cap(
+    directions: np.ndarray,
+    faces: np.ndarray,
+    rows: np.ndarray | None = None,
+    boundary: np.ndarray | None = None,
+) -> tuple[np.ndarray, float, float]:
+    """A cap free of a region seen from its centre, as large as found, and the largest gap
+    between the region's vertices' directions (docs/math.md, section 9).
+
+    The candidates for its middle: that of the largest cap free of every vertex direction
+    (:func:`exact_empty_cap`, its hull started on ``rows``), and those of caps free of the
+    ``boundary``'s directions (:func:`_boundary_poles`: the region's edge bounds the
+    directions it leaves free, where no fold does). Each is measured exactly
+    (:func:`_clear`) and the clearest kept.
+
+    Parameters
+    ----------
+    directions : (n, 3) float, non-zero, from the centre to each of the region's vertices
+    faces : (m, 3) int, the region's faces, indices into ``directions``
+    rows : (k,) int or None, the rows the hull starts from (:func:`exact_empty_cap`)
+    boundary : (b, 2) int or None, the region's boundary edges (rows of ``directions``)
+
+    Returns
+    -------
+    pole : (3,) float, unit, the cap's middle
+    free : float, radians: the angle from ``pole`` to the nearest point of the region seen
+        from the centre; 0 when every candidate is covered by a face (the region closes
+        round the centre)
+    vertex_gap : float, radians: the radius of the largest cap free of vertex directions
+    """
+    units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
+    pole, vertex_gap = exact_empty_cap(units, rows)
+    corners = units[faces[:, 0]], units[faces[:, 1]], units[faces[:, 2]]
+    poles = [pole, *_boundary_poles(units, boundary)]
+    clear = [_clear(units, corners, candidate) for candidate in poles]
+    best = int(np.argmax(clear))
+    return poles[best], clear[best], vertex_gap
+
+
+def _boundary_poles(units: np.ndarray, boundary: np.ndarray | None) -> list[np.ndarray]:
+    """Middles of caps free of the boundary's directions: for each of the ``_FREE_TRIES``
+    longest loops, the mean of its directions and its opposite (the two sides of the loop),
+    and the largest cap free of every boundary direction (:func:`largest_empty_cap`).
+
+    ``boundary``: (k, 2) int, the boundary edges (rows of ``units``)."""
+    if boundary is None or len(boundary) == 0:
+        return []
+    ends = np.asarray(boundary, dtype=np.int64).reshape(-1, 2)
+    n = len(units)
+    graph = coo_matrix((np.ones(len(ends)), (ends[:, 0], ends[:, 1])), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    vertices = np.unique(ends)
+    loops, sizes = np.unique(labels[vertices], return_counts=True)
+    poles = [largest_empty_cap(units[vertices])[0]]
+    for loop in loops[np.argsort(-sizes, kind="stable")[:_FREE_TRIES]]:
+        mean = units[vertices[labels[vertices] == loop]].sum(axis=0)
+        length = float(np.linalg.norm(mean))
+        if length > 0:
+            poles += [mean / length, -mean / length]
+    return poles
+
+
+def _clear(units: np.ndarray, corners: tuple, pole: np.ndarray) -> float:
+    """Radians from unit ``pole`` to the nearest point of the region seen from the centre:
+    0 when a face's spherical triangle holds it, else the nearest vertex or edge arc (an
+    arc of length L whose nearer end is d away comes no nearer than d - L / 2, so only the
+    arcs that may come nearer than the vertices are measured)."""
+    a, b, c = corners
+    if _covers(a, b, c, pole).any():
+        return 0.0
+    free = cap_radius(units, pole)
+    for start, end in ((a, b), (b, c), (c, a)):
+        ends = np.maximum(start @ pole, end @ pole)
+        nearest = np.arccos(np.clip(ends, -1.0, 1.0))
+        length = np.arccos(np.clip(np.einsum("ij,ij->i", start, end), -1.0, 1.0))
+        dips = np.flatnonzero(nearest - length / 2.0 < free)
+        if len(dips):
+            free = min(free, float(arcs_to_point(start[dips], end[dips], pole).min()))
+    return free
+
+
+def _covers(a: np.ndarray, b: np.ndarray, c: np.ndarray, pole: np.ndarray) -> np.ndarray:
+    """(m,) bool: whether the spherical triangle of unit ``a, b, c`` (m, 3) holds ``pole``
+    (the same side of its three great circles, and on the triangle's side of the sphere)."""
+    sides = np.stack([np.cross(a, b) @ pole, np.cross(b, c) @ pole, np.cross(c, a) @ pole], axis=1)
+    same = (sides >= 0).all(axis=1) | (sides <= 0).all(axis=1)
+    facing = (a + b + c) @ pole > 0
+    return same & facing & (np.abs(sides).sum(axis=1) > 0)
+
+
+def region_free_cap(
+    points: np.ndarray, faces: np.ndarray, center: np.ndarray, boundary: np.ndarray, spread: int
+) -> tuple[np.ndarray, float, float]:
+    """:func:`free_cap` of a region seen from ``center``: its hull started on the
+    ``boundary`` vertices and ``spread`` others, both thinned evenly to ``spread`` at most.
+
+    Parameters
+    ----------
+    points : (n, 3) float, the region's vertices (every one used by ``faces``)
+    faces : (m, 3) int, indices into ``points``
+    center : (3,) float, not one of ``points``
+    boundary : (b, 2) int, the region's boundary edges (rows of ``points``)
+    spread : int >= 1
+
+    Returns
+    -------
+    as :func:`free_cap`
+    """
+    directions = unit_rows(np.asarray(points, dtype=np.float64) - center)[0]
+    n = len(directions)
+    rows = np.linspace(0, n - 1, min(spread, n)).astype(np.int64)
+    edge = np.unique(boundary)
+    if len(edge) > spread:
+        edge = edge[np.linspace(0, len(edge) - 1, spread).astype(np.int64)]
+    return free_cap(directions, faces, np.union1d(rows, edge), boundary)

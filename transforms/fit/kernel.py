@@ -37,6 +37,13 @@ _EMPTY_KERNEL_FACES = 4096
 _REWEIGHTING_ROUNDS = 3
 #: The box around the region, as the solver's bounds on the frame coordinates (``_in_frame``).
 _IN_THE_BOX = [(-1.0, 1.0)] * 3
+#: Within this many region sizes of a face's plane, a centre counts as seeing it edge-on.
+_EDGE_ON = 1e-9
+#: How far, in region sizes, a least back-facing centre moves off the planes it lies on.
+_NUDGE = 1e-4
+#: The weight of the L1 distance from the region's middle (in region sizes) that makes the
+#: least back-facing centre one point (:func:`_least_backfacing`).
+_TIE_BREAK = 1e-7
 
 
 @dataclass(frozen=True)
@@ -83,9 +90,12 @@ class KernelPlanes:
         return nearest
 
     def backfacing_area(self, center: np.ndarray) -> float:
-        """Area of the faces whose plane ``center`` is not strictly inside of."""
+        """Area of the faces whose plane ``center`` is not inside of by more than
+        ``_EDGE_ON`` region sizes: a linear program's answer lies on planes, and which side of
+        them rounding puts it must not decide between candidates."""
         j = len(self.faces)
-        return float(self.areas[:j][self.offsets[:j] - self.normals[:j] @ center <= 0.0].sum())
+        inside = self.offsets[:j] - self.normals[:j] @ center
+        return float(self.areas[:j][inside <= _EDGE_ON * self.size].sum())
 
 
 @dataclass(frozen=True)
@@ -200,6 +210,11 @@ class _Moments:
         when the signed volume seen from the middle is positive (the normals point out)."""
         middle = self.first / self.weight
         _, axes = np.linalg.eigh(self.second - self.weight * np.outer(middle, middle))
+        # Each axis points along its largest component: the solver's frame is then the same
+        # for the same surface (the eigen-solver's signs jump with rounding), as the fit,
+        # run in the region's own frame (:mod:`.pose`), needs.
+        largest = np.argmax(np.abs(axes), axis=0)
+        axes = axes * np.sign(axes[largest, np.arange(3)])
         volume = self.normal_at - float(middle @ self.normal)
         return middle, axes, 1 if volume >= 0 else -1
 
@@ -321,7 +336,25 @@ def _least_backfacing_area(planes: KernelPlanes) -> np.ndarray:
         candidates.append(center)
         behind = np.maximum(planes.normals[rows] @ center - planes.offsets[rows], 0.0)
         weights = planes.areas[rows] / (behind + 1e-3 * planes.size)
-    return min(candidates, key=planes.backfacing_area)
+    return _off_the_planes(planes, min(candidates, key=planes.backfacing_area))
+
+
+def _off_the_planes(planes: KernelPlanes, center: np.ndarray) -> np.ndarray:
+    """``center`` moved ``_NUDGE`` region sizes to the inner side of the face planes it lies
+    on (within ``_EDGE_ON``), when that leaves no more area behind: a linear program's
+    answer is a vertex of planes, from which their faces are seen edge-on, and the map of a
+    face seen edge-on turns with the last bit of rounding."""
+    j = len(planes.faces)
+    inside = planes.offsets[:j] - planes.normals[:j] @ center
+    on = np.abs(inside) <= _EDGE_ON * planes.size
+    if not on.any():
+        return center
+    away = -(planes.areas[:j][on] @ planes.normals[:j][on])
+    length = float(np.linalg.norm(away))
+    if not length > 0:
+        return center
+    moved = center + _NUDGE * planes.size * away / length
+    return moved if planes.backfacing_area(moved) <= planes.backfacing_area(center) else center
 
 
 def _in_frame(planes: KernelPlanes, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -357,16 +390,25 @@ def _deepest(planes: KernelPlanes, rows: np.ndarray) -> tuple[np.ndarray, float]
 
 def _least_backfacing(planes: KernelPlanes, rows: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """The centre minimising ``sum(weights * max(0, n . c - offset))`` over the faces
-    ``rows`` (in the box)."""
+    ``rows`` (in the box), plus ``_TIE_BREAK`` times its L1 distance from the middle in the
+    region's frame: the sum alone is often least on a whole edge or facet, whose vertex the
+    solver picks by rounding, so that the same surface turned could get another centre."""
     local, scaled = _in_frame(planes, rows)
     count = len(rows)
-    # n . c - offset <= s_f: one slack per face, so sparse.
-    a_ub = sparse.hstack([sparse.csr_matrix(local), -sparse.identity(count, format="csr")])
+    # n . c - offset <= s_f: one slack per face, so sparse; |x_i| <= u_i.
+    eye = sparse.identity(3, format="csr")
+    a_ub = sparse.bmat(
+        [
+            [sparse.csr_matrix(local), -sparse.identity(count), None],
+            [eye, None, -eye],
+            [-eye, None, -eye],
+        ]
+    )
     found = linprog(
-        c=np.concatenate([np.zeros(3), weights / weights.sum()]),
+        c=np.concatenate([np.zeros(3), weights / weights.sum(), np.full(3, _TIE_BREAK)]),
         A_ub=a_ub.tocsr(),
-        b_ub=scaled,
-        bounds=[*_IN_THE_BOX] + [(0.0, None)] * count,
+        b_ub=np.concatenate([scaled, np.zeros(6)]),
+        bounds=[*_IN_THE_BOX] + [(0.0, None)] * (count + 3),
         method="highs",
     )
     if found.status != 0:

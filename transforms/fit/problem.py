@@ -13,6 +13,7 @@ and the energy of the region on every face, or on runs of them beyond ``EXPLAIN_
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from numbers import Integral
@@ -27,6 +28,7 @@ from ..frames import Frame
 from ..layouts import Layout
 from ..region import FlatRegion, flatten_region
 from ..sampling import area_sample
+from ..topology import region_edges
 from ..viewpoint import check_center_sees_area
 from .kernel import Kernel, kernel_planes
 from .objective import Candidates, FaceEnergy, region_energy
@@ -140,6 +142,11 @@ class _Problem:
         self.points, self.faces, self.method, self.threads = points, faces, method, threads
         self.layout = layout
         self.explain_faces, self.explain_run = explain_faces, explain_run
+        #: Where :meth:`flatten` flattens: these points, with a candidate's own frame, unless
+        #: the fit runs in the region's own frame (:mod:`.pose`), which sets the input's
+        #: points and the candidate's frame there.
+        self.world_points: np.ndarray = points
+        self.world_frame: Callable[[np.ndarray, np.ndarray], Frame] = _frame_of
         self.used = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(points)))
         self.region_points = points[self.used]
         self.planes = kernel_planes(points, faces)
@@ -201,10 +208,26 @@ class _Problem:
         picked = area_sample(self.areas, COARSE_SAMPLE_FACES)
         return FaceEnergy(*_compacted(self.points, self.faces[picked]), self.method, self.layout)
 
+    @cached_property
+    def region_faces(self) -> np.ndarray:
+        """(m, 3) int: the region's faces as rows of ``region_points``."""
+        position = np.zeros(len(self.points), dtype=np.int64)
+        position[self.used] = np.arange(len(self.used))
+        return position[self.faces]
+
+    @cached_property
+    def boundary_edges(self) -> np.ndarray:
+        """(b, 2) int: the region's boundary edges, rows of ``region_points``."""
+        faces = self.region_faces
+        return region_edges(faces, np.ones(len(faces), dtype=np.int8), len(self.used)).boundary
+
     def release(self) -> None:
         """Let go of what only the search reads: the kernel's planes, the region's own
-        vertices and the hull's (the flatten and the energies read the input's arrays)."""
+        vertices and faces and the hull's (the flatten and the energies read the input's
+        arrays)."""
         self.planes = self.region_points = self.used = self.hull_points = self.hull_rows = None
+        self.__dict__.pop("region_faces", None)
+        self.__dict__.pop("boundary_edges", None)
 
     @property
     def closed(self) -> bool:
@@ -233,9 +256,11 @@ class _Problem:
         return units
 
     def flatten(self, candidate: _Candidate) -> FlatRegion:
-        frame = Frame.from_matrix(candidate.rotation, candidate.center)
+        """The region flattened on every face with ``candidate``, in the input's coordinates
+        (so that the answer's params, sent back, give the same map to the last bit)."""
+        frame = self.world_frame(candidate.center, candidate.rotation)
         return flatten_region(
-            self.points,
+            self.world_points,
             self.faces,
             frame,
             self.chart(candidate.sigma),
@@ -362,6 +387,10 @@ class _Problem:
             return start
         sigma = float(sigmas[best - 1]) if start.sigma is not None else None
         return _Candidate(centers[best - 1], start.rotation, sigma)
+
+
+def _frame_of(center: np.ndarray, rotation: np.ndarray) -> Frame:
+    return Frame.from_matrix(rotation, center)
 
 
 def _cap_radii(points: np.ndarray, centers: np.ndarray, pole: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 from ..arrays import as_direction, as_vector
 from ..chart import Method
 from ..frames import Frame
-from .emptycap import cap_radius, largest_empty_cap
+from .emptycap import cap_radius, free_cap
 from .kernel import Kernel, chebyshev_center
 from .problem import FitBounds, FitFixed, _Candidate, _Problem
 
@@ -39,6 +39,7 @@ class _Search:
     free: list[bool]
     initial: _Candidate
     notes: list[str]
+    free_cap: tuple | None = None
 
 
 def _start(problem: _Problem, fixed: FitFixed, bounds: FitBounds) -> _Search:
@@ -69,6 +70,7 @@ def _start(problem: _Problem, fixed: FitFixed, bounds: FitBounds) -> _Search:
         free=[move_center, fixed.rotation is None, choice.choose_sigma],
         initial=choice.candidate,
         notes=notes,
+        free_cap=choice.free_cap,
     )
 
 
@@ -80,16 +82,24 @@ class _Choice:
     candidate: _Candidate
     margin: float | None
     choose_sigma: bool
+    #: :func:`.emptycap.free_cap` seen from the centre (pole, free, vertex gap), when the
+    #: rotation was chosen; None when it was given.
+    free_cap: tuple | None = None
 
 
 def _frame_and_sigma(
     problem: _Problem, center: np.ndarray, fixed: FitFixed, bounds: FitBounds, notes: list[str]
 ) -> _Choice:
-    """Seen from ``center``: the rotation of :func:`_start_rotation` unless fixed, and the
-    best sigma whose cap fits inside the empty cap less the margin unless fixed."""
+    """Seen from ``center``: unless fixed, the rotation with its pole in the middle of the
+    cap free of the region (:func:`.emptycap.free_cap`: the largest cap free of every vertex
+    direction, its hull started on :func:`.problem._hull_rows`, or one free of the boundary's
+    directions, whichever the region leaves clearer) and the roll of :func:`pole_and_roll`;
+    unless fixed, the best sigma whose cap fits inside the empty cap less the margin."""
     directions = problem.directions(center)
+    cap = None
     if fixed.rotation is None:
-        rotation = _start_rotation(directions, problem.hull_rows, fixed.up, notes)
+        cap = free_cap(directions, problem.region_faces, problem.hull_rows, problem.boundary_edges)
+        rotation = pole_and_roll(directions, cap[0], fixed.up, notes)
     else:
         rotation = fixed.rotation.rotation
     margin = math.radians(bounds.min_margin_deg)
@@ -104,16 +114,12 @@ def _frame_and_sigma(
     room = math.pi if margin is None else cap_radius(directions, rotation[1]) - margin
     choose_sigma = fixed.sigma is None and problem.method is not Method.STANDARD
     sigma = problem.best_sigma(center, rotation, room) if choose_sigma else fixed.sigma
-    return _Choice(_Candidate(center, rotation, sigma), margin, choose_sigma)
+    return _Choice(_Candidate(center, rotation, sigma), margin, choose_sigma, cap)
 
 
-def _start_rotation(
-    directions: np.ndarray, hull_rows: np.ndarray, up, notes: list[str]
-) -> np.ndarray:
-    """(3, 3): the pole in the middle of the largest empty cap of the directions
-    ``hull_rows`` (:func:`.problem._hull_rows`), the roll by ``up`` (unless it is parallel to the
-    pole: then a note) or :func:`roll_axis` (of every direction)."""
-    pole, _ = largest_empty_cap(directions[hull_rows])
+def pole_and_roll(directions: np.ndarray, pole: np.ndarray, up, notes: list[str]) -> np.ndarray:
+    """(3, 3): the rotation with local ``+Y`` along ``pole`` and the roll by ``up`` (unless it
+    is parallel to the pole: then a note) or :func:`roll_axis` of ``directions``."""
     if up is not None:
         up = as_direction(up, "up")
         if np.linalg.norm(np.cross(up, pole)) < _PARALLEL:

@@ -5,11 +5,14 @@ of /v1/flatten's and /v1/fit's."""
 
 from __future__ import annotations
 
+import math
 from typing import Literal
 
 from pydantic import Field
 
 from transforms import STRETCHED_ENERGY, Layout, Method
+from transforms.fit import HULL_VERTICES
+from transforms.fit.emptycap import region_free_cap
 
 from ...encoding import Answer
 from ...meshio import FORMATS
@@ -120,12 +123,20 @@ class Validation(Answer):
     winding: Literal["outward", "inward"] = Field(
         description="Which way the file's winding faces, as the region shows it."
     )
+    free_cap_deg: float = Field(
+        description="Angular radius, degrees, of the largest cap of directions free of the "
+        "region seen from the centre used (no face's direction in it); 0 when none is (the "
+        "region closes round the centre). Where it is above min_margin_deg, a pole in its "
+        "middle with a cap narrower by the margin keeps the seam and the singular points off "
+        'the region: "auto" and /v1/fit then answer seam-free.'
+    )
 
     @classmethod
     def of(cls, region: MeshRegion) -> Validation:
         """The validation with file face ids."""
         v, faces = region.flat.validation, region.faces
         return cls.build(
+            free_cap_deg=free_cap_deg(region),
             seam_free=v.seam_free,
             star_shaped=v.star_shaped,
             singular_point_faces=faces[v.singular_point_faces],
@@ -142,6 +153,16 @@ class Validation(Answer):
             stray_faces=region.pieces.stray,
             winding="outward" if v.winding == 1 else "inward",
         )
+
+
+def free_cap_deg(region: MeshRegion) -> float:
+    """The angular radius (degrees) of the largest cap free of the region seen from its
+    centre (:func:`transforms.fit.emptycap.region_free_cap`)."""
+    flat = region.flat
+    points = region.mesh.vertices[flat.vertex_ids]
+    boundary = flat.validation.boundary_edges
+    _, free, _ = region_free_cap(points, flat.faces, region.frame.center, boundary, HULL_VERTICES)
+    return math.degrees(free)
 
 
 class Summary(Answer):

@@ -388,7 +388,10 @@ def resolve(
         if fixed.rotation is not None and (fixed.sigma is not None or not warped):
             frame = head if head is not None else frame_of(params, selection.center)
             return chart_of(params), frame, None
-    choose = fit_region if params.auto else default_choice  # a search, or its start alone
+    # A search (never worse than the defaults, also at the request's default centre), or
+    # its start alone.
+    choose = fit_region if params.auto else default_choice
+    also = {"default_center": selection.center} if params.auto else {}
     fit = choose(
         mesh.vertices,
         welded_faces(mesh, selection),
@@ -397,6 +400,7 @@ def resolve(
         method=params.method,
         layout=params.layout,
         threads=ctx.threads,
+        **also,
     )
     if facing is not None and fixed.rotation is None:
         check_facing(fit.frame.rotation, facing, "the rotation chosen")

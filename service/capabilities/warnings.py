@@ -29,6 +29,7 @@ class WarningCode(StrEnum):
     DENSITY_IMPLAUSIBLE = "density_implausible"
     SITES_IMPLAUSIBLE = "sites_implausible"
     REGION_PIECES = "region_pieces"
+    SEAM_ON_REGION = "seam_on_region"
 
 
 #: What each code means: the table of docs/api.md (tests/test_warnings.py keeps them equal;
@@ -45,6 +46,10 @@ MEANINGS = {
     "part of the scan, an eye, a box beside the head). The message gives their face counts; "
     "validation.stray_faces lists the faces outside the largest, and region.pieces "
     '"largest" keeps the largest alone.',
+    WarningCode.SEAM_ON_REGION: "The seam or a singular point lies on the region, so the map "
+    "is not one patch (validation.seam_faces, singular_point_faces). The message says whether "
+    'a cap of directions is free of the region (then "auto" puts the seam there) or how large '
+    "the largest gap between its vertices' directions is.",
 }
 
 

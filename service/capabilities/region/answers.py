@@ -5,14 +5,11 @@ of /v1/flatten's and /v1/fit's."""
 
 from __future__ import annotations
 
-import math
 from typing import Literal
 
 from pydantic import Field
 
 from transforms import STRETCHED_ENERGY, Layout, Method
-from transforms.fit import HULL_VERTICES
-from transforms.fit.emptycap import region_free_cap
 
 from ...encoding import Answer
 from ...meshio import FORMATS
@@ -136,7 +133,7 @@ class Validation(Answer):
         """The validation with file face ids."""
         v, faces = region.flat.validation, region.faces
         return cls.build(
-            free_cap_deg=free_cap_deg(region),
+            free_cap_deg=region.free_cap[0],
             seam_free=v.seam_free,
             star_shaped=v.star_shaped,
             singular_point_faces=faces[v.singular_point_faces],
@@ -153,16 +150,6 @@ class Validation(Answer):
             stray_faces=region.pieces.stray,
             winding="outward" if v.winding == 1 else "inward",
         )
-
-
-def free_cap_deg(region: MeshRegion) -> float:
-    """The angular radius (degrees) of the largest cap free of the region seen from its
-    centre (:func:`transforms.fit.emptycap.region_free_cap`)."""
-    flat = region.flat
-    points = region.mesh.vertices[flat.vertex_ids]
-    boundary = flat.validation.boundary_edges
-    _, free, _ = region_free_cap(points, flat.faces, region.frame.center, boundary, HULL_VERTICES)
-    return math.degrees(free)
 
 
 class Summary(Answer):

@@ -8,7 +8,9 @@ placed in the request by :func:`service.problems.problem_of`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Generic, TypeVar
 
 import numpy as np
@@ -33,6 +35,8 @@ from transforms import (
 )
 from transforms import selection as select
 from transforms.arrays import as_direction
+from transforms.fit import HULL_VERTICES
+from transforms.fit.emptycap import region_free_cap
 from transforms.frames import FACING_AGREEMENT_DEG, facing_disagreement_deg
 from transforms.topology import representatives, welded_by
 
@@ -372,6 +376,20 @@ class MeshRegion:
         """The region's connected pieces (``count > 1``: the region is several pieces)."""
         return self.selection.pieces
 
+    @cached_property
+    def free_cap(self) -> tuple[float, float]:
+        """Degrees: the angular radius of the largest cap free of the region seen from its
+        centre, and that of the largest gap between its vertices' directions
+        (:func:`transforms.fit.emptycap.region_free_cap`; found once, for the validation
+        and the warnings)."""
+        flat = self.flat
+        points = self.mesh.vertices[flat.vertex_ids]
+        boundary = flat.validation.boundary_edges
+        _, free, gap = region_free_cap(
+            points, flat.faces, self.frame.center, boundary, HULL_VERTICES
+        )
+        return math.degrees(free), math.degrees(gap)
+
 
 def resolve(
     mesh: Mesh, selection: Selection, params: MeshParams, ctx: Context
@@ -504,7 +522,33 @@ def flatten(given: MeshInput, ctx: Context) -> MeshRegion:
             mesh.vertices, faces, frame, chart, threads=ctx.threads, layout=params.layout
         )
     untangled = untangle_layout(mesh, flat) if params.untangle else None
-    return MeshRegion(mesh, selection, chart, frame, flat, fit, untangled, facing_of(params))
+    region = MeshRegion(mesh, selection, chart, frame, flat, fit, untangled, facing_of(params))
+    if not flat.validation.seam_free:
+        _warn_of_the_seam(region, ctx)
+    return region
+
+
+def _warn_of_the_seam(region: MeshRegion, ctx: Context) -> None:
+    """The ``seam_on_region`` warning: why the seam or a singular point lies on the region,
+    and whether a pole could keep them off it."""
+    free, gap = region.free_cap
+    if free > 0:
+        ctx.warn(
+            WarningCode.SEAM_ON_REGION,
+            "rotation",
+            f"the seam or a singular point lies on the region, yet a cap of {free:.3g} degrees "
+            "is free of it seen from the centre: the rotation or sigma used does not put the "
+            'seam there ("auto" or /v1/fit does)',
+        )
+    else:
+        ctx.warn(
+            WarningCode.SEAM_ON_REGION,
+            "region",
+            "the seam or a singular point lies on the region: no cap is free of it seen from "
+            "the centre (its faces close round every direction), so no pole can keep them off; "
+            f"the largest gap between its vertices' directions is {gap:.3g} degrees. A smaller "
+            "region, or a centre that sees it from one side, can be one patch",
+        )
 
 
 def untangle_layout(mesh: Mesh, flat: FlatRegion) -> Untangled:

@@ -523,7 +523,7 @@ def test_colour_by_shows_the_distortion_on_the_map_and_the_head(server, tmp_path
         page.wait_for_selector("body[data-state=shown]", timeout=120_000)
         page.wait_for_function(
             "() => document.querySelector('#map svg g.legend')"
-            ".textContent.includes('200,390 triangles')",
+            ".textContent.includes('200,280 triangles')",
             timeout=120_000,
         )
         assert page.locator("#map svg path.fill[class*=colour-]").count() > 20

@@ -38,3 +38,8 @@ def test_a_scan_declared_in_the_wrong_unit_is_never_silent(stored, declared):
 def test_a_stray_box_is_said():
     (case,) = [c for c in ALL_CASES if c.stray and c.scan == FS]
     assert "region_pieces" in run_case(case)["warnings"]
+
+
+def test_the_fit_in_three_random_poses_has_the_same_energy():
+    (case,) = [c for c in CASES if c.name == "fsaverage scalp, Y-up"]
+    assert run_case(case)["spread"] <= 1e-9

@@ -299,3 +299,64 @@ async def test_samples_say_their_units_and_when_they_are_estimated(client):
     # With its unit, each head's scalp reads as a scalp: no units warning.
     params = {**SCALP, "units": listed[NAME]["units"]}
     assert (await flatten(client, NAME, params, endpoint="/v1/measure")).json()["warnings"] == []
+
+
+# -- the map itself ---------------------------------------------------------------------
+
+
+async def test_a_seam_on_a_region_that_leaves_a_cap_free_is_blamed_on_the_rotation(client):
+    """The scalp with the pole put up through the crown: a cap below is free, the rotation
+    given misses it, and "auto" would not."""
+    params = {"region": SCALP["region"], "rotation": {"pole": [0, 0, 1], "up": [0, 1, 0]}}
+    answer = (await flatten(client, NAME, params, endpoint="/v1/validate")).json()
+    assert not answer["validation"]["seam_free"]
+    warning = only(answer, WarningCode.SEAM_ON_REGION)
+    assert warning["field"] == "params.rotation"
+    free = answer["validation"]["free_cap_deg"]
+    assert free > 10 and f"a cap of {free:.3g} degrees is free" in warning["message"]
+    auto = {"region": SCALP["region"], "center": "auto", "rotation": "auto", "sigma": "auto"}
+    fitted = (await flatten(client, NAME, auto, endpoint="/v1/validate")).json()
+    assert fitted["validation"]["seam_free"]
+    assert WarningCode.SEAM_ON_REGION not in [w["code"] for w in fitted["warnings"]]
+
+
+async def test_a_closed_region_says_no_cap_is_free_and_its_largest_gap(client):
+    """The whole head seen from inside: its faces close round every direction."""
+    vertices, _ = load_sample(NAME)
+    answer = (await flatten(client, NAME, {}, endpoint="/v1/validate")).json()
+    assert not answer["validation"]["seam_free"] and answer["validation"]["free_cap_deg"] == 0
+    warning = only(answer, WarningCode.SEAM_ON_REGION)
+    assert warning["field"] == "params.region" and "no cap is free" in warning["message"]
+    # The largest gap between the vertices' directions, by brute force over a fine sphere:
+    # the largest angle from any direction to its nearest vertex direction.
+    centre = np.asarray(answer["params"]["center"])
+    seen = vertices - centre
+    seen /= np.linalg.norm(seen, axis=1, keepdims=True)
+    k = np.arange(20000) + 0.5
+    polar, azimuth = np.arccos(1 - 2 * k / len(k)), np.pi * (1 + 5**0.5) * k
+    probes = np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar),
+                       np.cos(polar)], axis=1)  # fmt: skip
+    nearest = np.degrees(np.arccos(np.clip((probes @ seen.T).max(axis=1), -1, 1))).max()
+    said = numbers(warning["message"].split("largest gap")[1])[0]
+    assert said == pytest.approx(nearest, abs=0.5)
+
+
+async def test_folded_and_backfacing_triangles_are_said_with_their_counts(client):
+    """Lee Perry-Smith's head seen from the box centre of the head and shoulders: the cone
+    takes the neck and the chin, which face away from there."""
+    params = {"region": {"cone": {"axis": [0, 1, 0], "half_angle_deg": 60}}}
+    name = "lee-perry-smith.obj"
+    answer = (await flatten(client, name, params, endpoint="/v1/validate")).json()
+    v = answer["validation"]
+    assert not v["star_shaped"]
+    warning = only(answer, WarningCode.REGION_FOLDS)
+    folded, total, behind = numbers(warning["message"])[:3]
+    assert (folded, total, behind) == (
+        len(v["folded_faces"]), len(answer["faces"]["ids"]) if "faces" in answer
+        else v["pieces"][0] + len(v["stray_faces"]), len(v["backfacing_faces"]),
+    )  # fmt: skip
+    assert "untangle: true" in warning["message"]
+    untangled = {**params, "untangle": True}
+    after = (await flatten(client, name, untangled, endpoint="/v1/validate")).json()
+    left = len(after["untangle"]["folded_after"])
+    assert f"untangling left {left:,} folded" in only(after, WarningCode.REGION_FOLDS)["message"]

@@ -30,6 +30,7 @@ class WarningCode(StrEnum):
     SITES_IMPLAUSIBLE = "sites_implausible"
     REGION_PIECES = "region_pieces"
     SEAM_ON_REGION = "seam_on_region"
+    REGION_FOLDS = "region_folds"
 
 
 #: What each code means: the table of docs/api.md (tests/test_warnings.py keeps them equal;
@@ -50,6 +51,9 @@ MEANINGS = {
     "is not one patch (validation.seam_faces, singular_point_faces). The message says whether "
     'a cap of directions is free of the region (then "auto" puts the seam there) or how large '
     "the largest gap between its vertices' directions is.",
+    WarningCode.REGION_FOLDS: "Triangles of the region are folded in the map or face away "
+    "from the centre, so the map overlaps itself there (validation.folded_faces, "
+    "backfacing_faces). The message gives how many, and whether untangling was asked for.",
 }
 
 

@@ -525,7 +525,28 @@ def flatten(given: MeshInput, ctx: Context) -> MeshRegion:
     region = MeshRegion(mesh, selection, chart, frame, flat, fit, untangled, facing_of(params))
     if not flat.validation.seam_free:
         _warn_of_the_seam(region, ctx)
+    if not flat.validation.star_shaped:
+        _warn_of_folds(region, ctx)
     return region
+
+
+def _warn_of_folds(region: MeshRegion, ctx: Context) -> None:
+    """The ``region_folds`` warning: triangles folded in the map or facing away from the
+    centre (the map overlaps itself there), how many, and what may help."""
+    v = region.flat.validation
+    folded, behind, total = len(v.folded_faces), len(v.backfacing_faces), len(region.faces)
+    if region.untangled is None:
+        after = "untangle: true makes the layout fold-free where it can"
+    else:
+        after = f"untangling left {len(region.untangled.flipped_after):,} folded"
+    ctx.warn(
+        WarningCode.REGION_FOLDS,
+        "region",
+        f"{folded:,} of the region's {total:,} triangles are folded in the map and {behind:,} "
+        f"face away from the centre (validation.folded_faces, backfacing_faces): the map "
+        f"overlaps itself there and its numbers on them cannot be trusted; {after}. A "
+        'narrower region, a centre inside the head beneath it, or "auto" may see it whole',
+    )
 
 
 def _warn_of_the_seam(region: MeshRegion, ctx: Context) -> None:

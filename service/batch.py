@@ -54,9 +54,11 @@ from pathlib import Path
 
 import orjson
 
+from .batchfiles import ScanFolder, content_free, partial_name, read_confined
 from .capabilities import MESH_COMMANDS, MeshCapability
 from .capabilities.context import Context
 from .capabilities.inputs import MeshPart, Upload, parse_params
+from .errors import UnreadableMesh
 from .jsonkeys import repeated_key
 from .meshio import format_of
 from .observability import JsonFormatter
@@ -93,6 +95,8 @@ class Scan:
     command: str
     params: dict
     outputs: tuple[tuple[str, Output], ...]
+    #: Where the mesh may lie: the manifest's folder, and each --allow-root.
+    roots: tuple[Path, ...] = ()
 
     def digest(self, mesh_bytes: bytes) -> str:
         """SHA-256 of everything the outputs depend on: the mesh's bytes, the command, the
@@ -124,9 +128,10 @@ class Outcome:
 # -- the manifest --------------------------------------------------------------------------
 
 
-def read_manifest(path: Path) -> list[Scan]:
+def read_manifest(path: Path, allowed: tuple[Path, ...] = ()) -> list[Scan]:
     """Every scan of the manifest, checked (params by the API's models, outputs by the
-    command's forms, names unique).
+    command's forms, names unique); a scan's mesh may lie in the manifest's folder or one
+    of ``allowed``.
 
     Raises
     ------
@@ -144,7 +149,7 @@ def read_manifest(path: Path) -> list[Scan]:
         if not line.strip():
             continue
         try:
-            scan = parse_line(line, number, path.parent)
+            scan = parse_line(line, number, path.parent, allowed)
             if scan.name in lines_by_name:
                 raise Problem(
                     422,
@@ -164,8 +169,9 @@ def read_manifest(path: Path) -> list[Scan]:
     return scans
 
 
-def parse_line(line: bytes, number: int, folder: Path) -> Scan:
-    """One manifest line as a :class:`Scan`; ``folder`` is where relative paths start.
+def parse_line(line: bytes, number: int, folder: Path, allowed: tuple[Path, ...] = ()) -> Scan:
+    """One manifest line as a :class:`Scan`; ``folder`` is where relative paths start, and
+    with ``allowed`` where its mesh may lie.
 
     Raises
     ------
@@ -198,7 +204,8 @@ def parse_line(line: bytes, number: int, folder: Path) -> Scan:
             "or '-', starting with a letter or digit, at most 128",
             field="name",
         )
-    return Scan(number, name, folder / mesh, command, params, _outputs(entry, capability))
+    outputs = _outputs(entry, capability)
+    return Scan(number, name, folder / mesh, command, params, outputs, (folder, *allowed))
 
 
 def _object_of(line: bytes) -> dict:
@@ -287,22 +294,27 @@ def process(scan: Scan, out: Path, settings: Settings) -> Outcome:
     """Compute ``scan`` into ``out/NAME/`` unless its digest says it is done; a failure is
     recorded in its ``error.json`` (when the folder can be written) and returned, never
     raised."""
-    started, folder = time.perf_counter(), out / scan.name
+    started, path = time.perf_counter(), out / scan.name
     try:
-        return _process(scan, folder, settings, started)
-    except OSError as error:  # the output folder: not writable, or full
-        detail = f"cannot write in {str(folder)!r}: {error.strerror}"
-        return _failed(scan, folder, Problem(500, detail, "output-not-written"), started)
+        folder = ScanFolder(out, scan.name)
+    except OSError as error:  # not writable, full, or a symbolic link at DIR/NAME
+        why = "a symbolic link is there" if path.is_symlink() else error.strerror
+        detail = f"cannot write in {str(path)!r}: {why}"
+        return failed(scan, None, Problem(500, detail, "output-not-written"), started)
+    with folder:
+        try:
+            return _process(scan, folder, settings, started)
+        except OSError as error:  # the output folder: not writable, or full
+            detail = f"cannot write in {str(path)!r}: {error.strerror}"
+            return failed(scan, folder, Problem(500, detail, "output-not-written"), started)
 
 
-def _process(scan: Scan, folder: Path, settings: Settings, started: float) -> Outcome:
+def _process(scan: Scan, folder: ScanFolder, settings: Settings, started: float) -> Outcome:
     cpu = time.process_time()
-    folder.mkdir(parents=True, exist_ok=True)
     try:
-        data = scan.mesh.read_bytes()
-    except OSError as error:
-        detail = f"mesh: cannot read {str(scan.mesh)!r}: {error.strerror}"
-        return _failed(scan, folder, Problem(422, detail, field="mesh"), started)
+        data = read_confined(scan.mesh, scan.roots, settings.max_upload_bytes)
+    except Problem as problem:
+        return failed(scan, folder, problem, started)
     digest = scan.digest(data)
     if _finished(folder, scan, digest):
         return Outcome(scan, "skipped", time.perf_counter() - started)
@@ -310,59 +322,63 @@ def _process(scan: Scan, folder: Path, settings: Settings, started: float) -> Ou
     try:
         written = _compute(scan, data, settings, folder)
     except Problem as problem:
-        return _failed(scan, folder, problem, started)
+        return failed(scan, folder, problem, started)
     except OSError:
         raise  # writing the outputs (process says so)
     except Exception as error:  # a bug: this scan fails alone, named by the error's type only
         # (its message could quote the mesh).
         problem = Problem(500, f"internal error ({type(error).__name__})", "internal-error")
-        return _failed(scan, folder, problem, started)
+        return failed(scan, folder, problem, started)
     record = {"digest": digest, "meshflat": version("meshflat"), "outputs": written}
-    _write_atomically(folder / DIGEST_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
+    folder.write_atomically(DIGEST_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
     seconds = time.perf_counter() - started
     return Outcome(scan, "done", seconds, cpu_seconds=time.process_time() - cpu)
 
 
-def _compute(scan: Scan, data: bytes, settings: Settings, folder: Path) -> dict[str, dict]:
+def _compute(scan: Scan, data: bytes, settings: Settings, folder: ScanFolder) -> dict[str, dict]:
     """The outputs of one computation, each written as it is rendered (partial names until
-    all are), with their sizes and SHA-256."""
+    all are), with their sizes and SHA-256. A reader's refusal is told by its kind and
+    position only (:func:`content_free`): its message may quote the file."""
     capability = MESH_COMMANDS[scan.command]
     timings = Timings()
     written = {}
     ctx = Context(settings)
     with core_errors_as_problems(capability.places):
         params = parse_params(capability.params, orjson.dumps(scan.params))
-        given = capability.input_of(
-            params, {capability.mesh.name: Upload(scan.mesh.name, data)}, ctx
-        )
+        try:
+            given = capability.input_of(
+                params, {capability.mesh.name: Upload(scan.mesh.name, data)}, ctx
+            )
+        except UnreadableMesh as error:
+            raise content_free(error.error, error.part) from None
         with timings.measure("compute"):
             result = capability.operation(given, ctx)
         for name, output in scan.outputs:
             answer = capability.render(result, params, output, ctx, timings)
-            _partial(folder / name).write_bytes(answer)
+            folder.write_partial(name, answer)
             written[name] = {"bytes": len(answer), "sha256": hashlib.sha256(answer).hexdigest()}
     for name in written:
-        os.replace(_partial(folder / name), folder / name)
+        folder.commit(name)
     return written
 
 
-def _finished(folder: Path, scan: Scan, digest: str) -> bool:
+def _finished(folder: ScanFolder, scan: Scan, digest: str) -> bool:
     """Whether the folder's digest is ``digest`` and every output is as it recorded."""
     try:
-        record = orjson.loads((folder / DIGEST_FILE).read_bytes())
+        record = orjson.loads(folder.read(DIGEST_FILE))
     except (OSError, orjson.JSONDecodeError):
         return False
     if not isinstance(record, dict) or record.get("digest") != digest:
         return False
     recorded = record.get("outputs")
     return isinstance(recorded, dict) and all(
-        _intact(folder / name, recorded.get(name)) for name, _ in scan.outputs
+        _intact(folder, name, recorded.get(name)) for name, _ in scan.outputs
     )
 
 
-def _intact(path: Path, recorded) -> bool:
+def _intact(folder: ScanFolder, name: str, recorded) -> bool:
     try:
-        data = path.read_bytes()
+        data = folder.read(name)
     except OSError:
         return False
     return isinstance(recorded, dict) and recorded == {
@@ -371,15 +387,17 @@ def _intact(path: Path, recorded) -> bool:
     }
 
 
-def _forget(folder: Path, scan: Scan) -> None:
+def _forget(folder: ScanFolder, scan: Scan) -> None:
     """Before a scan is computed: no record of an earlier run, and no output of other
     inputs left to pass for this one's."""
     for name in (DIGEST_FILE, ERROR_FILE, *(name for name, _ in scan.outputs)):
-        (folder / name).unlink(missing_ok=True)
-        _partial(folder / name).unlink(missing_ok=True)
+        folder.unlink(name)
+        folder.unlink(partial_name(name))
 
 
-def _failed(scan: Scan, folder: Path, problem: Problem, started: float) -> Outcome:
+def failed(scan: Scan, folder: ScanFolder | None, problem: Problem, started: float) -> Outcome:
+    """The scan's failure, with its ``error.json`` in ``folder`` (None: it cannot be
+    written; the log says why)."""
     answer = orjson.loads(problem_body(problem))
     record = {
         **answer,
@@ -389,20 +407,11 @@ def _failed(scan: Scan, folder: Path, problem: Problem, started: float) -> Outco
         "meshflat": version("meshflat"),
     }
     with contextlib.suppress(OSError):  # a folder that cannot be written: the log says why
-        for name, _ in scan.outputs:
-            _partial(folder / name).unlink(missing_ok=True)
-        _write_atomically(folder / ERROR_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
+        if folder is not None:
+            for name, _ in scan.outputs:
+                folder.unlink(partial_name(name))
+            folder.write_atomically(ERROR_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
     return Outcome(scan, "failed", time.perf_counter() - started, answer)
-
-
-def _partial(path: Path) -> Path:
-    return path.with_name(f".{path.name}.partial")
-
-
-def _write_atomically(path: Path, data: bytes) -> None:
-    partial = _partial(path)
-    partial.write_bytes(data)
-    os.replace(partial, path)
 
 
 # -- many scans ----------------------------------------------------------------------------
@@ -415,7 +424,7 @@ def outcomes(scans: list[Scan], out: Path, settings: Settings, processes: int) -
     todo = []
     for scan in scans:
         started = time.perf_counter()
-        if _done_before(scan, out):
+        if _done_before(scan, out, settings):
             yield Outcome(scan, "skipped", time.perf_counter() - started)
         else:
             todo.append(scan)
@@ -437,12 +446,13 @@ def outcomes(scans: list[Scan], out: Path, settings: Settings, processes: int) -
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _done_before(scan: Scan, out: Path) -> bool:
+def _done_before(scan: Scan, out: Path, settings: Settings) -> bool:
     try:
-        data = scan.mesh.read_bytes()
-    except OSError:
+        data = read_confined(scan.mesh, scan.roots, settings.max_upload_bytes)
+        with ScanFolder(out, scan.name, create=False) as folder:
+            return _finished(folder, scan, scan.digest(data))
+    except (Problem, OSError):
         return False  # its process says why
-    return _finished(out / scan.name, scan, scan.digest(data))
 
 
 def _fresh_processes() -> BaseContext:
@@ -489,7 +499,9 @@ def run_batch(args: argparse.Namespace) -> int:
         The manifest or an option is wrong (nothing has run).
     """
     settings = Settings.from_env()
-    scans = shard_of(read_manifest(Path(args.manifest)), args.shard_index, args.shard_count)
+    allowed = tuple(Path(root) for root in args.allow_root or ())
+    scans = read_manifest(Path(args.manifest), allowed)
+    scans = shard_of(scans, args.shard_index, args.shard_count)
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)

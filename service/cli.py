@@ -287,6 +287,12 @@ def _add_batch(commands) -> None:
     )
     batch.add_argument("--out", metavar="DIR", required=True, help="a folder per scan in DIR")
     batch.add_argument(
+        "--allow-root",
+        action="append",
+        metavar="DIR",
+        help="meshes may lie under DIR too (default: only in the manifest's folder); repeatable",
+    )
+    batch.add_argument(
         "--processes",
         type=_positive,
         metavar="N",

@@ -4,6 +4,7 @@ failure on its own, sharded over pods; a bad manifest line is named by its numbe
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -42,8 +43,14 @@ def scalp(outputs=("map.json",)) -> dict:
     return {"mesh": SAMPLES[NAME].path.as_posix(), "params": PARAMS, "outputs": list(outputs)}
 
 
+#: The bundled scans' folder: the manifests of these tests name the scalp there.
+SAMPLES_ROOT = SAMPLES[NAME].path.parent
+
+
 def batch(manifest: Path, out: Path, *options) -> int:
-    return main(["batch", str(manifest), "--out", str(out), *map(str, options)])
+    """``meshflat batch``, the bundled scans' folder allowed beside the manifest's."""
+    allowed = ["--allow-root", str(SAMPLES_ROOT)]
+    return main(["batch", str(manifest), "--out", str(out), *allowed, *map(str, options)])
 
 
 def logged(capsys) -> list[dict]:
@@ -134,10 +141,15 @@ async def test_one_bad_scan_fails_alone_with_the_api_message(client, tmp_path, c
 
     answer = problem(await flatten(client, NAME, data=data, filename=filename), 422, "mesh")
     error = json.loads((out / "broken" / ERROR_FILE).read_bytes())
-    assert {key: error[key] for key in answer} == answer
+    # The API's problem, but for its detail: a reader's kind and position, never its words
+    # (they may quote the file).
+    assert {key: error[key] for key in answer if key != "detail"} == {
+        key: answer[key] for key in answer if key != "detail"
+    }
+    assert error["detail"].startswith("mesh: not a readable mesh (MeshFormatError at line 7")
     assert (error["line"], error["scan"]) == (2, "broken")
     failed = next(line for line in lines if line.get("scan") == "broken")
-    assert (failed["level"], failed["line"], failed["detail"]) == ("error", 2, answer["detail"])
+    assert (failed["level"], failed["line"], failed["detail"]) == ("error", 2, error["detail"])
     summary = lines[-1]
     assert [summary[key] for key in ("message", "done", "skipped", "failed")] == [
         "batch finished",
@@ -176,10 +188,12 @@ async def test_only_the_outputs_asked_for_and_the_records_reach_the_disk(tmp_pat
     writes = await watched_writes(run)
     finals = [out / "s" / name for name in (*forms, DIGEST_FILE)] + [out / "a" / ERROR_FILE]
     allowed = {*finals, *(path.with_name(f".{path.name}.partial") for path in finals)}
-    opened = {Path(path) for event, path in writes if event == "open"}
-    assert opened and opened <= allowed, opened - allowed
-    made = {Path(path) for event, path in writes if event == "os.mkdir"}
-    assert made <= {out, out / "s", out / "a"}
+    # A scan's files are opened by name in its folder (opened itself without following a
+    # link); an opened descriptor's file object shows as its number.
+    opened = {str(path) for event, path in writes if event == "open" and not isinstance(path, int)}
+    assert opened and opened <= {path.name for path in allowed}, opened
+    made = {str(path) for event, path in writes if event == "os.mkdir"}
+    assert made <= {str(out), "s", "a"}
 
 
 def test_an_unreadable_mesh_fails_its_scan_only(tmp_path, capsys):
@@ -319,8 +333,9 @@ async def test_the_installed_command_runs_scans_in_processes(tmp_path):
         [{**scalp(["map.svg"]), "name": name} for name in ("one", "two", "three")],
     )
     command = Path(sys.executable).parent / "meshflat"
+    options = ["--processes", "2", "--progress", "--allow-root", SAMPLES_ROOT]
     run = subprocess.run(
-        [command, "batch", manifest, "--out", tmp_path / "out", "--processes", "2", "--progress"],
+        [command, "batch", manifest, "--out", tmp_path / "out", *options],
         capture_output=True,
         text=True,
         timeout=300,
@@ -331,3 +346,65 @@ async def test_the_installed_command_runs_scans_in_processes(tmp_path):
         assert (tmp_path / "out" / name / "map.svg").read_bytes().startswith(b"<svg")
     summary = json.loads(run.stderr.rsplit("\n", 2)[-2].rpartition("\r")[2])
     assert summary["message"] == "batch finished" and summary["done"] == 3
+
+
+def test_meshes_are_read_only_as_regular_files_inside_the_manifests_folder(
+    tmp_path, capsys, monkeypatch
+):
+    monkeypatch.setenv("MESHFLAT_MAX_UPLOAD_BYTES", "100000")
+    here, secret = tmp_path / "here", tmp_path / "secret"
+    here.mkdir()
+    secret.mkdir()
+    (secret / "hidden.obj").write_bytes(b"v 0 0 0\n")
+    (here / "link.obj").symlink_to(secret / "hidden.obj")
+    os.mkfifo(here / "pipe.obj")  # read in the main process, it would hang the batch
+    (here / "huge.obj").write_bytes(b"v 0 0 0\n" * 20_000)  # 160 kB, beyond the limit
+    refused = {
+        "shadow": ("/etc/shadow", "outside"),
+        "passwd": ("../../../../../../etc/passwd", "outside"),
+        "hidden": ("../secret/hidden.obj", "outside"),
+        "link": ("link.obj", "outside"),
+        "pipe": ("pipe.obj", "not a regular file"),
+        "zero": ("/dev/zero", "not a regular file"),
+        "huge": ("huge.obj", "larger than 100000 bytes"),
+    }
+    lines = [
+        {"mesh": mesh, "params": {"format": "obj"}, "outputs": ["m.json"], "name": name}
+        for name, (mesh, _) in refused.items()
+    ]
+    manifest = write_manifest(here, [*lines, {**scalp(), "name": "ok"}])
+    out = tmp_path / "out"
+    assert batch(manifest, out, "--processes", 1, "--allow-root", "/dev") == SCANS_FAILED
+    assert by_scan(logged(capsys)) == {**dict.fromkeys(refused, "scan failed"), "ok": "scan done"}
+    for name, (_, words) in refused.items():
+        error = json.loads((out / name / ERROR_FILE).read_bytes())
+        assert error["field"] == "mesh" and words in error["detail"], (name, error)
+    assert json.loads((out / "huge" / ERROR_FILE).read_bytes())["status"] == 413
+
+
+def test_outputs_are_never_written_through_a_symbolic_link(tmp_path, capsys):
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "victim").write_text("untouched")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "linked").symlink_to(elsewhere)  # a scan's folder that is a link out of DIR
+    (out / "planted").mkdir()
+    (out / "planted" / f".{ERROR_FILE}.partial").symlink_to(elsewhere / "victim")
+    manifest = write_manifest(
+        tmp_path,
+        [
+            {"mesh": "missing.obj", "outputs": ["m.json"], "name": "linked"},
+            {"mesh": "missing.obj", "outputs": ["m.json"], "name": "planted"},
+            {**scalp(), "name": "ok"},
+        ],
+    )
+    assert batch(manifest, out, "--processes", 1) == SCANS_FAILED
+    lines = logged(capsys)
+    assert by_scan(lines) == {"linked": "scan failed", "planted": "scan failed", "ok": "scan done"}
+    linked = next(line for line in lines if line.get("scan") == "linked")
+    assert "symbolic link" in linked["detail"]
+    assert sorted(p.name for p in elsewhere.iterdir()) == ["victim"]
+    assert (elsewhere / "victim").read_text() == "untouched"
+    written = out / "planted" / ERROR_FILE
+    assert not written.is_symlink() and json.loads(written.read_bytes())["scan"] == "planted"

@@ -408,3 +408,26 @@ def test_outputs_are_never_written_through_a_symbolic_link(tmp_path, capsys):
     assert (elsewhere / "victim").read_text() == "untouched"
     written = out / "planted" / ERROR_FILE
     assert not written.is_symlink() and json.loads(written.read_bytes())["scan"] == "planted"
+
+
+def test_a_readers_refusal_is_told_by_kind_and_position_never_by_the_files_words(tmp_path, capsys):
+    meshes = {
+        "count.ply": b"ply\nformat ascii 1.0\nelement vertex SECRETCOUNT\nend_header\n",
+        "element.ply": b"ply\nformat ascii 1.0\nelement MRN_12345678 1\nproperty float x\n"
+        b"end_header\n1\n",
+    }
+    for filename, data in meshes.items():
+        (tmp_path / filename).write_bytes(data)
+    manifest = write_manifest(
+        tmp_path, [{"mesh": filename, "outputs": ["m.json"]} for filename in meshes]
+    )
+    out = tmp_path / "out"
+    assert batch(manifest, out, "--processes", 1) == SCANS_FAILED
+    said = capsys.readouterr().err
+    errors = {name: (out / name / ERROR_FILE).read_text() for name in ("count", "element")}
+    for text in (said, *errors.values()):
+        assert "SECRETCOUNT" not in text and "MRN_12345678" not in text, text
+    count = json.loads(errors["count"])
+    assert (count["status"], count["field"]) == (422, "mesh")
+    assert "MeshFormatError at line 3" in count["detail"], count
+    assert "not a readable mesh" in json.loads(errors["element"])["detail"]

@@ -41,9 +41,9 @@ import os
 import re
 import sys
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -78,6 +78,8 @@ LINE_KEYS = ("mesh", "outputs", "params", "command", "name")
 PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
 #: Kubernetes sets it in each pod of an Indexed Job (its index, from 0).
 JOB_INDEX_VARIABLE = "JOB_COMPLETION_INDEX"
+#: How many times a scan is computed whose process dies (killed, out of memory).
+ATTEMPTS = 2
 #: The exit status when scans failed (each logged, with its error.json); 2 is a bad manifest
 #: or option, when nothing ran.
 SCANS_FAILED = 1
@@ -432,18 +434,61 @@ def outcomes(scans: list[Scan], out: Path, settings: Settings, processes: int) -
         for scan in todo:
             yield process(scan, out, settings)
         return
-    pool = ProcessPoolExecutor(min(processes, len(todo)), mp_context=_fresh_processes())
+    yield from _on_processes(todo, out, settings, min(processes, len(todo)))
+
+
+def _on_processes(todo: list[Scan], out: Path, settings: Settings, processes: int):
+    """The scans on ``processes`` workers, each its own single-process pool, so that a
+    worker's death (killed, out of memory) is the death of the one scan it was computing:
+    that pool alone is replaced, the scan computed once more on a fresh process, and after
+    :data:`ATTEMPTS` deaths written as failed with its ``error.json``; the others go on."""
+    context = _fresh_processes()
+    waiting, deaths = deque(todo), Counter()
+    idle = [ProcessPoolExecutor(1, mp_context=context) for _ in range(processes)]
+    running: dict[Future, tuple[ProcessPoolExecutor, Scan]] = {}
     try:
-        futures = {pool.submit(process, scan, out, settings): scan for scan in todo}
-        for future in as_completed(futures):
-            try:
-                yield future.result()
-            except BrokenProcessPool:
-                detail = "the process computing it died (killed, or out of memory); rerun to retry"
-                died = orjson.loads(problem_body(Problem(500, detail, "worker-died")))
-                yield Outcome(futures[future], "failed", 0.0, died)
+        while waiting or running:
+            while waiting and idle:
+                pool, scan = idle.pop(), waiting.popleft()
+                running[pool.submit(process, scan, out, settings)] = (pool, scan)
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in finished:
+                pool, scan = running.pop(future)
+                try:
+                    outcome = future.result()
+                except BrokenProcessPool:
+                    pool.shutdown(wait=False)
+                    idle.append(ProcessPoolExecutor(1, mp_context=context))
+                    deaths[scan.line] += 1
+                    if deaths[scan.line] < ATTEMPTS:
+                        logger.warning(
+                            "scan's process died: computing it again on a fresh one",
+                            extra={"scan": scan.name, "line": scan.line},
+                        )
+                        waiting.appendleft(scan)
+                        continue
+                    outcome = _died(scan, out)
+                else:
+                    idle.append(pool)
+                yield outcome
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        for pool in (*idle, *(pool for pool, _ in running.values())):
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _died(scan: Scan, out: Path) -> Outcome:
+    """The failure of a scan whose process died each time, with its ``error.json``."""
+    detail = (
+        f"the process computing it died {ATTEMPTS} times (killed, or out of memory: "
+        "MESHFLAT_MAX_VERTICES and MESHFLAT_MAX_FACES bound a mesh); rerun to retry"
+    )
+    problem = Problem(500, detail, "worker-died")
+    try:
+        folder = ScanFolder(out, scan.name)
+    except OSError:
+        return failed(scan, None, problem, time.perf_counter())
+    with folder:
+        return failed(scan, folder, problem, time.perf_counter())
 
 
 def _done_before(scan: Scan, out: Path, settings: Settings) -> bool:

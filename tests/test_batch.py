@@ -6,13 +6,16 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
+from multiprocessing import get_context
 from pathlib import Path
 
 import pytest
 
-from service.batch import DIGEST_FILE, ERROR_FILE, SCANS_FAILED, available_cpus
+from service import batch as batch_module
+from service.batch import DIGEST_FILE, ERROR_FILE, SCANS_FAILED, available_cpus, process
 from service.capabilities import MESH_COMMANDS
 from service.cli import main
 from service.samples import SAMPLES
@@ -431,3 +434,38 @@ def test_a_readers_refusal_is_told_by_kind_and_position_never_by_the_files_words
     assert (count["status"], count["field"]) == (422, "mesh")
     assert "MeshFormatError at line 3" in count["detail"], count
     assert "not a readable mesh" in json.loads(errors["element"])["detail"]
+
+
+def _killed_while_computing(scan, out, settings):
+    """The batch's ``process`` in a worker that is killed (SIGKILL, as the kernel's OOM
+    killer does) while computing ``dies-*`` scans: ``dies-once`` on its first attempt only."""
+    died = scan.mesh.parent / f"{scan.name}.died"
+    if scan.name == "dies-always" or (scan.name == "dies-once" and not died.exists()):
+        died.write_text("")
+        os.kill(os.getpid(), signal.SIGKILL)
+    return process(scan, out, settings)
+
+
+def test_a_worker_that_dies_fails_its_own_scan_alone_after_one_retry(tmp_path, capsys, monkeypatch):
+    shutil.copy(SAMPLES[NAME].path, tmp_path / "scalp.ply")
+    line = {"mesh": "scalp.ply", "params": PARAMS, "outputs": ["v.json"], "command": "validate"}
+    names = ["a", "dies-once", "b", "dies-always", "c", "d"]
+    manifest = write_manifest(tmp_path, [{**line, "name": name} for name in names])
+    # The workers are forked from this process, so that they run the function above: the
+    # test's own code kills them; the batch knows nothing of it.
+    monkeypatch.setattr(batch_module, "_fresh_processes", lambda: get_context("fork"))
+    monkeypatch.setattr(batch_module, "process", _killed_while_computing)
+    out = tmp_path / "out"
+    assert batch(manifest, out, "--processes", 2) == SCANS_FAILED
+    lines = logged(capsys)
+    assert by_scan(lines) == {
+        **dict.fromkeys(names, "scan done"),
+        "dies-once": "scan done",
+        "dies-always": "scan failed",
+    }
+    again = [line["scan"] for line in lines if line["message"].startswith("scan's process died")]
+    assert sorted(again) == ["dies-always", "dies-once"]
+    error = json.loads((out / "dies-always" / ERROR_FILE).read_bytes())
+    assert error["status"] == 500 and "died 2 times" in error["detail"]
+    assert error["line"] == 4
+    assert lines[-1]["done"] == 5 and lines[-1]["failed"] == 1

@@ -469,3 +469,26 @@ def test_a_worker_that_dies_fails_its_own_scan_alone_after_one_retry(tmp_path, c
     assert error["status"] == 500 and "died 2 times" in error["detail"]
     assert error["line"] == 4
     assert lines[-1]["done"] == 5 and lines[-1]["failed"] == 1
+
+
+@pytest.mark.parametrize(
+    ("line", "words"),
+    [
+        ({**LINE, "params": {"region": {"texture_mask": {}}}},
+         ["params.region.texture_mask", "mask", "--mask"]),
+        ({**LINE, "command": "measure", "params": {"region": {"texture_mask": {}}}},
+         ["params.region.texture_mask", "measure"]),
+        ({**LINE, "command": "sites", "params": {"density_range": [10, 40]}},
+         ["params.density_range", "density_map", "--density-map"]),
+        ({**LINE, "command": "transfer"}, ["params.values", "image", "--image"]),
+        ({**LINE, "command": "transfer", "params": {"values": "x"}, "outputs": ["ids.face_ids"]},
+         ["outputs", "'ids.face_ids'", "look-up"]),
+    ],
+)  # fmt: skip
+def test_a_line_that_needs_a_part_the_batch_cannot_give_is_refused(tmp_path, capsys, line, words):
+    manifest = write_manifest(tmp_path, [{**LINE, "name": "first"}, line])
+    assert batch(manifest, tmp_path / "out") == 2
+    said = capsys.readouterr().err
+    assert "manifest.jsonl: line 2: " in said, said
+    assert all(word in said for word in words), said
+    assert not (tmp_path / "out").exists()

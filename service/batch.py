@@ -1,30 +1,36 @@
 """``meshflat batch``: a data set of scans, each answered by the service's own code.
 
-    meshflat batch MANIFEST.jsonl --out DIR [--processes N] [--shard-count N [--shard-index I]]
+    meshflat batch MANIFEST.jsonl --out DIR [--allow-root DIR] [--processes N]
+        [--shard-count N [--shard-index I]]
 
 The manifest has one JSON object per line (blank lines are skipped), one scan each::
 
     {"mesh": "scans/p001.glb", "params": {"region": {...}}, "outputs": ["map.json", "map.png"]}
 
-``mesh`` (relative to the manifest's folder) and ``outputs`` (file names whose extensions pick
-the forms, among those the command answers) are required; ``params`` are the API's (default
-``{}``), ``command`` a mesh route's command (default ``flatten``) and ``name`` the scan's
-folder under DIR (default: the mesh's file name without its extension). The whole manifest is
-checked before anything runs: a bad line stops the batch, named by its number.
+``mesh`` (relative to the manifest's folder, and inside it or an ``--allow-root``: a regular
+file within the upload limit, :mod:`service.batchfiles`) and ``outputs`` (file names whose
+extensions pick the forms, among those the command answers) are required; ``params`` are the
+API's (default ``{}``), ``command`` a mesh route's command (default ``flatten``) and ``name``
+the scan's folder under DIR (default: the mesh's file name without its extension). The whole
+manifest is checked before anything runs (:mod:`service.batchmanifest`): a bad line stops the
+batch, named by its number.
 
 A scan's outputs are what the API answers, byte for byte (the same params model, reader,
 operation and encoders: :meth:`service.capabilities.MeshCapability.render`), computed once and
 written into ``DIR/NAME/``; then ``digest.json``, last and atomically: the SHA-256 of the
 mesh's bytes with the command, the canonical params, the output names and meshflat's version,
 and each output's size and SHA-256. A rerun skips a scan whose digest matches and whose outputs
-are intact, so a batch that stopped goes on where it was. A scan that fails gets
-``error.json`` (the API's problem, and the line) and a log line; the others go on.
+are intact, so a batch that stopped goes on where it was. Nothing is written through a symbolic
+link. A scan that fails gets ``error.json`` (the API's problem, and the line; a reader's
+refusal by its kind and position only) and a log line; the others go on.
 
 Scans run on N processes that start clean (from a fork server, not forked from the command:
 nothing of its threads is inherited; BLAS on one thread each, as in the service); scans done
-before are skipped first, without them. With ``--shard-count N`` a run takes the scans ``i``
-with ``i % N == INDEX`` (counted from 0 in manifest order), INDEX being ``--shard-index`` or
-``JOB_COMPLETION_INDEX``, which Kubernetes sets in each pod of an Indexed Job.
+before are skipped first, without them. Each process is a pool of its own: one that dies costs
+only the scan it was computing, computed once more on a fresh process, then failed. With
+``--shard-count N`` a run takes the scans ``i`` with ``i % N == INDEX`` (counted from 0 in
+manifest order), INDEX being ``--shard-index`` or ``JOB_COMPLETION_INDEX``, which Kubernetes
+sets in each pod of an Indexed Job.
 
 Logs are JSON lines on stderr: one per scan (name, line, outcome; a failure's status and
 detail), then a summary. Nothing of a mesh goes to disk but the outputs asked for.

@@ -13,7 +13,8 @@
     meshflat sites MESH ... [--density 40] [--zones zones.json] [--units mm] [--out sites.ply]
     meshflat register BASE FOLLOW_UP ... [--units mm] [--params JSON] --out frame.json
                       [--density-map map.png --params '{"density_range": [20, 60]}']
-    meshflat batch MANIFEST.jsonl --out DIR [--processes N] [--shard-count N [--shard-index I]]
+    meshflat batch MANIFEST.jsonl --out DIR [--allow-root DIR] [--processes N]
+        [--shard-count N [--shard-index I]]
 
 One command per mesh route of :mod:`service.capabilities`, running the same operation: the
 parameters are the API's (``--params`` takes any of them as JSON, the options override it),

@@ -342,6 +342,8 @@ async def test_the_installed_command_runs_scans_in_processes(tmp_path):
         capture_output=True,
         text=True,
         timeout=300,
+        # The tree under test (a worktree's, when the editable install is another's).
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])},
     )
     assert run.returncode == 0, run.stderr
     assert "3/3 done" in run.stderr  # the progress bar

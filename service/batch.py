@@ -59,7 +59,14 @@ from pathlib import Path
 
 import orjson
 
-from .batchfiles import ScanFolder, content_free, partial_name, read_confined
+from .batchfiles import (
+    ScanFolder,
+    content_free,
+    partial_name,
+    quoting_only,
+    read_confined,
+    words_of,
+)
 from .batchmanifest import DIGEST_FILE, ERROR_FILE, Scan, read_manifest, shard_of
 from .batchmanifest import JOB_INDEX_VARIABLE as JOB_INDEX_VARIABLE  # the deploy's tests'
 from .capabilities import MESH_COMMANDS
@@ -129,8 +136,9 @@ def _process(scan: Scan, folder: ScanFolder, settings: Settings, started: float)
     _forget(folder, scan)
     try:
         written = _compute(scan, data, settings, folder)
-    except Problem as problem:
-        return failed(scan, folder, problem, started)
+    except Problem as problem:  # naming nothing the file holds that the line does not say
+        given = words_of(scan.params) | {scan.command}
+        return failed(scan, folder, quoting_only(problem, given), started)
     except OSError:
         raise  # writing the outputs (process says so)
     except Exception as error:  # a bug: this scan fails alone, named by the error's type only

@@ -11,7 +11,9 @@ relative to it, with ``O_NOFOLLOW``; a temporary ``.partial`` file is created wi
 ``O_EXCL`` after whatever was at its name (a planted link included) is removed.
 
 A reader's message may quote the file (a PLY header line, a property's name): what the batch
-logs and writes of it is :func:`content_free`, the error's kind and its position only.
+logs and writes of it is :func:`content_free`, the error's kind and its position only; a
+use-case's refusal may name what the file has (its groups, its vertex properties), and
+:func:`quoting_only` shows every quoted word the manifest's line did not give as ``'…'``.
 """
 
 from __future__ import annotations
@@ -103,6 +105,35 @@ def content_free(error: MeshFormatError, part: str) -> Problem:
         return Problem(413, detail, "mesh-too-large", part)
     detail = f"{part}: not a readable mesh ({kind}{at}; the file's content is not repeated)"
     return Problem(422, detail, "unreadable-mesh", part)
+
+
+#: A quoted piece of a message, as ``repr`` quotes a string (not an apostrophe: a word's).
+_QUOTED = re.compile(r"(?<!\w)('(?:[^'\\]|\\.)*'|\"(?:[^\"\\]|\\.)*\")(?!\w)")
+
+
+def words_of(value) -> set[str]:
+    """Every string in ``value`` (a manifest line's params: keys and values, nested)."""
+    if isinstance(value, str):
+        return {value}
+    if isinstance(value, dict):
+        return set().union(*(words_of(k) | words_of(v) for k, v in value.items()))
+    if isinstance(value, list | tuple):
+        return set().union(*(words_of(item) for item in value))
+    return set()
+
+
+def quoting_only(problem: Problem, given: set[str]) -> Problem:
+    """``problem`` with every quoted word that is not one of ``given`` (what the manifest's
+    line says) shown as ``'…'``: a use-case's refusal may name what the file has (its
+    groups, its vertex properties), which is the file's content."""
+
+    def shown(match: re.Match) -> str:
+        return match[0] if match[0][1:-1] in given else "'…'"
+
+    detail = _QUOTED.sub(shown, problem.detail)
+    if detail == problem.detail:
+        return problem
+    return Problem(problem.status, detail, problem.kind, problem.field, problem.indices)
 
 
 class ScanFolder:

@@ -494,3 +494,36 @@ def test_a_line_that_needs_a_part_the_batch_cannot_give_is_refused(tmp_path, cap
     assert "manifest.jsonl: line 2: " in said, said
     assert all(word in said for word in words), said
     assert not (tmp_path / "out").exists()
+
+
+def test_a_refusal_that_names_what_the_file_has_keeps_those_names_out(tmp_path, capsys):
+    ply = (
+        b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        b"property float z\nproperty int MRN_12345678\nelement face 1\n"
+        b"property list uchar int vertex_indices\nend_header\n"
+        b"0 0 0 1\n1 0 0 1\n0 1 0 1\n3 0 1 2\n"
+    )
+    (tmp_path / "props.ply").write_bytes(ply)
+    (tmp_path / "groups.obj").write_bytes(b"g patient-7f3a9c\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    feature = {"feature_id": {"attribute": "quality", "values": [1]}}
+    manifest = write_manifest(
+        tmp_path,
+        [
+            {"mesh": "props.ply", "params": {"region": feature}, "outputs": ["m.json"]},
+            {
+                "mesh": "groups.obj",
+                "params": {"region": {"groups": ["nope"]}},
+                "outputs": ["m.json"],
+            },
+        ],
+    )
+    out = tmp_path / "out"
+    assert batch(manifest, out, "--processes", 1) == SCANS_FAILED
+    said = capsys.readouterr().err
+    errors = {name: (out / name / ERROR_FILE).read_text() for name in ("props", "groups")}
+    for text in (said, *errors.values()):
+        assert "MRN_12345678" not in text and "patient-7f3a9c" not in text, text
+    # What the line said is still named; what the file has is shown as '…'.
+    assert "'quality'" in json.loads(errors["props"])["detail"]
+    assert "'nope'" in json.loads(errors["groups"])["detail"]
+    assert "'…'" in json.loads(errors["groups"])["detail"]

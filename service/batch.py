@@ -1,30 +1,36 @@
 """``meshflat batch``: a data set of scans, each answered by the service's own code.
 
-    meshflat batch MANIFEST.jsonl --out DIR [--processes N] [--shard-count N [--shard-index I]]
+    meshflat batch MANIFEST.jsonl --out DIR [--allow-root DIR] [--processes N]
+        [--shard-count N [--shard-index I]]
 
 The manifest has one JSON object per line (blank lines are skipped), one scan each::
 
     {"mesh": "scans/p001.glb", "params": {"region": {...}}, "outputs": ["map.json", "map.png"]}
 
-``mesh`` (relative to the manifest's folder) and ``outputs`` (file names whose extensions pick
-the forms, among those the command answers) are required; ``params`` are the API's (default
-``{}``), ``command`` a mesh route's command (default ``flatten``) and ``name`` the scan's
-folder under DIR (default: the mesh's file name without its extension). The whole manifest is
-checked before anything runs: a bad line stops the batch, named by its number.
+``mesh`` (relative to the manifest's folder, and inside it or an ``--allow-root``: a regular
+file within the upload limit, :mod:`service.batchfiles`) and ``outputs`` (file names whose
+extensions pick the forms, among those the command answers) are required; ``params`` are the
+API's (default ``{}``), ``command`` a mesh route's command (default ``flatten``) and ``name``
+the scan's folder under DIR (default: the mesh's file name without its extension). The whole
+manifest is checked before anything runs (:mod:`service.batchmanifest`): a bad line stops the
+batch, named by its number.
 
 A scan's outputs are what the API answers, byte for byte (the same params model, reader,
 operation and encoders: :meth:`service.capabilities.MeshCapability.render`), computed once and
 written into ``DIR/NAME/``; then ``digest.json``, last and atomically: the SHA-256 of the
 mesh's bytes with the command, the canonical params, the output names and meshflat's version,
 and each output's size and SHA-256. A rerun skips a scan whose digest matches and whose outputs
-are intact, so a batch that stopped goes on where it was. A scan that fails gets
-``error.json`` (the API's problem, and the line) and a log line; the others go on.
+are intact, so a batch that stopped goes on where it was. Nothing is written through a symbolic
+link. A scan that fails gets ``error.json`` (the API's problem, and the line; a reader's
+refusal by its kind and position only) and a log line; the others go on.
 
 Scans run on N processes that start clean (from a fork server, not forked from the command:
 nothing of its threads is inherited; BLAS on one thread each, as in the service); scans done
-before are skipped first, without them. With ``--shard-count N`` a run takes the scans ``i``
-with ``i % N == INDEX`` (counted from 0 in manifest order), INDEX being ``--shard-index`` or
-``JOB_COMPLETION_INDEX``, which Kubernetes sets in each pod of an Indexed Job.
+before are skipped first, without them. Each process is a pool of its own: one that dies costs
+only the scan it was computing, computed once more on a fresh process, then failed. With
+``--shard-count N`` a run takes the scans ``i`` with ``i % N == INDEX`` (counted from 0 in
+manifest order), INDEX being ``--shard-index`` or ``JOB_COMPLETION_INDEX``, which Kubernetes
+sets in each pod of an Indexed Job.
 
 Logs are JSON lines on stderr: one per scan (name, line, outcome; a failure's status and
 detail), then a summary. Nothing of a mesh goes to disk but the outputs asked for.
@@ -38,12 +44,11 @@ import hashlib
 import logging
 import math
 import os
-import re
 import sys
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -54,57 +59,33 @@ from pathlib import Path
 
 import orjson
 
-from .capabilities import MESH_COMMANDS, MeshCapability
+from .batchfiles import (
+    ScanFolder,
+    content_free,
+    partial_name,
+    quoting_only,
+    read_confined,
+    words_of,
+)
+from .batchmanifest import DIGEST_FILE, ERROR_FILE, Scan, read_manifest, shard_of
+from .batchmanifest import JOB_INDEX_VARIABLE as JOB_INDEX_VARIABLE  # the deploy's tests'
+from .capabilities import MESH_COMMANDS
 from .capabilities.context import Context
-from .capabilities.inputs import MeshPart, Upload, parse_params
-from .jsonkeys import repeated_key
-from .meshio import format_of
+from .capabilities.inputs import Upload, parse_params
+from .errors import UnreadableMesh
 from .observability import JsonFormatter
-from .outputs import Output
 from .problems import Problem, core_errors_as_problems, problem_body
 from .progress import Progress
 from .settings import Settings
 from .timings import Timings
 
-#: Written last into a scan's folder: the inputs' digest and each output's size and SHA-256.
-DIGEST_FILE = "digest.json"
-#: Written into a scan's folder when it fails: the API's problem and the manifest's line.
-ERROR_FILE = "error.json"
-#: The keys of a manifest line.
-LINE_KEYS = ("mesh", "outputs", "params", "command", "name")
-#: A scan's folder and its outputs' file names: one plain path component each.
-PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")
-#: Kubernetes sets it in each pod of an Indexed Job (its index, from 0).
-JOB_INDEX_VARIABLE = "JOB_COMPLETION_INDEX"
+#: How many times a scan is computed whose process dies (killed, out of memory).
+ATTEMPTS = 2
 #: The exit status when scans failed (each logged, with its error.json); 2 is a bad manifest
 #: or option, when nothing ran.
 SCANS_FAILED = 1
 
 logger = logging.getLogger("meshflat.batch")
-
-
-@dataclass(frozen=True)
-class Scan:
-    """One line of the manifest, checked: ``outputs`` are (file name, form) pairs."""
-
-    line: int
-    name: str
-    mesh: Path
-    command: str
-    params: dict
-    outputs: tuple[tuple[str, Output], ...]
-
-    def digest(self, mesh_bytes: bytes) -> str:
-        """SHA-256 of everything the outputs depend on: the mesh's bytes, the command, the
-        params (keys sorted), the output names and meshflat's version."""
-        recipe = {
-            "mesh_sha256": hashlib.sha256(mesh_bytes).hexdigest(),
-            "command": self.command,
-            "params": self.params,
-            "outputs": [name for name, _ in self.outputs],
-            "meshflat": version("meshflat"),
-        }
-        return hashlib.sha256(orjson.dumps(recipe, option=orjson.OPT_SORT_KEYS)).hexdigest()
 
 
 @dataclass(frozen=True)
@@ -121,165 +102,6 @@ class Outcome:
     cpu_seconds: float | None = None
 
 
-# -- the manifest --------------------------------------------------------------------------
-
-
-def read_manifest(path: Path) -> list[Scan]:
-    """Every scan of the manifest, checked (params by the API's models, outputs by the
-    command's forms, names unique).
-
-    Raises
-    ------
-    Problem
-        The manifest cannot be read, or has bad lines (each named by its number).
-    """
-    try:
-        lines = path.read_bytes().splitlines()
-    except OSError as error:
-        raise Problem(
-            422, f"cannot read {str(path)!r}: {error.strerror}", field="MANIFEST"
-        ) from None
-    scans, errors, lines_by_name = [], [], {}
-    for number, line in enumerate(lines, 1):
-        if not line.strip():
-            continue
-        try:
-            scan = parse_line(line, number, path.parent)
-            if scan.name in lines_by_name:
-                raise Problem(
-                    422,
-                    f"name: {scan.name!r} is also line {lines_by_name[scan.name]}'s folder; "
-                    'give each scan its own "name"',
-                )
-        except Problem as problem:
-            errors.append(f"line {number}: {problem.detail}")
-            continue
-        lines_by_name[scan.name] = number
-        scans.append(scan)
-    if errors:
-        shown = errors[:20] + ([f"and {len(errors) - 20} more"] if len(errors) > 20 else [])
-        raise Problem(422, f"{path.name}: " + "\n  ".join(shown), field="MANIFEST")
-    if not scans:
-        raise Problem(422, f"{path.name}: no scans (one JSON object per line)", field="MANIFEST")
-    return scans
-
-
-def parse_line(line: bytes, number: int, folder: Path) -> Scan:
-    """One manifest line as a :class:`Scan`; ``folder`` is where relative paths start.
-
-    Raises
-    ------
-    Problem
-        What is wrong with the line, naming its key (and the params' field).
-    """
-    entry = _object_of(line)
-    mesh = entry.get("mesh")
-    if not isinstance(mesh, str) or not mesh:
-        raise Problem(422, 'mesh: each line needs "mesh", the path of its scan', field="mesh")
-    command = entry.get("command", "flatten")
-    if command not in MESH_COMMANDS:
-        raise Problem(422, f"command: {command!r} is not one of {', '.join(MESH_COMMANDS)}")
-    capability = MESH_COMMANDS[command]
-    others = [part.name for part in capability.extra_parts if isinstance(part, MeshPart)]
-    if others:  # a line names one mesh
-        raise Problem(
-            422,
-            f"command: {command} reads a second mesh ({', '.join(others)}), which a manifest "
-            f"line cannot give; run `meshflat {command}` for each pair",
-            field="command",
-        )
-    params = entry.get("params", {})
-    _check_params(params, capability, Path(mesh).name)
-    name = entry.get("name", Path(mesh).stem)
-    if not isinstance(name, str) or not PLAIN_NAME.fullmatch(name):
-        raise Problem(
-            422,
-            f"name: {name!r} cannot name a folder: give \"name\", letters, digits, '.', '_' "
-            "or '-', starting with a letter or digit, at most 128",
-            field="name",
-        )
-    return Scan(number, name, folder / mesh, command, params, _outputs(entry, capability))
-
-
-def _object_of(line: bytes) -> dict:
-    try:
-        entry = orjson.loads(line)
-    except orjson.JSONDecodeError as error:
-        raise Problem(422, f"not JSON ({error})") from None
-    if not isinstance(entry, dict):
-        raise Problem(422, 'not a JSON object such as {"mesh": ..., "outputs": [...]}')
-    repeated = repeated_key(line)
-    if repeated is not None:
-        where = ".".join(str(part) for part in repeated)
-        raise Problem(422, f"{where}: given more than once (only one would be used)", field=where)
-    unknown = sorted(set(entry) - set(LINE_KEYS))
-    if unknown:
-        raise Problem(422, f"{unknown[0]}: not a key of a line; the keys: {', '.join(LINE_KEYS)}")
-    return entry
-
-
-def _check_params(params, capability: MeshCapability, mesh_name: str) -> None:
-    """The params as the API checks them, and the mesh's format known from its name."""
-    if not isinstance(params, dict):
-        raise Problem(422, "params: must be a JSON object (the API's params)", field="params")
-    if "output" in params:
-        raise Problem(
-            422,
-            "params.output: the extensions in outputs choose the forms; leave it out",
-            field="params.output",
-        )
-    with core_errors_as_problems(capability.places):
-        parsed = parse_params(capability.params, orjson.dumps(params))
-        format_of(mesh_name, parsed.format)
-
-
-def _outputs(entry: dict, capability: MeshCapability) -> tuple[tuple[str, Output], ...]:
-    names = entry.get("outputs")
-    if not names or not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-        raise Problem(
-            422, 'outputs: a list of file names, such as ["map.json", "map.png"]', field="outputs"
-        )
-    for name in names:
-        if not PLAIN_NAME.fullmatch(name) or name in (DIGEST_FILE, ERROR_FILE):
-            raise Problem(
-                422,
-                f"outputs: {name!r} is not a plain file name (letters, digits, '.', '_', '-'; "
-                f"not {DIGEST_FILE} or {ERROR_FILE}, which the batch writes)",
-                field="outputs",
-            )
-    if len(set(names)) != len(names):
-        raise Problem(422, "outputs: a file name is given twice", field="outputs")
-    with core_errors_as_problems(capability.places):
-        return tuple((name, capability.output_of_file(name, "outputs")) for name in names)
-
-
-def shard_of(scans: list[Scan], index: int | None, count: int | None) -> list[Scan]:
-    """The scans ``i`` with ``i % count == index``; all of them without a count. The index
-    defaults to ``JOB_COMPLETION_INDEX``."""
-    if count is None:
-        if index is not None:
-            raise Problem(422, "--shard-index: give --shard-count too", field="--shard-index")
-        return scans
-    if index is None:
-        given = os.environ.get(JOB_INDEX_VARIABLE)
-        if given is None:
-            raise Problem(
-                422,
-                f"--shard-count: give --shard-index, or set {JOB_INDEX_VARIABLE} "
-                "(Kubernetes does in an Indexed Job)",
-                field="--shard-index",
-            )
-        try:
-            index = int(given)
-        except ValueError:
-            raise Problem(
-                422, f"{JOB_INDEX_VARIABLE}: {given!r} is not a whole number", field="--shard-index"
-            ) from None
-    if not 0 <= index < count:
-        raise Problem(422, f"--shard-index: {index} is outside [0, {count})", field="--shard-index")
-    return scans[index::count]
-
-
 # -- one scan ------------------------------------------------------------------------------
 
 
@@ -287,82 +109,92 @@ def process(scan: Scan, out: Path, settings: Settings) -> Outcome:
     """Compute ``scan`` into ``out/NAME/`` unless its digest says it is done; a failure is
     recorded in its ``error.json`` (when the folder can be written) and returned, never
     raised."""
-    started, folder = time.perf_counter(), out / scan.name
+    started, path = time.perf_counter(), out / scan.name
     try:
-        return _process(scan, folder, settings, started)
-    except OSError as error:  # the output folder: not writable, or full
-        detail = f"cannot write in {str(folder)!r}: {error.strerror}"
-        return _failed(scan, folder, Problem(500, detail, "output-not-written"), started)
+        folder = ScanFolder(out, scan.name)
+    except OSError as error:  # not writable, full, or a symbolic link at DIR/NAME
+        why = "a symbolic link is there" if path.is_symlink() else error.strerror
+        detail = f"cannot write in {str(path)!r}: {why}"
+        return failed(scan, None, Problem(500, detail, "output-not-written"), started)
+    with folder:
+        try:
+            return _process(scan, folder, settings, started)
+        except OSError as error:  # the output folder: not writable, or full
+            detail = f"cannot write in {str(path)!r}: {error.strerror}"
+            return failed(scan, folder, Problem(500, detail, "output-not-written"), started)
 
 
-def _process(scan: Scan, folder: Path, settings: Settings, started: float) -> Outcome:
+def _process(scan: Scan, folder: ScanFolder, settings: Settings, started: float) -> Outcome:
     cpu = time.process_time()
-    folder.mkdir(parents=True, exist_ok=True)
     try:
-        data = scan.mesh.read_bytes()
-    except OSError as error:
-        detail = f"mesh: cannot read {str(scan.mesh)!r}: {error.strerror}"
-        return _failed(scan, folder, Problem(422, detail, field="mesh"), started)
+        data = read_confined(scan.mesh, scan.roots, settings.max_upload_bytes)
+    except Problem as problem:
+        return failed(scan, folder, problem, started)
     digest = scan.digest(data)
     if _finished(folder, scan, digest):
         return Outcome(scan, "skipped", time.perf_counter() - started)
     _forget(folder, scan)
     try:
         written = _compute(scan, data, settings, folder)
-    except Problem as problem:
-        return _failed(scan, folder, problem, started)
+    except Problem as problem:  # naming nothing the file holds that the line does not say
+        given = words_of(scan.params) | {scan.command}
+        return failed(scan, folder, quoting_only(problem, given), started)
     except OSError:
         raise  # writing the outputs (process says so)
     except Exception as error:  # a bug: this scan fails alone, named by the error's type only
         # (its message could quote the mesh).
         problem = Problem(500, f"internal error ({type(error).__name__})", "internal-error")
-        return _failed(scan, folder, problem, started)
+        return failed(scan, folder, problem, started)
     record = {"digest": digest, "meshflat": version("meshflat"), "outputs": written}
-    _write_atomically(folder / DIGEST_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
+    folder.write_atomically(DIGEST_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
     seconds = time.perf_counter() - started
     return Outcome(scan, "done", seconds, cpu_seconds=time.process_time() - cpu)
 
 
-def _compute(scan: Scan, data: bytes, settings: Settings, folder: Path) -> dict[str, dict]:
+def _compute(scan: Scan, data: bytes, settings: Settings, folder: ScanFolder) -> dict[str, dict]:
     """The outputs of one computation, each written as it is rendered (partial names until
-    all are), with their sizes and SHA-256."""
+    all are), with their sizes and SHA-256. A reader's refusal is told by its kind and
+    position only (:func:`content_free`): its message may quote the file."""
     capability = MESH_COMMANDS[scan.command]
     timings = Timings()
     written = {}
     ctx = Context(settings)
     with core_errors_as_problems(capability.places):
         params = parse_params(capability.params, orjson.dumps(scan.params))
-        given = capability.input_of(
-            params, {capability.mesh.name: Upload(scan.mesh.name, data)}, ctx
-        )
+        try:
+            given = capability.input_of(
+                params, {capability.mesh.name: Upload(scan.mesh.name, data)}, ctx
+            )
+        except UnreadableMesh as error:
+            raise content_free(error.error, error.part) from None
         with timings.measure("compute"):
             result = capability.operation(given, ctx)
         for name, output in scan.outputs:
             answer = capability.render(result, params, output, ctx, timings)
-            _partial(folder / name).write_bytes(answer)
+            folder.write_partial(name, answer)
             written[name] = {"bytes": len(answer), "sha256": hashlib.sha256(answer).hexdigest()}
     for name in written:
-        os.replace(_partial(folder / name), folder / name)
+        folder.commit(name)
     return written
 
 
-def _finished(folder: Path, scan: Scan, digest: str) -> bool:
+def _finished(folder: ScanFolder, scan: Scan, digest: str) -> bool:
     """Whether the folder's digest is ``digest`` and every output is as it recorded."""
     try:
-        record = orjson.loads((folder / DIGEST_FILE).read_bytes())
+        record = orjson.loads(folder.read(DIGEST_FILE))
     except (OSError, orjson.JSONDecodeError):
         return False
     if not isinstance(record, dict) or record.get("digest") != digest:
         return False
     recorded = record.get("outputs")
     return isinstance(recorded, dict) and all(
-        _intact(folder / name, recorded.get(name)) for name, _ in scan.outputs
+        _intact(folder, name, recorded.get(name)) for name, _ in scan.outputs
     )
 
 
-def _intact(path: Path, recorded) -> bool:
+def _intact(folder: ScanFolder, name: str, recorded) -> bool:
     try:
-        data = path.read_bytes()
+        data = folder.read(name)
     except OSError:
         return False
     return isinstance(recorded, dict) and recorded == {
@@ -371,15 +203,17 @@ def _intact(path: Path, recorded) -> bool:
     }
 
 
-def _forget(folder: Path, scan: Scan) -> None:
+def _forget(folder: ScanFolder, scan: Scan) -> None:
     """Before a scan is computed: no record of an earlier run, and no output of other
     inputs left to pass for this one's."""
     for name in (DIGEST_FILE, ERROR_FILE, *(name for name, _ in scan.outputs)):
-        (folder / name).unlink(missing_ok=True)
-        _partial(folder / name).unlink(missing_ok=True)
+        folder.unlink(name)
+        folder.unlink(partial_name(name))
 
 
-def _failed(scan: Scan, folder: Path, problem: Problem, started: float) -> Outcome:
+def failed(scan: Scan, folder: ScanFolder | None, problem: Problem, started: float) -> Outcome:
+    """The scan's failure, with its ``error.json`` in ``folder`` (None: it cannot be
+    written; the log says why)."""
     answer = orjson.loads(problem_body(problem))
     record = {
         **answer,
@@ -389,20 +223,11 @@ def _failed(scan: Scan, folder: Path, problem: Problem, started: float) -> Outco
         "meshflat": version("meshflat"),
     }
     with contextlib.suppress(OSError):  # a folder that cannot be written: the log says why
-        for name, _ in scan.outputs:
-            _partial(folder / name).unlink(missing_ok=True)
-        _write_atomically(folder / ERROR_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
+        if folder is not None:
+            for name, _ in scan.outputs:
+                folder.unlink(partial_name(name))
+            folder.write_atomically(ERROR_FILE, orjson.dumps(record, option=orjson.OPT_INDENT_2))
     return Outcome(scan, "failed", time.perf_counter() - started, answer)
-
-
-def _partial(path: Path) -> Path:
-    return path.with_name(f".{path.name}.partial")
-
-
-def _write_atomically(path: Path, data: bytes) -> None:
-    partial = _partial(path)
-    partial.write_bytes(data)
-    os.replace(partial, path)
 
 
 # -- many scans ----------------------------------------------------------------------------
@@ -415,7 +240,7 @@ def outcomes(scans: list[Scan], out: Path, settings: Settings, processes: int) -
     todo = []
     for scan in scans:
         started = time.perf_counter()
-        if _done_before(scan, out):
+        if _done_before(scan, out, settings):
             yield Outcome(scan, "skipped", time.perf_counter() - started)
         else:
             todo.append(scan)
@@ -423,26 +248,70 @@ def outcomes(scans: list[Scan], out: Path, settings: Settings, processes: int) -
         for scan in todo:
             yield process(scan, out, settings)
         return
-    pool = ProcessPoolExecutor(min(processes, len(todo)), mp_context=_fresh_processes())
+    yield from _on_processes(todo, out, settings, min(processes, len(todo)))
+
+
+def _on_processes(todo: list[Scan], out: Path, settings: Settings, processes: int):
+    """The scans on ``processes`` workers, each its own single-process pool, so that a
+    worker's death (killed, out of memory) is the death of the one scan it was computing:
+    that pool alone is replaced, the scan computed once more on a fresh process, and after
+    :data:`ATTEMPTS` deaths written as failed with its ``error.json``; the others go on."""
+    context = _fresh_processes()
+    waiting, deaths = deque(todo), Counter()
+    idle = [ProcessPoolExecutor(1, mp_context=context) for _ in range(processes)]
+    running: dict[Future, tuple[ProcessPoolExecutor, Scan]] = {}
     try:
-        futures = {pool.submit(process, scan, out, settings): scan for scan in todo}
-        for future in as_completed(futures):
-            try:
-                yield future.result()
-            except BrokenProcessPool:
-                detail = "the process computing it died (killed, or out of memory); rerun to retry"
-                died = orjson.loads(problem_body(Problem(500, detail, "worker-died")))
-                yield Outcome(futures[future], "failed", 0.0, died)
+        while waiting or running:
+            while waiting and idle:
+                pool, scan = idle.pop(), waiting.popleft()
+                running[pool.submit(process, scan, out, settings)] = (pool, scan)
+            finished, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in finished:
+                pool, scan = running.pop(future)
+                try:
+                    outcome = future.result()
+                except BrokenProcessPool:
+                    pool.shutdown(wait=False)
+                    idle.append(ProcessPoolExecutor(1, mp_context=context))
+                    deaths[scan.line] += 1
+                    if deaths[scan.line] < ATTEMPTS:
+                        logger.warning(
+                            "scan's process died: computing it again on a fresh one",
+                            extra={"scan": scan.name, "line": scan.line},
+                        )
+                        waiting.appendleft(scan)
+                        continue
+                    outcome = _died(scan, out)
+                else:
+                    idle.append(pool)
+                yield outcome
     finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        for pool in (*idle, *(pool for pool, _ in running.values())):
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _done_before(scan: Scan, out: Path) -> bool:
+def _died(scan: Scan, out: Path) -> Outcome:
+    """The failure of a scan whose process died each time, with its ``error.json``."""
+    detail = (
+        f"the process computing it died {ATTEMPTS} times (killed, or out of memory: "
+        "MESHFLAT_MAX_VERTICES and MESHFLAT_MAX_FACES bound a mesh); rerun to retry"
+    )
+    problem = Problem(500, detail, "worker-died")
     try:
-        data = scan.mesh.read_bytes()
+        folder = ScanFolder(out, scan.name)
     except OSError:
+        return failed(scan, None, problem, time.perf_counter())
+    with folder:
+        return failed(scan, folder, problem, time.perf_counter())
+
+
+def _done_before(scan: Scan, out: Path, settings: Settings) -> bool:
+    try:
+        data = read_confined(scan.mesh, scan.roots, settings.max_upload_bytes)
+        with ScanFolder(out, scan.name, create=False) as folder:
+            return _finished(folder, scan, scan.digest(data))
+    except (Problem, OSError):
         return False  # its process says why
-    return _finished(out / scan.name, scan, scan.digest(data))
 
 
 def _fresh_processes() -> BaseContext:
@@ -489,7 +358,9 @@ def run_batch(args: argparse.Namespace) -> int:
         The manifest or an option is wrong (nothing has run).
     """
     settings = Settings.from_env()
-    scans = shard_of(read_manifest(Path(args.manifest)), args.shard_index, args.shard_count)
+    allowed = tuple(Path(root) for root in args.allow_root or ())
+    scans = read_manifest(Path(args.manifest), allowed)
+    scans = shard_of(scans, args.shard_index, args.shard_count)
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)

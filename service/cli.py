@@ -13,7 +13,8 @@
     meshflat sites MESH ... [--density 40] [--zones zones.json] [--units mm] [--out sites.ply]
     meshflat register BASE FOLLOW_UP ... [--units mm] [--params JSON] --out frame.json
                       [--density-map map.png --params '{"density_range": [20, 60]}']
-    meshflat batch MANIFEST.jsonl --out DIR [--processes N] [--shard-count N [--shard-index I]]
+    meshflat batch MANIFEST.jsonl --out DIR [--allow-root DIR] [--processes N]
+        [--shard-count N [--shard-index I]]
 
 One command per mesh route of :mod:`service.capabilities`, running the same operation: the
 parameters are the API's (``--params`` takes any of them as JSON, the options override it),
@@ -286,6 +287,12 @@ def _add_batch(commands) -> None:
         help='one JSON object a line: {"mesh": PATH, "params": {...}, "outputs": [FILE, ...]}',
     )
     batch.add_argument("--out", metavar="DIR", required=True, help="a folder per scan in DIR")
+    batch.add_argument(
+        "--allow-root",
+        action="append",
+        metavar="DIR",
+        help="meshes may lie under DIR too (default: only in the manifest's folder); repeatable",
+    )
     batch.add_argument(
         "--processes",
         type=_positive,

@@ -4,14 +4,18 @@ failure on its own, sharded over pods; a bad manifest line is named by its numbe
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import signal
 import subprocess
 import sys
+from multiprocessing import get_context
 from pathlib import Path
 
 import pytest
 
-from service.batch import DIGEST_FILE, ERROR_FILE, SCANS_FAILED, available_cpus
+from service import batch as batch_module
+from service.batch import DIGEST_FILE, ERROR_FILE, SCANS_FAILED, available_cpus, process
 from service.capabilities import MESH_COMMANDS
 from service.cli import main
 from service.samples import SAMPLES
@@ -42,8 +46,14 @@ def scalp(outputs=("map.json",)) -> dict:
     return {"mesh": SAMPLES[NAME].path.as_posix(), "params": PARAMS, "outputs": list(outputs)}
 
 
+#: The bundled scans' folder: the manifests of these tests name the scalp there.
+SAMPLES_ROOT = SAMPLES[NAME].path.parent
+
+
 def batch(manifest: Path, out: Path, *options) -> int:
-    return main(["batch", str(manifest), "--out", str(out), *map(str, options)])
+    """``meshflat batch``, the bundled scans' folder allowed beside the manifest's."""
+    allowed = ["--allow-root", str(SAMPLES_ROOT)]
+    return main(["batch", str(manifest), "--out", str(out), *allowed, *map(str, options)])
 
 
 def logged(capsys) -> list[dict]:
@@ -134,10 +144,15 @@ async def test_one_bad_scan_fails_alone_with_the_api_message(client, tmp_path, c
 
     answer = problem(await flatten(client, NAME, data=data, filename=filename), 422, "mesh")
     error = json.loads((out / "broken" / ERROR_FILE).read_bytes())
-    assert {key: error[key] for key in answer} == answer
+    # The API's problem, but for its detail: a reader's kind and position, never its words
+    # (they may quote the file).
+    assert {key: error[key] for key in answer if key != "detail"} == {
+        key: answer[key] for key in answer if key != "detail"
+    }
+    assert error["detail"].startswith("mesh: not a readable mesh (MeshFormatError at line 7")
     assert (error["line"], error["scan"]) == (2, "broken")
     failed = next(line for line in lines if line.get("scan") == "broken")
-    assert (failed["level"], failed["line"], failed["detail"]) == ("error", 2, answer["detail"])
+    assert (failed["level"], failed["line"], failed["detail"]) == ("error", 2, error["detail"])
     summary = lines[-1]
     assert [summary[key] for key in ("message", "done", "skipped", "failed")] == [
         "batch finished",
@@ -176,10 +191,12 @@ async def test_only_the_outputs_asked_for_and_the_records_reach_the_disk(tmp_pat
     writes = await watched_writes(run)
     finals = [out / "s" / name for name in (*forms, DIGEST_FILE)] + [out / "a" / ERROR_FILE]
     allowed = {*finals, *(path.with_name(f".{path.name}.partial") for path in finals)}
-    opened = {Path(path) for event, path in writes if event == "open"}
-    assert opened and opened <= allowed, opened - allowed
-    made = {Path(path) for event, path in writes if event == "os.mkdir"}
-    assert made <= {out, out / "s", out / "a"}
+    # A scan's files are opened by name in its folder (opened itself without following a
+    # link); an opened descriptor's file object shows as its number.
+    opened = {str(path) for event, path in writes if event == "open" and not isinstance(path, int)}
+    assert opened and opened <= {path.name for path in allowed}, opened
+    made = {str(path) for event, path in writes if event == "os.mkdir"}
+    assert made <= {str(out), "s", "a"}
 
 
 def test_an_unreadable_mesh_fails_its_scan_only(tmp_path, capsys):
@@ -319,11 +336,14 @@ async def test_the_installed_command_runs_scans_in_processes(tmp_path):
         [{**scalp(["map.svg"]), "name": name} for name in ("one", "two", "three")],
     )
     command = Path(sys.executable).parent / "meshflat"
+    options = ["--processes", "2", "--progress", "--allow-root", SAMPLES_ROOT]
     run = subprocess.run(
-        [command, "batch", manifest, "--out", tmp_path / "out", "--processes", "2", "--progress"],
+        [command, "batch", manifest, "--out", tmp_path / "out", *options],
         capture_output=True,
         text=True,
         timeout=300,
+        # The tree under test (a worktree's, when the editable install is another's).
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])},
     )
     assert run.returncode == 0, run.stderr
     assert "3/3 done" in run.stderr  # the progress bar
@@ -331,3 +351,179 @@ async def test_the_installed_command_runs_scans_in_processes(tmp_path):
         assert (tmp_path / "out" / name / "map.svg").read_bytes().startswith(b"<svg")
     summary = json.loads(run.stderr.rsplit("\n", 2)[-2].rpartition("\r")[2])
     assert summary["message"] == "batch finished" and summary["done"] == 3
+
+
+def test_meshes_are_read_only_as_regular_files_inside_the_manifests_folder(
+    tmp_path, capsys, monkeypatch
+):
+    monkeypatch.setenv("MESHFLAT_MAX_UPLOAD_BYTES", "100000")
+    here, secret = tmp_path / "here", tmp_path / "secret"
+    here.mkdir()
+    secret.mkdir()
+    (secret / "hidden.obj").write_bytes(b"v 0 0 0\n")
+    (here / "link.obj").symlink_to(secret / "hidden.obj")
+    os.mkfifo(here / "pipe.obj")  # read in the main process, it would hang the batch
+    (here / "huge.obj").write_bytes(b"v 0 0 0\n" * 20_000)  # 160 kB, beyond the limit
+    refused = {
+        "shadow": ("/etc/shadow", "outside"),
+        "passwd": ("../../../../../../etc/passwd", "outside"),
+        "hidden": ("../secret/hidden.obj", "outside"),
+        "link": ("link.obj", "outside"),
+        "pipe": ("pipe.obj", "not a regular file"),
+        "zero": ("/dev/zero", "not a regular file"),
+        "huge": ("huge.obj", "larger than 100000 bytes"),
+    }
+    lines = [
+        {"mesh": mesh, "params": {"format": "obj"}, "outputs": ["m.json"], "name": name}
+        for name, (mesh, _) in refused.items()
+    ]
+    manifest = write_manifest(here, [*lines, {**scalp(), "name": "ok"}])
+    out = tmp_path / "out"
+    assert batch(manifest, out, "--processes", 1, "--allow-root", "/dev") == SCANS_FAILED
+    assert by_scan(logged(capsys)) == {**dict.fromkeys(refused, "scan failed"), "ok": "scan done"}
+    for name, (_, words) in refused.items():
+        error = json.loads((out / name / ERROR_FILE).read_bytes())
+        assert error["field"] == "mesh" and words in error["detail"], (name, error)
+    assert json.loads((out / "huge" / ERROR_FILE).read_bytes())["status"] == 413
+
+
+def test_outputs_are_never_written_through_a_symbolic_link(tmp_path, capsys):
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (elsewhere / "victim").write_text("untouched")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "linked").symlink_to(elsewhere)  # a scan's folder that is a link out of DIR
+    (out / "planted").mkdir()
+    (out / "planted" / f".{ERROR_FILE}.partial").symlink_to(elsewhere / "victim")
+    manifest = write_manifest(
+        tmp_path,
+        [
+            {"mesh": "missing.obj", "outputs": ["m.json"], "name": "linked"},
+            {"mesh": "missing.obj", "outputs": ["m.json"], "name": "planted"},
+            {**scalp(), "name": "ok"},
+        ],
+    )
+    assert batch(manifest, out, "--processes", 1) == SCANS_FAILED
+    lines = logged(capsys)
+    assert by_scan(lines) == {"linked": "scan failed", "planted": "scan failed", "ok": "scan done"}
+    linked = next(line for line in lines if line.get("scan") == "linked")
+    assert "symbolic link" in linked["detail"]
+    assert sorted(p.name for p in elsewhere.iterdir()) == ["victim"]
+    assert (elsewhere / "victim").read_text() == "untouched"
+    written = out / "planted" / ERROR_FILE
+    assert not written.is_symlink() and json.loads(written.read_bytes())["scan"] == "planted"
+
+
+def test_a_readers_refusal_is_told_by_kind_and_position_never_by_the_files_words(tmp_path, capsys):
+    meshes = {
+        "count.ply": b"ply\nformat ascii 1.0\nelement vertex SECRETCOUNT\nend_header\n",
+        "element.ply": b"ply\nformat ascii 1.0\nelement MRN_12345678 1\nproperty float x\n"
+        b"end_header\n1\n",
+    }
+    for filename, data in meshes.items():
+        (tmp_path / filename).write_bytes(data)
+    manifest = write_manifest(
+        tmp_path, [{"mesh": filename, "outputs": ["m.json"]} for filename in meshes]
+    )
+    out = tmp_path / "out"
+    assert batch(manifest, out, "--processes", 1) == SCANS_FAILED
+    said = capsys.readouterr().err
+    errors = {name: (out / name / ERROR_FILE).read_text() for name in ("count", "element")}
+    for text in (said, *errors.values()):
+        assert "SECRETCOUNT" not in text and "MRN_12345678" not in text, text
+    count = json.loads(errors["count"])
+    assert (count["status"], count["field"]) == (422, "mesh")
+    assert "MeshFormatError at line 3" in count["detail"], count
+    assert "not a readable mesh" in json.loads(errors["element"])["detail"]
+
+
+def _killed_while_computing(scan, out, settings):
+    """The batch's ``process`` in a worker that is killed (SIGKILL, as the kernel's OOM
+    killer does) while computing ``dies-*`` scans: ``dies-once`` on its first attempt only."""
+    died = scan.mesh.parent / f"{scan.name}.died"
+    if scan.name == "dies-always" or (scan.name == "dies-once" and not died.exists()):
+        died.write_text("")
+        os.kill(os.getpid(), signal.SIGKILL)
+    return process(scan, out, settings)
+
+
+def test_a_worker_that_dies_fails_its_own_scan_alone_after_one_retry(tmp_path, capsys, monkeypatch):
+    shutil.copy(SAMPLES[NAME].path, tmp_path / "scalp.ply")
+    line = {"mesh": "scalp.ply", "params": PARAMS, "outputs": ["v.json"], "command": "validate"}
+    names = ["a", "dies-once", "b", "dies-always", "c", "d"]
+    manifest = write_manifest(tmp_path, [{**line, "name": name} for name in names])
+    # The workers are forked from this process, so that they run the function above: the
+    # test's own code kills them; the batch knows nothing of it.
+    monkeypatch.setattr(batch_module, "_fresh_processes", lambda: get_context("fork"))
+    monkeypatch.setattr(batch_module, "process", _killed_while_computing)
+    out = tmp_path / "out"
+    assert batch(manifest, out, "--processes", 2) == SCANS_FAILED
+    lines = logged(capsys)
+    assert by_scan(lines) == {
+        **dict.fromkeys(names, "scan done"),
+        "dies-once": "scan done",
+        "dies-always": "scan failed",
+    }
+    again = [line["scan"] for line in lines if line["message"].startswith("scan's process died")]
+    assert sorted(again) == ["dies-always", "dies-once"]
+    error = json.loads((out / "dies-always" / ERROR_FILE).read_bytes())
+    assert error["status"] == 500 and "died 2 times" in error["detail"]
+    assert error["line"] == 4
+    assert lines[-1]["done"] == 5 and lines[-1]["failed"] == 1
+
+
+@pytest.mark.parametrize(
+    ("line", "words"),
+    [
+        ({**LINE, "params": {"region": {"texture_mask": {}}}},
+         ["params.region.texture_mask", "mask", "--mask"]),
+        ({**LINE, "command": "measure", "params": {"region": {"texture_mask": {}}}},
+         ["params.region.texture_mask", "measure"]),
+        ({**LINE, "command": "sites", "params": {"density_range": [10, 40]}},
+         ["params.density_range", "density_map", "--density-map"]),
+        ({**LINE, "command": "transfer"}, ["params.values", "image", "--image"]),
+        ({**LINE, "command": "transfer", "params": {"values": "x"}, "outputs": ["ids.face_ids"]},
+         ["outputs", "'ids.face_ids'", "look-up"]),
+    ],
+)  # fmt: skip
+def test_a_line_that_needs_a_part_the_batch_cannot_give_is_refused(tmp_path, capsys, line, words):
+    manifest = write_manifest(tmp_path, [{**LINE, "name": "first"}, line])
+    assert batch(manifest, tmp_path / "out") == 2
+    said = capsys.readouterr().err
+    assert "manifest.jsonl: line 2: " in said, said
+    assert all(word in said for word in words), said
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_refusal_that_names_what_the_file_has_keeps_those_names_out(tmp_path, capsys):
+    ply = (
+        b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        b"property float z\nproperty int MRN_12345678\nelement face 1\n"
+        b"property list uchar int vertex_indices\nend_header\n"
+        b"0 0 0 1\n1 0 0 1\n0 1 0 1\n3 0 1 2\n"
+    )
+    (tmp_path / "props.ply").write_bytes(ply)
+    (tmp_path / "groups.obj").write_bytes(b"g patient-7f3a9c\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    feature = {"feature_id": {"attribute": "quality", "values": [1]}}
+    manifest = write_manifest(
+        tmp_path,
+        [
+            {"mesh": "props.ply", "params": {"region": feature}, "outputs": ["m.json"]},
+            {
+                "mesh": "groups.obj",
+                "params": {"region": {"groups": ["nope"]}},
+                "outputs": ["m.json"],
+            },
+        ],
+    )
+    out = tmp_path / "out"
+    assert batch(manifest, out, "--processes", 1) == SCANS_FAILED
+    said = capsys.readouterr().err
+    errors = {name: (out / name / ERROR_FILE).read_text() for name in ("props", "groups")}
+    for text in (said, *errors.values()):
+        assert "MRN_12345678" not in text and "patient-7f3a9c" not in text, text
+    # What the line said is still named; what the file has is shown as '…'.
+    assert "'quality'" in json.loads(errors["props"])["detail"]
+    assert "'nope'" in json.loads(errors["groups"])["detail"]
+    assert "'…'" in json.loads(errors["groups"])["detail"]

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+from .images import MAX_PIXELS
 from .meshio import Limits
 
 
@@ -28,6 +29,8 @@ class Settings:
     max_drawn_points : MESHFLAT_MAX_DRAWN_POINTS, the points of all the zones' rings and the
         curves of a /v1/measure request (an outline a surgeon draws has hundreds)
     max_sites : MESHFLAT_MAX_SITES, sites one /v1/sites request may place
+    max_image_pixels : MESHFLAT_MAX_IMAGE_PIXELS, pixels of a PNG part (a mask, a density
+        map, an image), from its header before a pixel is decoded
     threads : MESHFLAT_THREADS, threads one request's computation may use
     max_jobs : MESHFLAT_MAX_JOBS, jobs computed at once per process
     max_waiting : MESHFLAT_MAX_WAITING, jobs queued for a slot beyond those (their bodies in);
@@ -61,6 +64,7 @@ class Settings:
     max_points: int = 5_000_000
     max_drawn_points: int = 100_000
     max_sites: int = 1_000_000
+    max_image_pixels: int = MAX_PIXELS
     threads: int = 1
     max_jobs: int = 2
     max_waiting: int = 1

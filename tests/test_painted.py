@@ -31,7 +31,7 @@ def ply_with(columns: dict[str, tuple[str, np.ndarray]], face_columns=None) -> b
     """fsaverage as a binary PLY with extra vertex (and face) properties: name -> (PLY type,
     values)."""
     vertex = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
-    types = {"uchar": "u1", "ushort": "<u2", "float": "<f4", "int": "<i4"}
+    types = {"uchar": "u1", "ushort": "<u2", "float": "<f4", "double": "<f8", "int": "<i4"}
     vertex += [(name, types[kind]) for name, (kind, _) in columns.items()]
     rows = np.zeros(len(VERTICES), dtype=vertex)
     for axis, name in enumerate("xyz"):

@@ -715,6 +715,16 @@ async def test_a_smaller_min_spacing_is_used_as_asked(client):
     assert answer["min_distance_mm"] >= 0.5
 
 
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+async def test_a_min_spacing_beyond_a_micron_to_a_kilometre_is_a_422(client):
+    """1e-300 mm overflowed the sites a unit² the spacing allows, 1e300 mm its square."""
+    for spacing in (1e-300, 1e-4, 2e6, 1e300):
+        body = await sites(client, {"density_per_cm2": 5, "min_spacing_mm": spacing})
+        problem(body, 422, "params.min_spacing_mm")
+    answer = await sites(client, {"density_per_cm2": 5, "min_spacing_mm": 1e-3})
+    assert answer.status_code == 200 and answer.json()["min_distance_mm"] >= 1e-3
+
+
 async def test_edge_cases_answer_without_a_500(client):
     """No site at all (a tiny density): every form answers; a scale from a known distance
     far outside a micron to a kilometre per unit is a 422; a spacing far too wide for the

@@ -306,3 +306,32 @@ async def test_a_value_range_beyond_the_coordinates_bound_is_refused(client):
     Image.new("L", (900, 600)).save(right, format="PNG")
     answer = await transfer(client, huge, {"image": ("map.png", right.getvalue())})
     problem(answer, 422, "params.value_range.0")
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+@pytest.mark.parametrize("extreme", [1e100, -1e308, "both"])
+async def test_a_values_property_beyond_the_bound_is_a_422_naming_values(client, extreme):
+    """A file's property is held to the bound of listed values (+-1e15): at 1e100 the range
+    of values all equal was low = high, at +-1e308 its width overflowed; every pixel was 0
+    and numpy warned."""
+    both = np.where(VERTICES[:, 0] > 0, 1.7e308, -1.7e308)
+    values = both if extreme == "both" else np.full(len(VERTICES), extreme)
+    data = ply_with({"v": ("double", values)})
+    body = problem(await transfer(client, {"values": "v"}, data=data), 422, "params.values")
+    assert "within +-1e15" in body["detail"] and body["indices"][0] == 0
+    bound = np.where(VERTICES[:, 0] > 0, 1e15, -1e15)
+    drawn = await transfer(client, {"values": "v"}, data=ply_with({"v": ("double", bound)}))
+    assert drawn.json()["value_range"] == [-1e15, 1e15]
+    assert png_of(drawn.json()["image"]).max() == 65535
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+async def test_a_value_range_too_narrow_for_the_values_is_a_422_naming_it(client):
+    """Values of tens drawn on [0, 5e-324] overflowed to infinity; a range 1e12 times
+    narrower than the values' distance from it is refused, one within is drawn."""
+    narrow = {"values": VALUES.tolist(), "value_range": [0.0, 5e-324]}
+    body = problem(await transfer(client, narrow), 422, "params.value_range")
+    assert "too narrow for the values" in body["detail"]
+    reach = float(np.abs(VALUES).max())
+    within = {"values": VALUES.tolist(), "value_range": [0.0, reach * 1e-12]}
+    assert (await transfer(client, within)).status_code == 200

@@ -30,7 +30,8 @@ Number = Annotated[float, Field(allow_inf_nan=False)]
 PositiveNumber = Annotated[float, Field(allow_inf_nan=False, gt=0)]
 #: A coordinate or a direction's component: within +-1e15, so that sums of squares (lengths,
 #: dot products) stay finite in double precision; far beyond any scan's units.
-Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-1e15, le=1e15)]
+MAX_COORDINATE = 1e15
+Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Vector3 = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
 # Long lists stop at their first bad item (fail_fast): a body of a million wrong items would
 # otherwise build a million error objects, some 280 bytes for each byte of it.

@@ -155,16 +155,25 @@ class PngFile:
     upload: Upload
 
     def read(self, params: BaseModel, ctx: Context) -> Png:
-        """The image, its pixels charged to ``ctx`` before they are decoded.
+        """The image, its pixels charged to ``ctx`` before they are decoded, at most
+        MESHFLAT_MAX_IMAGE_PIXELS of them.
 
         Raises
         ------
         InvalidInput
-            Not a PNG, another size, another mode (naming the part).
+            Not a PNG, another size, too many pixels, truncated or inconsistent, another mode
+            (naming the part).
         """
         part = self.part
         size = (params.image_width, params.image_height) if part.framed else None
-        return read_png(bytes(self.upload.data), part.name, ctx.charge, size, part.grey_only)
+        return read_png(
+            bytes(self.upload.data),
+            part.name,
+            ctx.charge,
+            size,
+            part.grey_only,
+            ctx.settings.max_image_pixels,
+        )
 
 
 #: The ``mask`` part every mesh route reads for a ``region.texture_mask``.

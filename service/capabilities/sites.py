@@ -28,7 +28,7 @@ from ..outputs import Output
 from ..outputs.picture import Drawn
 from .context import SITE_BYTES, Context
 from .drawn import Outline, Zone, check_names, checked_zone, overlaps, warn_outside
-from .fields import PictureParams, PositiveNumber, choice, output_choice
+from .fields import PictureParams, choice, output_choice
 from .inputs import PngFile, PngPart
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
@@ -42,6 +42,11 @@ from .warnings import WarnedAnswer
 #: Sites per cm² a density may ask for (a site every 0.1 mm or so).
 MAX_DENSITY_PER_CM2 = 10_000.0
 DensityPerCm2 = Annotated[float, Field(allow_inf_nan=False, gt=0, le=MAX_DENSITY_PER_CM2)]
+#: The spacing asked for, millimetres: a micron to a kilometre, so that in any unit the mesh
+#: may have (1e-3 to 1e6 mm a unit, units.MM_PER_UNIT) the sites a unit² it allows
+#: stay finite (1e-300 overflowed them; 1e300, its square).
+MIN_SPACING_MM = (1e-3, 1e6)
+SpacingMm = Annotated[float, Field(allow_inf_nan=False, ge=MIN_SPACING_MM[0], le=MIN_SPACING_MM[1])]
 
 
 class SiteZone(Zone):
@@ -78,10 +83,11 @@ class SitesParams(MeshParams, PictureParams):
         description="An exact total: the zones keep their relative densities and the "
         "spacing adapts. Default: each zone's area times its density, rounded.",
     )
-    min_spacing_mm: PositiveNumber | None = Field(
+    min_spacing_mm: SpacingMm | None = Field(
         None,
-        description="No two sites closer than this in 3D, millimetres. Default: "
-        "0.7 / sqrt(density) in each zone, at the density placed (docs/math.md, section 13).",
+        description="No two sites closer than this in 3D, millimetres: a micron to a "
+        "kilometre. Default: 0.7 / sqrt(density) in each zone, at the density placed "
+        "(docs/math.md, section 13).",
     )
     density_range: Annotated[list[Annotated[float, Field(ge=0, le=MAX_DENSITY_PER_CM2)]],
                              Field(min_length=2, max_length=2)] | None = Field(

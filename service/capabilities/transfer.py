@@ -23,7 +23,7 @@ from ..meshio import Mesh
 from ..outputs import Output
 from ..outputs.lookup import grey_alpha_png16, lookup_bytes
 from .context import Context
-from .fields import Coordinate, FramingParams, output_choice
+from .fields import MAX_COORDINATE, Coordinate, FramingParams, output_choice
 from .inputs import PngFile, PngPart
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
@@ -40,7 +40,7 @@ class TransferParams(MeshParams, FramingParams):
         None,
         description="Values a vertex to draw on the map: one a vertex of the file (in its "
         "order), or the name of a per-vertex property of the file (a PLY property, a glTF "
-        "custom attribute such as _FEATURE_ID_0).",
+        "custom attribute such as _FEATURE_ID_0); each within +-1e15.",
     )
     value_range: tuple[Coordinate, Coordinate] | None = Field(
         None,
@@ -82,6 +82,10 @@ class TransferParams(MeshParams, FramingParams):
 
 #: Bytes a pixel of a transfer's grid may cost: ids, weights, values and their encoding.
 TRANSFER_BYTES_PER_PIXEL = 48
+#: The farthest a value drawn may lie from value_range's low end, in the range's widths:
+#: beyond, the drawing is 0 or 65535 but for slivers thinner than its rounding, and the
+#: planes through the triangles' values could overflow (a range of 1e-300 for values of 1).
+MAX_RANGES = 1e12
 
 
 @dataclass(frozen=True)
@@ -173,6 +177,13 @@ def _values_to_image(region: MeshRegion, values, drawn, faces, at, params, ctx: 
     low, high = params.value_range or (float(values.min()), float(values.max()))
     if high <= low:
         low, high = (low, low + 1.0) if low < 0 else (low - 1.0, low)
+    reach = float(np.abs(values - low).max())  # within 2e15: the values' bound
+    if reach > MAX_RANGES * (high - low):
+        raise InvalidInput(
+            "value_range",
+            f"[{low:.6g}, {high:.6g}] is too narrow for the values, which lie up to {reach:.6g} "
+            f"from its low end: at most {MAX_RANGES:.0e} times its width",
+        )
     scaled = (values - low) / (high - low)
     width, height = params.image_width, params.image_height
     image, ids = pixels.vertex_image(at[faces], scaled[faces], height, width, ctx.threads)
@@ -209,7 +220,9 @@ def _vertex_values(mesh: Mesh, values) -> np.ndarray:
     Raises
     ------
     TransformInputError
-        Not one a vertex, a property the file lacks, or a NaN among them.
+        Not one a vertex, a property the file lacks, a NaN among them, or (a property's) a
+        value beyond +-1e15, the bound of listed values: the range drawn must be finite and
+        wider than its ends' rounding.
     """
     if isinstance(values, str):
         found = mesh.attributes.vertex.get(values)
@@ -228,6 +241,14 @@ def _vertex_values(mesh: Mesh, values) -> np.ndarray:
     if bad.size:
         raise TransformInputError(
             "values", f"vertex {int(bad[0])}'s value is not a number", indices=bad
+        )
+    bad = np.flatnonzero(np.abs(array) > MAX_COORDINATE)
+    if bad.size:
+        raise TransformInputError(
+            "values",
+            f"vertex {int(bad[0])}'s value is {array[bad[0]]:.4g}; values must lie within "
+            "+-1e15, as listed values",
+            indices=bad,
         )
     return array
 

@@ -461,6 +461,13 @@ def cases() -> list[Case]:
             content_type="multipart/form-data; boundary=b",
         ),
         Case(
+            "multipart naming its boundary twice",
+            400,
+            ("Content-Type", "boundary more than once"),
+            body=b'--b\r\nContent-Disposition: form-data; name="params"\r\n\r\n{}\r\n--b--\r\n',
+            content_type="multipart/form-data; boundary=evil; boundary=b",
+        ),
+        Case(
             "points with a NaN",
             422,
             ("points",),

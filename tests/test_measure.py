@@ -10,6 +10,7 @@ import math
 import httpx
 import numpy as np
 import pytest
+import shapely
 
 from service.app import create_app
 from service.cli import main
@@ -156,6 +157,43 @@ async def test_a_zone_off_the_region_measures_nothing_and_says_so(client):
     assert measured["area"] == 0.0 and measured["faces"] == [] and measured["perimeter"] == 0.0
     assert measured["area_outside_region"] == pytest.approx(0.1)
     assert measured["outline"][0]["points"] == []
+
+
+#: A strip across the scalp's map: a rectangle drawn with its ends at +-147.03 spanned exactly
+#: MAX_CELLS_PER_SIDE - 3 cells of the zone's grid, and rounding put its far end in the grid's
+#: empty margin: the strip measured a fortieth of its area.
+STRIP = (1.0444092486908958, 1.3664327427199252)
+
+
+async def test_a_zones_numbers_do_not_depend_on_how_far_off_the_map_its_corners_lie(client):
+    scalp = await flat_map(client)
+    y0, y1 = STRIP
+    reaches = (5.0, 65.88, 147.0287641866895, 1e6, 1e15)
+    zones = [rectangle(f"to {far:g}", -far, far, y0, y1) for far in reaches]
+    answer = (await measure(client, {"zones": zones, "units": "mm"})).json()
+    near, *far = answer["zones"]
+    # The strip's area by shapely: each triangle's map area inside it, over its map area.
+    c = np.stack([scalp["x"], scalp["y"]], axis=1)[scalp["corners"]]
+    triangles = shapely.polygons(np.concatenate([c, c[:, :1]], axis=1))
+    strip = shapely.box(scalp["x"].min() - 1, y0, scalp["x"].max() + 1, y1)
+    shares = shapely.area(shapely.intersection(triangles, strip)) / shapely.area(triangles)
+    assert near["area"] == pytest.approx(math.fsum(shares * scalp["areas"]), rel=1e-9)
+    for zone in far:
+        assert zone["area"] == pytest.approx(near["area"], rel=1e-9), zone["name"]
+        assert zone["perimeter"] == pytest.approx(near["perimeter"], rel=1e-9), zone["name"]
+        assert zone["faces"] == near["faces"] and zone["partial_faces"] == near["partial_faces"]
+
+
+async def test_sites_in_a_zone_do_not_depend_on_how_far_off_the_map_its_corners_lie(client):
+    y0, y1 = STRIP
+    counts = []
+    for far in (5.0, 147.0287641866895, 1e15):
+        zone = {**rectangle("strip", -far, far, y0, y1), "density_per_cm2": 20}
+        params = {**PARAMS, "units": "mm", "zones": [zone], "seed": 3}
+        answer = (await flatten(client, NAME, params, endpoint="/v1/sites")).json()
+        counts.append((answer["count"], answer["zones"][0]["area_cm2"]))
+    assert counts[1][0] == counts[2][0] == counts[0][0] > 0
+    assert [area for _, area in counts] == pytest.approx([counts[0][1]] * 3, rel=1e-9)
 
 
 async def test_units_give_square_centimetres_and_millimetres(client):

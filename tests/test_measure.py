@@ -150,6 +150,47 @@ async def test_a_hole_takes_its_area_out_and_overlaps_are_measured(client):
     assert ("hole", "ring") not in overlaps  # they share only the hole's boundary
 
 
+async def test_nested_zones_are_measured_once_each_and_their_overlaps_are_the_inner_ones(
+    client, monkeypatch
+):
+    """Every pair of nested zones overlaps: each pair's shared area is the inner zone's,
+    taken from its own measure, not from a zone made of their intersection and measured
+    again (a quadratic count of measures: 256 nested 16-gons took over 60 s)."""
+    import service.capabilities.measure as module
+
+    measures = []
+
+    def counted(triangles, rings):
+        measures.append(len(rings[0]))
+        return cover_zone(triangles, rings)
+
+    cover_zone = module.cover_zone
+    monkeypatch.setattr(module, "cover_zone", counted)
+    scalp = await flat_map(client)
+    centre = np.array([scalp["x"].mean(), scalp["y"].mean()])
+    turns = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    circle = np.column_stack([np.cos(turns), np.sin(turns)])
+    radii = 0.05 + 0.06 * np.arange(24)
+    zones = [{"name": f"r{k}", "outer": ring(centre + r * circle)} for k, r in enumerate(radii)]
+    answer = (await measure(client, {"zones": zones})).json()
+    assert len(measures) == len(zones)
+    area = [zone["area"] for zone in answer["zones"]]
+    pairs = [(i, j) for i in range(len(zones)) for j in range(i + 1, len(zones))]
+    assert [tuple(o["indices"]) for o in answer["overlaps"]] == pairs
+    for overlap in answer["overlaps"]:
+        assert overlap["area"] == area[overlap["indices"][0]]  # the smaller one
+    # Partly overlapping zones are still intersected, and the common part measured.
+    crossing = [
+        zones[3],
+        {**zones[4], "name": "moved", "outer": ring(centre + 0.2 + radii[4] * circle)},
+    ]
+    measures.clear()
+    answer = (await measure(client, {"zones": crossing})).json()
+    assert len(measures) == 3
+    (overlap,) = answer["overlaps"]
+    assert 0 < overlap["area"] < min(zone["area"] for zone in answer["zones"])
+
+
 async def test_a_zone_off_the_region_measures_nothing_and_says_so(client):
     zone = rectangle("far", 10.0, 10.5, 10.0, 10.2)
     answer = (await measure(client, {"zones": [zone]})).json()

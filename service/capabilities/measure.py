@@ -22,6 +22,7 @@ from .drawn import (
     Curve,
     Outline,
     Zone,
+    ZonePair,
     check_names,
     checked_curve,
     checked_zone,
@@ -137,8 +138,7 @@ def measure(given: MeshInput[MeasureParams], ctx: Context) -> Measured:
     triangles = map_triangles(region, ctx)
     covers = [cover_zone(triangles, outline.rings) for outline in outlines]
     shared = tuple(
-        (i, j, sum(cover_zone(triangles, rings).total(triangles.surface_area) for rings in parts))
-        for i, j, parts in overlaps(outlines)
+        (pair.i, pair.j, _shared_area(triangles, covers, pair)) for pair in overlaps(outlines)
     )
     lifted = tuple(
         (curve.name, lift_curve(triangles, points))
@@ -154,6 +154,14 @@ def measure(given: MeshInput[MeasureParams], ctx: Context) -> Measured:
         shared,
         scale,
     )
+
+
+def _shared_area(triangles: MapTriangles, covers: list[ZoneCover], pair: ZonePair) -> float:
+    """The surface area two zones share: that of the one inside the other, or their common
+    parts' covers summed."""
+    if pair.within is not None:
+        return covers[pair.within].total(triangles.surface_area)
+    return sum(cover_zone(triangles, rings).total(triangles.surface_area) for rings in pair.parts)
 
 
 def _warn(ctx: Context, params, region: MeshRegion, zones, curves, scale) -> None:
@@ -297,15 +305,14 @@ class MeasureResponse(WarnedAnswer):
             units=None if scale is None else Units.build(mm_per_unit=scale),
             zones=[ZoneMeasure.of(measured, k) for k in range(len(measured.zones))],
             curves=[CurveMeasure.of(measured, k) for k in range(len(measured.curves))],
-            overlaps=[
-                Overlap.build(
-                    zones=[names[i], names[j]],
-                    indices=[i, j],
-                    area=area,
-                    area_cm2=in_cm2(area, scale),
-                )
-                for i, j, area in measured.overlaps
-            ],
+            # A row each, not a model each: nested zones overlap in pairs by the ten thousand.
+            overlaps=Overlap.rows(
+                [True] * len(measured.overlaps),
+                zones=[[names[i], names[j]] for i, j, _ in measured.overlaps],
+                indices=[[i, j] for i, j, _ in measured.overlaps],
+                area=[area for _, _, area in measured.overlaps],
+                area_cm2=[in_cm2(area, scale) for _, _, area in measured.overlaps],
+            ),
         )
 
 

@@ -231,7 +231,9 @@ async def test_sites_in_a_zone_do_not_depend_on_how_far_off_the_map_its_corners_
     for far in (5.0, 147.0287641866895, 1e15):
         zone = {**rectangle("strip", -far, far, y0, y1), "density_per_cm2": 20}
         params = {**PARAMS, "units": "mm", "zones": [zone], "seed": 3}
-        answer = (await flatten(client, NAME, params, endpoint="/v1/sites")).json()
+        response = await flatten(client, NAME, params, endpoint="/v1/sites")
+        assert response.status_code == 200, response.text
+        answer = response.json()
         counts.append((answer["count"], answer["zones"][0]["area_cm2"]))
     assert counts[1][0] == counts[2][0] == counts[0][0] > 0
     assert [area for _, area in counts] == pytest.approx([counts[0][1]] * 3, rel=1e-9)

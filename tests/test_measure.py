@@ -179,16 +179,26 @@ async def test_nested_zones_are_measured_once_each_and_their_overlaps_are_the_in
     assert [tuple(o["indices"]) for o in answer["overlaps"]] == pairs
     for overlap in answer["overlaps"]:
         assert overlap["area"] == area[overlap["indices"][0]]  # the smaller one
-    # Partly overlapping zones are still intersected, and the common part measured.
+    # Partly overlapping zones share, by shapely, each triangle's map area in both over its
+    # map area times its surface area; with no zone measured beyond the two.
+    shifted = [np.array([0.0, 0.0]), np.array([0.2, 0.1]), np.array([-0.15, 0.25])]
     crossing = [
-        zones[3],
-        {**zones[4], "name": "moved", "outer": ring(centre + 0.2 + radii[4] * circle)},
+        {"name": f"c{k}", "outer": ring(centre + shift + radii[4] * circle)}
+        for k, shift in enumerate(shifted)
     ]
     measures.clear()
     answer = (await measure(client, {"zones": crossing})).json()
     assert len(measures) == 3
-    (overlap,) = answer["overlaps"]
-    assert 0 < overlap["area"] < min(zone["area"] for zone in answer["zones"])
+    c = np.stack([scalp["x"], scalp["y"]], axis=1)[scalp["corners"]]
+    triangles = shapely.polygons(np.concatenate([c, c[:, :1]], axis=1))
+    polygons = [shapely.Polygon(centre + shift + radii[4] * circle) for shift in shifted]
+    assert [o["indices"] for o in answer["overlaps"]] == [[0, 1], [0, 2], [1, 2]]
+    for overlap in answer["overlaps"]:
+        i, j = overlap["indices"]
+        common = shapely.intersection(polygons[i], polygons[j])
+        share = shapely.area(shapely.intersection(triangles, common)) / shapely.area(triangles)
+        assert overlap["area"] == pytest.approx(math.fsum(share * scalp["areas"]), rel=1e-9)
+        assert 0 < overlap["area"] < answer["zones"][i]["area"]
 
 
 async def test_a_zone_off_the_region_measures_nothing_and_says_so(client):

@@ -22,11 +22,11 @@ from .drawn import (
     Curve,
     Outline,
     Zone,
-    ZonePair,
     check_names,
     checked_curve,
     checked_zone,
     overlaps,
+    shared_areas,
     warn_outside,
 )
 from .fields import PictureParams, choice, output_choice
@@ -137,9 +137,9 @@ def measure(given: MeshInput[MeasureParams], ctx: Context) -> Measured:
     region = flatten(given, ctx)
     triangles = map_triangles(region, ctx)
     covers = [cover_zone(triangles, outline.rings) for outline in outlines]
-    shared = tuple(
-        (pair.i, pair.j, _shared_area(triangles, covers, pair)) for pair in overlaps(outlines)
-    )
+    pairs = overlaps(outlines)
+    areas = shared_areas(triangles, covers, pairs).tolist()
+    shared = tuple((pair.i, pair.j, area) for pair, area in zip(pairs, areas, strict=True))
     lifted = tuple(
         (curve.name, lift_curve(triangles, points))
         for curve, points in zip(params.curves, curves, strict=True)
@@ -154,14 +154,6 @@ def measure(given: MeshInput[MeasureParams], ctx: Context) -> Measured:
         shared,
         scale,
     )
-
-
-def _shared_area(triangles: MapTriangles, covers: list[ZoneCover], pair: ZonePair) -> float:
-    """The surface area two zones share: that of the one inside the other, or their common
-    parts' covers summed."""
-    if pair.within is not None:
-        return covers[pair.within].total(triangles.surface_area)
-    return sum(cover_zone(triangles, rings).total(triangles.surface_area) for rings in pair.parts)
 
 
 def _warn(ctx: Context, params, region: MeshRegion, zones, curves, scale) -> None:

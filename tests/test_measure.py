@@ -10,6 +10,7 @@ import math
 import httpx
 import numpy as np
 import pytest
+import shapely
 
 from service.app import create_app
 from service.cli import main
@@ -149,6 +150,57 @@ async def test_a_hole_takes_its_area_out_and_overlaps_are_measured(client):
     assert ("hole", "ring") not in overlaps  # they share only the hole's boundary
 
 
+async def test_nested_zones_are_measured_once_each_and_their_overlaps_are_the_inner_ones(
+    client, monkeypatch
+):
+    """Every pair of nested zones overlaps: each pair's shared area is the inner zone's,
+    taken from its own measure, not from a zone made of their intersection and measured
+    again (a quadratic count of measures: 256 nested 16-gons took over 60 s)."""
+    import service.capabilities.measure as module
+
+    measures = []
+
+    def counted(triangles, rings):
+        measures.append(len(rings[0]))
+        return cover_zone(triangles, rings)
+
+    cover_zone = module.cover_zone
+    monkeypatch.setattr(module, "cover_zone", counted)
+    scalp = await flat_map(client)
+    centre = np.array([scalp["x"].mean(), scalp["y"].mean()])
+    turns = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    circle = np.column_stack([np.cos(turns), np.sin(turns)])
+    radii = 0.05 + 0.06 * np.arange(24)
+    zones = [{"name": f"r{k}", "outer": ring(centre + r * circle)} for k, r in enumerate(radii)]
+    answer = (await measure(client, {"zones": zones})).json()
+    assert len(measures) == len(zones)
+    area = [zone["area"] for zone in answer["zones"]]
+    pairs = [(i, j) for i in range(len(zones)) for j in range(i + 1, len(zones))]
+    assert [tuple(o["indices"]) for o in answer["overlaps"]] == pairs
+    for overlap in answer["overlaps"]:
+        assert overlap["area"] == area[overlap["indices"][0]]  # the smaller one
+    # Partly overlapping zones share, by shapely, each triangle's map area in both over its
+    # map area times its surface area; with no zone measured beyond the two.
+    shifted = [np.array([0.0, 0.0]), np.array([0.2, 0.1]), np.array([-0.15, 0.25])]
+    crossing = [
+        {"name": f"c{k}", "outer": ring(centre + shift + radii[4] * circle)}
+        for k, shift in enumerate(shifted)
+    ]
+    measures.clear()
+    answer = (await measure(client, {"zones": crossing})).json()
+    assert len(measures) == 3
+    c = np.stack([scalp["x"], scalp["y"]], axis=1)[scalp["corners"]]
+    triangles = shapely.polygons(np.concatenate([c, c[:, :1]], axis=1))
+    polygons = [shapely.Polygon(centre + shift + radii[4] * circle) for shift in shifted]
+    assert [o["indices"] for o in answer["overlaps"]] == [[0, 1], [0, 2], [1, 2]]
+    for overlap in answer["overlaps"]:
+        i, j = overlap["indices"]
+        common = shapely.intersection(polygons[i], polygons[j])
+        share = shapely.area(shapely.intersection(triangles, common)) / shapely.area(triangles)
+        assert overlap["area"] == pytest.approx(math.fsum(share * scalp["areas"]), rel=1e-9)
+        assert 0 < overlap["area"] < answer["zones"][i]["area"]
+
+
 async def test_a_zone_off_the_region_measures_nothing_and_says_so(client):
     zone = rectangle("far", 10.0, 10.5, 10.0, 10.2)
     answer = (await measure(client, {"zones": [zone]})).json()
@@ -156,6 +208,45 @@ async def test_a_zone_off_the_region_measures_nothing_and_says_so(client):
     assert measured["area"] == 0.0 and measured["faces"] == [] and measured["perimeter"] == 0.0
     assert measured["area_outside_region"] == pytest.approx(0.1)
     assert measured["outline"][0]["points"] == []
+
+
+#: A strip across the scalp's map: a rectangle drawn with its ends at +-147.03 spanned exactly
+#: MAX_CELLS_PER_SIDE - 3 cells of the zone's grid, and rounding put its far end in the grid's
+#: empty margin: the strip measured a fortieth of its area.
+STRIP = (1.0444092486908958, 1.3664327427199252)
+
+
+async def test_a_zones_numbers_do_not_depend_on_how_far_off_the_map_its_corners_lie(client):
+    scalp = await flat_map(client)
+    y0, y1 = STRIP
+    reaches = (5.0, 65.88, 147.0287641866895, 1e6, 1e15)
+    zones = [rectangle(f"to {far:g}", -far, far, y0, y1) for far in reaches]
+    answer = (await measure(client, {"zones": zones, "units": "mm"})).json()
+    near, *far = answer["zones"]
+    # The strip's area by shapely: each triangle's map area inside it, over its map area.
+    c = np.stack([scalp["x"], scalp["y"]], axis=1)[scalp["corners"]]
+    triangles = shapely.polygons(np.concatenate([c, c[:, :1]], axis=1))
+    strip = shapely.box(scalp["x"].min() - 1, y0, scalp["x"].max() + 1, y1)
+    shares = shapely.area(shapely.intersection(triangles, strip)) / shapely.area(triangles)
+    assert near["area"] == pytest.approx(math.fsum(shares * scalp["areas"]), rel=1e-9)
+    for zone in far:
+        assert zone["area"] == pytest.approx(near["area"], rel=1e-9), zone["name"]
+        assert zone["perimeter"] == pytest.approx(near["perimeter"], rel=1e-9), zone["name"]
+        assert zone["faces"] == near["faces"] and zone["partial_faces"] == near["partial_faces"]
+
+
+async def test_sites_in_a_zone_do_not_depend_on_how_far_off_the_map_its_corners_lie(client):
+    y0, y1 = STRIP
+    counts = []
+    for far in (5.0, 147.0287641866895, 1e15):
+        zone = {**rectangle("strip", -far, far, y0, y1), "density_per_cm2": 20}
+        params = {**PARAMS, "units": "mm", "zones": [zone], "seed": 3}
+        response = await flatten(client, NAME, params, endpoint="/v1/sites")
+        assert response.status_code == 200, response.text
+        answer = response.json()
+        counts.append((answer["count"], answer["zones"][0]["area_cm2"]))
+    assert counts[1][0] == counts[2][0] == counts[0][0] > 0
+    assert [area for _, area in counts] == pytest.approx([counts[0][1]] * 3, rel=1e-9)
 
 
 async def test_units_give_square_centimetres_and_millimetres(client):

@@ -9,6 +9,8 @@ import math
 import numpy as np
 import pytest
 import shapely
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from transforms.mapping import MapTriangles
 from transforms.zones import ZoneCover, cover_zone, lift_curve
@@ -373,6 +375,76 @@ def test_a_zone_off_the_region_covers_nothing():
         assert cover.covered_map_area == 0.0
         assert cover.perimeter == 0.0
         assert all(len(ring.faces) == 0 for ring in cover.outline)
+
+
+#: A far coordinate: 10**e off the unit square's map, from just beyond it to 1e15.
+far_exponents = st.floats(0.2, 15.0)
+#: A coordinate on the square's map, clear of its sides.
+on_map = st.floats(0.05, 0.95)
+
+
+def assert_same_cover(triangles: MapTriangles, far: ZoneCover, near: ZoneCover) -> None:
+    """Two covers of zones with the same part of the map: the same numbers to 1e-9."""
+    np.testing.assert_allclose(
+        shares_by_face(far, len(triangles)), shares_by_face(near, len(triangles)), atol=1e-9
+    )
+    assert zone_area(triangles, far) == pytest.approx(zone_area(triangles, near), rel=1e-9)
+    assert far.perimeter == pytest.approx(near.perimeter, rel=1e-9, abs=1e-12)
+    assert far.covered_map_area == pytest.approx(near.covered_map_area, rel=1e-9, abs=1e-12)
+
+
+@settings(max_examples=12, deadline=None)
+@given(
+    sides=st.lists(st.one_of(on_map, far_exponents.map(lambda e: -(10.0**e))), min_size=4,
+                   max_size=4),
+)  # fmt: skip
+def test_a_rectangles_numbers_do_not_depend_on_how_far_off_the_map_its_sides_lie(sides):
+    """A rectangle with each side on the map or up to 1e15 off it: the numbers of the same
+    rectangle with its far sides just beyond the map (checked against shapely)."""
+    triangles = jittered_mesh(n=12)
+    # A negative side is that far beyond the map, on the side it bounds.
+    x0, y0 = sides[:2]
+    x1, y1 = (side if side >= 0 else 1.0 - side for side in sides[2:])
+    x0, x1 = sorted((x0, x1)) if min(sides[0], sides[2]) >= 0 else (x0, x1)
+    y0, y1 = sorted((y0, y1)) if min(sides[1], sides[3]) >= 0 else (y0, y1)
+    assume(x1 - x0 > 1e-3 and y1 - y0 > 1e-3)
+    near = np.clip(rectangle(x0, y0, x1, y1), -0.5, 1.5)
+    assert_same_cover(
+        triangles,
+        cover_zone(triangles, [rectangle(x0, y0, x1, y1)]),
+        assert_like_shapely(triangles, [near]),
+    )
+
+
+@settings(max_examples=12, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    reaches=st.lists(far_exponents, min_size=1, max_size=4),
+)
+def test_a_polygons_numbers_do_not_depend_on_far_off_vertices_added_beyond_the_map(seed, reaches):
+    """A random convex polygon over the map, some of its corners off the map each moved up
+    to 1e15 away along one of their edges' lines (the edge keeps its line and its part of
+    the map, and the polygon gains a triangle off the map, beside the next edge): the
+    polygon's numbers (checked against shapely)."""
+    triangles = jittered_mesh(n=12)
+    rng = np.random.default_rng(seed)
+    near = shapely.get_coordinates(shapely.MultiPoint(rng.uniform(-0.5, 1.5, (8, 2))).convex_hull)
+    near = near[:-1]
+    square = shapely.box(0.0, 0.0, 1.0, 1.0)
+    ring, moved = near.copy(), 0
+    for k, corner in enumerate(near):
+        # Along the edge from the corner before (or after) it; the triangle gained lies
+        # between the new corner and the corner after (or before) it.
+        along, other = (near[k - 1], near[(k + 1) % len(near)])[:: rng.choice([1, -1])]
+        out = (corner - along) / np.linalg.norm(corner - along)
+        strip = shapely.Polygon([corner, other, other + 100.0 * out, corner + 100.0 * out])
+        if moved < len(reaches) and not strip.intersects(square):
+            ring[k] = corner + 10.0 ** reaches[moved] * out
+            moved += 1
+    assume(moved > 0 and shapely.Polygon(ring).is_valid)
+    assert_same_cover(
+        triangles, cover_zone(triangles, [ring]), assert_like_shapely(triangles, [near])
+    )
 
 
 # -- curves and perimeters ---------------------------------------------------------------

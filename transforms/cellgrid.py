@@ -35,12 +35,18 @@ class CellGrid:
     def covering(cls, low, high, size: float) -> CellGrid:
         """The grid over the box ``[low, high]`` ((2,) each) with cells of at least ``size``
         (larger when the box would need more than ``MAX_CELLS_PER_SIDE`` a side) and one
-        empty cell of margin all round."""
+        empty cell of margin all round.
+
+        The last row and column are counted with the floor that files items
+        (:meth:`columns`, :meth:`rows`), so that ``high``'s cell is never the margin, even
+        when the box spans a whole number of cells to rounding (a box of exactly
+        ``MAX_CELLS_PER_SIDE - 3`` cells, the case of every wide one)."""
         low, high = np.asarray(low, dtype=np.float64), np.asarray(high, dtype=np.float64)
         extent = float(np.max(high - low))
         size = max(float(size), extent / (MAX_CELLS_PER_SIDE - 3), extent * 1e-12, 1e-300)
-        spans = np.floor((high - low) / size).astype(np.int64) + 3
-        return cls(float(low[0] - size), float(low[1] - size), size, int(spans[0]), int(spans[1]))
+        origin = low - size
+        spans = np.floor((high - origin) / size).astype(np.int64) + 2
+        return cls(float(origin[0]), float(origin[1]), size, int(spans[0]), int(spans[1]))
 
     @property
     def n_cells(self) -> int:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .cellgrid import Boxes, CellGrid, CellIndex
+from .clipping import clip_ring, map_box
 from .mapping import MapTriangles
 
 #: Cells are this many typical triangles wide.
@@ -274,6 +275,10 @@ class Polyline:
     length: float
 
 
+#: The lift of a line wholly off the map.
+_NO_LINE = Polyline(np.empty((0, 2)), np.empty((0, 3)), np.empty(0, dtype=np.int64), 0.0)
+
+
 def lift_polyline(triangles: MapTriangles, trace: Trace, segments: np.ndarray) -> Polyline:
     """The pieces of ``trace`` on the ``segments`` ((S,) int, consecutive and ascending) of
     its segments, lifted and joined in order along them."""
@@ -292,7 +297,7 @@ def lift_polyline(triangles: MapTriangles, trace: Trace, segments: np.ndarray) -
     piece, triangle, start, stop = piece[kept], triangle[kept], start[kept], stop[kept]
     segment = trace.segment[piece]
     if len(segment) == 0:
-        return Polyline(np.empty((0, 2)), np.empty((0, 3)), np.empty(0, dtype=np.int64), 0.0)
+        return _NO_LINE
     order = np.lexsort((start, segment))
     segment, start, stop, triangle = segment[order], start[order], stop[order], triangle[order]
     # Pieces of one segment in one triangle cut by cell borders are one piece.
@@ -339,10 +344,7 @@ def _within_map(triangles: MapTriangles, a: np.ndarray, b: np.ndarray):
     A point far off the map (1e12 away, say) would stretch the cell grid and leave the
     region's stretch of the segment too small a share of it to be told apart. Each cut end
     is reckoned from the segment's end nearer to it, so that it keeps its precision."""
-    xmin, xmax, ymin, ymax = triangles.bounds
-    margin = triangles.typical_size
-    low = np.array([xmin.min(), ymin.min()]) - margin
-    high = np.array([xmax.max(), ymax.max()]) + margin
+    low, high = map_box(triangles)
     d = b - a
     enter_t, enter_u = [np.zeros(len(a))], [np.ones(len(a))]  # not cut: t = 0, u = 1 - t
     leave_t, leave_u = [np.ones(len(a))], [np.zeros(len(a))]
@@ -443,6 +445,8 @@ class ZoneCover:
         1 inside the zone, 0 outside (outer ring counter-clockwise, holes clockwise; a point
         on a ring's edge counts by the half-open rule of eq. 12.2's ``w``)."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        if self.trace is None:  # the zone misses the map
+            return np.zeros(len(points), dtype=np.int64)
         grid = self.trace.grid
         low = np.array([grid.x0, grid.y0])
         high = low + grid.size * np.array([grid.n_columns, grid.n_rows])
@@ -479,10 +483,18 @@ def cover_zone(triangles: MapTriangles, rings) -> ZoneCover:
     Returns
     -------
     ZoneCover
+
+    The rings are first clipped to the map's box (:func:`.clipping.clip_ring`, grown by
+    :func:`map_box`): the numbers do not depend on how far off the map a vertex lies.
     """
-    a, b, ring = ring_edges(rings)
-    map_area = float(sum(abs(ring_area(np.asarray(r, dtype=np.float64))) for r in rings[:1]))
-    map_area -= float(sum(abs(ring_area(np.asarray(r, dtype=np.float64))) for r in rings[1:]))
+    rings = [np.asarray(r, dtype=np.float64) for r in rings]
+    map_area = abs(ring_area(rings[0])) - float(sum(abs(ring_area(r)) for r in rings[1:]))
+    clipped = [clip_ring(r, *map_box(triangles)) for r in rings]
+    kept = [k for k, r in enumerate(clipped) if len(r)]
+    if not len(clipped[0]):
+        missed = np.empty(0, dtype=np.int64)
+        return ZoneCover(missed, missed, np.empty(0), map_area, 0.0, (_NO_LINE,) * len(rings))
+    a, b, ring = ring_edges([clipped[k] for k in kept])
     trace = Trace.of(triangles, a, b)
     winding = _centre_windings(trace)
     # Far from the outline, a triangle is wholly in or out: its box's first cell says which.
@@ -496,7 +508,8 @@ def cover_zone(triangles: MapTriangles, rings) -> ZoneCover:
     partial, share = near[cut], share[cut]
     covered = ZoneCover(inside, partial, share, 0.0, 0.0, ()).total(triangles.front_map_area)
     edges = np.arange(len(ring))
-    outline = tuple(lift_polyline(triangles, trace, edges[ring == k]) for k in range(len(rings)))
+    lifted = {k: lift_polyline(triangles, trace, edges[ring == n]) for n, k in enumerate(kept)}
+    outline = tuple(lifted.get(k, _NO_LINE) for k in range(len(rings)))
     return ZoneCover(inside, partial, share, map_area, covered, outline, trace, winding)
 
 

@@ -17,8 +17,9 @@ from typing import Annotated
 import numpy as np
 import shapely
 from pydantic import Field, model_validator
+from scipy import sparse
 
-from transforms import Layout
+from transforms import Layout, MapTriangles, ZoneCover
 
 from ..errors import InvalidInput
 from .context import Context
@@ -192,27 +193,120 @@ def _where(reason: str) -> str:
     return f" near ({float(found['x']):.6g}, {float(found['y']):.6g})" if found else ""
 
 
-def overlaps(outlines: list[Outline]) -> list[tuple[int, int, list[tuple[np.ndarray, ...]]]]:
-    """The pairs of zones whose areas overlap, with their common part as zones of their own
-    (rings as :class:`Outline` holds them): ``(i, j, parts)`` for ``i < j``."""
+@dataclass(frozen=True)
+class ZonePair:
+    """Two zones (positions ``i < j``) whose areas overlap, and their common part: ``within``,
+    the one of them that lies wholly in the other (the common part is that zone itself), or
+    else ``parts``, the common part as zones of their own (rings as :class:`Outline` holds
+    them)."""
+
+    i: int
+    j: int
+    within: int | None
+    parts: tuple[tuple[np.ndarray, ...], ...] = ()
+    common: shapely.Geometry | None = None
+
+
+def overlaps(outlines: list[Outline]) -> list[ZonePair]:
+    """The pairs of zones whose areas overlap, in order of ``(i, j)``.
+
+    Only the pairs whose boxes meet (found by GEOS's STRtree, in ``O(n log n + pairs)``) are
+    tested exactly, all at once in GEOS: a pair where one zone covers the other takes that
+    zone as its common part, with no intersection computed (so nested zones cost one
+    predicate a pair); the others are intersected."""
     if len(outlines) < 2:
         return []
-    polygons = [outline.polygon for outline in outlines]
-    tree = shapely.STRtree(polygons)
+    polygons = np.array([outline.polygon for outline in outlines], dtype=object)
+    left, right = shapely.STRtree(polygons).query(polygons)
+    pairs = left < right
+    order = np.lexsort((right[pairs], left[pairs]))
+    left, right = left[pairs][order], right[pairs][order]
+    first, second = polygons[left], polygons[right]
+    within = np.where(
+        shapely.covers(first, second), right, np.where(shapely.covers(second, first), left, -1)
+    )
+    crossed = np.flatnonzero(within < 0)
+    commons = shapely.intersection(first[crossed], second[crossed])
+    common = dict(zip(crossed.tolist(), commons, strict=True))
     found = []
-    left, right = tree.query(polygons, predicate="intersects")
-    for i, j in zip(left.tolist(), right.tolist(), strict=True):
-        if i >= j:
-            continue
-        common = shapely.intersection(polygons[i], polygons[j])
-        parts = [
-            (_open(part.exterior), *(_open(hole) for hole in part.interiors))
-            for part in shapely.get_parts(common)
-            if isinstance(part, shapely.Polygon) and part.area > 0
-        ]
-        if parts:
-            found.append((i, j, parts))
-    return sorted(found, key=lambda item: item[:2])
+    for k, (i, j) in enumerate(zip(left.tolist(), right.tolist(), strict=True)):
+        if within[k] >= 0:
+            found.append(ZonePair(i, j, int(within[k])))
+        elif parts := _parts(common[k]):
+            found.append(ZonePair(i, j, None, parts, common[k]))
+    return found
+
+
+def shared_areas(triangles: MapTriangles, covers: list[ZoneCover], pairs: list[ZonePair]):
+    """(p,) float: the surface area each pair of zones shares (docs/math.md, section 12).
+
+    A zone inside the other shares its own area. Two that partly overlap share, on each
+    triangle, the other's share where one holds it wholly; only on the triangles both
+    outlines cut is their common part clipped to the triangle (GEOS, all such triangles of
+    all pairs in one call). So the cost is in proportion to the zones' triangles, with no
+    zone measured again a pair."""
+    area = triangles.surface_area
+    shared = np.array(
+        [covers[p.within].total(area) if p.within is not None else 0.0 for p in pairs]
+    )
+    crossed = [k for k, pair in enumerate(pairs) if pair.within is None]
+    if not crossed:
+        return shared
+    whole, cut = _cover_matrices(covers, len(triangles))
+    first = np.array([pairs[k].i for k in crossed])
+    second = np.array([pairs[k].j for k in crossed])
+    held = sparse.csr_matrix(whole.multiply(area))
+    shared[crossed] = _row_dots(held[first], whole[second] + cut[second])
+    shared[crossed] += _row_dots(whole[first] + cut[first], held[second])
+    shared[crossed] -= _row_dots(held[first], whole[second])
+    both = cut[first].multiply(cut[second] > 0).tocoo()
+    if both.nnz:
+        corners = triangles.corners(both.col)
+        inside = shapely.area(
+            shapely.intersection(
+                shapely.polygons(corners),
+                np.array([pairs[crossed[r]].common for r in both.row], dtype=object),
+            )
+        )
+        ratio = inside / np.abs(triangles.signed_map_area[both.col])
+        shared[crossed] += np.bincount(both.row, ratio * area[both.col], len(crossed))
+    return shared
+
+
+def _cover_matrices(covers: list[ZoneCover], count: int):
+    """Sparse (z, m) matrices of the zones' triangles: 1 where wholly inside, and the share
+    where cut."""
+    rows = [np.full(len(c.inside), k) for k, c in enumerate(covers)]
+    whole = sparse.csr_matrix(
+        (
+            np.ones(sum(map(len, rows))),
+            (np.concatenate(rows), np.concatenate([c.inside for c in covers])),
+        ),
+        shape=(len(covers), count),
+    )
+    rows = [np.full(len(c.partial), k) for k, c in enumerate(covers)]
+    cut = sparse.csr_matrix(
+        (
+            np.concatenate([c.share for c in covers]),
+            (np.concatenate(rows), np.concatenate([c.partial for c in covers])),
+        ),
+        shape=(len(covers), count),
+    )
+    return whole, cut
+
+
+def _row_dots(a, b) -> np.ndarray:
+    """(p,) float: the dot products of the rows of two sparse (p, m) matrices."""
+    return np.asarray(a.multiply(b).sum(axis=1)).ravel()
+
+
+def _parts(common) -> tuple[tuple[np.ndarray, ...], ...]:
+    """The polygons of positive area of a GEOS intersection, as rings."""
+    return tuple(
+        (_open(part.exterior), *(_open(hole) for hole in part.interiors))
+        for part in shapely.get_parts(common)
+        if isinstance(part, shapely.Polygon) and part.area > 0
+    )
 
 
 def _open(ring) -> np.ndarray:

@@ -26,6 +26,7 @@ from .drawn import (
     checked_curve,
     checked_zone,
     overlaps,
+    shared_areas,
     warn_outside,
 )
 from .fields import PictureParams, choice, output_choice
@@ -136,10 +137,9 @@ def measure(given: MeshInput[MeasureParams], ctx: Context) -> Measured:
     region = flatten(given, ctx)
     triangles = map_triangles(region, ctx)
     covers = [cover_zone(triangles, outline.rings) for outline in outlines]
-    shared = tuple(
-        (i, j, sum(cover_zone(triangles, rings).total(triangles.surface_area) for rings in parts))
-        for i, j, parts in overlaps(outlines)
-    )
+    pairs = overlaps(outlines)
+    areas = shared_areas(triangles, covers, pairs).tolist()
+    shared = tuple((pair.i, pair.j, area) for pair, area in zip(pairs, areas, strict=True))
     lifted = tuple(
         (curve.name, lift_curve(triangles, points))
         for curve, points in zip(params.curves, curves, strict=True)
@@ -297,15 +297,14 @@ class MeasureResponse(WarnedAnswer):
             units=None if scale is None else Units.build(mm_per_unit=scale),
             zones=[ZoneMeasure.of(measured, k) for k in range(len(measured.zones))],
             curves=[CurveMeasure.of(measured, k) for k in range(len(measured.curves))],
-            overlaps=[
-                Overlap.build(
-                    zones=[names[i], names[j]],
-                    indices=[i, j],
-                    area=area,
-                    area_cm2=in_cm2(area, scale),
-                )
-                for i, j, area in measured.overlaps
-            ],
+            # A row each, not a model each: nested zones overlap in pairs by the ten thousand.
+            overlaps=Overlap.rows(
+                [True] * len(measured.overlaps),
+                zones=[[names[i], names[j]] for i, j, _ in measured.overlaps],
+                indices=[[i, j] for i, j, _ in measured.overlaps],
+                area=[area for _, _, area in measured.overlaps],
+                area_cm2=[in_cm2(area, scale) for _, _, area in measured.overlaps],
+            ),
         )
 
 

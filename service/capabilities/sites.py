@@ -290,12 +290,12 @@ def _warn_outside(ctx: Context, region: MeshRegion, outlines: list[Outline], fou
 
 def _apart(outlines: list[Outline]) -> list[Outline]:
     """The zones, refused when two overlap (a site's density would be ambiguous there)."""
-    for i, j, _ in overlaps(outlines):
+    for pair in overlaps(outlines):
         raise InvalidInput(
-            f"zones.{j}",
+            f"zones.{pair.j}",
             "a site's density would be ambiguous there",
-            name=outlines[j].name,
-            about=f" overlaps params.zones.{i} ({outlines[i].name!r})",
+            name=outlines[pair.j].name,
+            about=f" overlaps params.zones.{pair.i} ({outlines[pair.i].name!r})",
         )
     return outlines
 

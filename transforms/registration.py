@@ -185,6 +185,15 @@ def clamped(grow: float, bounds: Bounds) -> float:
     return grow if bounds is None else float(np.clip(grow, *bounds))
 
 
+def held(grow: float, bounds: Bounds) -> bool:
+    """Whether the scale ``grow`` lies at either bound of ``bounds`` (to rounding): where
+    :func:`icp` held a scale that would have gone beyond."""
+    if bounds is None:
+        return False
+    low, high = bounds
+    return bool(grow <= low * (1 + 1e-9) or grow >= high * (1 - 1e-9))
+
+
 def _extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return points.min(axis=0), points.max(axis=0)
 
@@ -302,10 +311,11 @@ def register(
     """The follow-up (``source``) registered to the baseline (``target``, the whole scan):
     from the landmarks' ``pairs`` ((k, 3) each, follow-up then baseline) when given; else
     each of :func:`moment_starts` is refined on every ``COARSE_EVERY``-th sample, the two
-    best distinct ones (by the share of samples on the target) on all of them, and the better
-    kept, unless the other fits about as well (``AMBIGUOUS``) and either fits (``PLAUSIBLE``).
-    The residuals are against the whole baseline (:func:`register_region` goes on to the
-    region). With ``scale``, every scale is held within ``bounds`` (:func:`icp`).
+    best distinct ones (by the share of samples on the target, a scale :func:`held` at a
+    bound ranked last) on all of them, and the better kept, unless the other fits about as
+    well (``AMBIGUOUS``) and either fits (``PLAUSIBLE``), neither held. The residuals are
+    against the whole baseline (:func:`register_region` goes on to the region). With
+    ``scale``, every scale is held within ``bounds`` (:func:`icp`).
 
     Raises
     ------
@@ -327,22 +337,35 @@ def _best_of_moments(source: Surface, target: Surface, scale: bool, bounds: Boun
         distance, _ = coarse_target.tree.query(apply(start, coarse_source.points))
         return float(np.mean(distance <= coarse_tolerance))
 
-    ranked = np.argsort([landed(start) for start in starts], kind="stable")[::-1]
     trials = [
         icp(coarse_source, coarse_target, starts[i], scale, COARSE_ROUNDS, bounds)
-        for i in ranked[:REFINED_STARTS]
+        for i in _chosen(starts, [landed(start) for start in starts])
     ]
     # Ranked on the whole baseline: the coarse samples lie too far apart to tell a head
     # turned half round from the right one.
     tolerance = on_surface_distance(target)
-    trials.sort(key=lambda trial: -_share(measured(coarse_source, target, trial.matrix), tolerance))
+
+    # A scale held at a bound ranks last: shrunk towards a point, any follow-up lies on it.
+    def rank(trial: Registration) -> tuple[bool, float]:
+        share = _share(measured(coarse_source, target, trial.matrix), tolerance)
+        return held(trial.scale, bounds), -share
+
+    trials.sort(key=rank)
     best = [trials[0]]
-    best += [t for t in trials[1:] if _angle(t.matrix, trials[0].matrix) > DISTINCT_DEG][:1]
+    best += [
+        t
+        for t in trials[1:]
+        if _angle(t.matrix, trials[0].matrix) > DISTINCT_DEG and not held(t.scale, bounds)
+    ][:1]
     refined = sorted(
         (icp(source, target, trial.matrix, scale, bounds=bounds) for trial in best),
-        key=lambda found: -_share(found, tolerance),
+        key=lambda found: (held(found.scale, bounds), -_share(found, tolerance)),
     )
-    if len(refined) > 1 and _angle(refined[0].matrix, refined[1].matrix) > DISTINCT_DEG:
+    if (
+        len(refined) > 1
+        and not any(held(found.scale, bounds) for found in refined)
+        and (_angle(refined[0].matrix, refined[1].matrix) > DISTINCT_DEG)
+    ):
         shares = (_share(refined[0], tolerance), _share(refined[1], tolerance))
         if shares[0] >= PLAUSIBLE and shares[0] - shares[1] < AMBIGUOUS:
             raise RegistrationAmbiguous(_angle(refined[0].matrix, refined[1].matrix), shares)
@@ -459,6 +482,23 @@ def register_region(
         empty = np.empty(0)
         return OnRegion(Registration(found.matrix, found.scale, empty, empty), over, None)
     return OnRegion(measured(source, scans.target, found.matrix), over, source)
+
+
+def _chosen(starts: list[np.ndarray], landed: list[float]) -> list[int]:
+    """Which ``starts`` (4x4 each) to refine: those that put the most samples on the target
+    (``landed``), ``REFINED_STARTS`` in all, an equal number of each scale: a follow-up
+    started far smaller than the target lies on it whole wherever it starts (a tenth of the
+    size, any start near its surface), and would take every place."""
+    ranked = np.argsort(landed, kind="stable")[::-1]
+    grows = [round(float(np.cbrt(np.linalg.det(start[:3, :3]))), 9) for start in starts]
+    each = REFINED_STARTS // len(set(grows))
+    taken: dict[float, int] = {}
+    chosen = []
+    for i in ranked:
+        if taken.get(grows[i], 0) < each:
+            chosen.append(int(i))
+            taken[grows[i]] = taken.get(grows[i], 0) + 1
+    return chosen
 
 
 def on_surface_distance(surface: Surface) -> float:

@@ -20,6 +20,7 @@ from transforms.registration import (
     RegionScans,
     RegistrationAmbiguous,
     Surface,
+    held,
     register,
     register_region,
 )
@@ -358,17 +359,15 @@ def _scale_bounds(sizes: LogSizes) -> tuple[float, float]:
 def _check_scale(fitted: float, bounds: tuple[float, float] | None) -> None:
     """Refuse a similarity whose fitted scale ICP held at a bound of ``bounds``: it would
     have gone beyond (a follow-up shrinking onto a point of the baseline lies on it whole)."""
-    if bounds is None:
+    if not held(fitted, bounds):
         return
     low, high = bounds
     if fitted <= low * (1 + 1e-9):
         what = (
             f"its floor {low:.3g} (the follow-up 1/{OTHER_UNITS:g} of the baseline region's size)"
         )
-    elif fitted >= high * (1 - 1e-9):
-        what = f"its ceiling {high:.3g} (the follow-up {OTHER_UNITS:g} times the baseline's size)"
     else:
-        return
+        what = f"its ceiling {high:.3g} (the follow-up {OTHER_UNITS:g} times the baseline's size)"
     raise InvalidInput(
         "follow_up",
         f"could not register it: the fitted scale {fitted:.3g} is held at {what}, the bound "
@@ -526,7 +525,11 @@ ROWS = (
         "follow-up's faces over the baseline's region aligned on that region (docs/math.md, "
         "section 15). In rigid mode a follow-up more than "
         f"{OTHER_UNITS:g} times the whole baseline's size, or less than "
-        f"1/{OTHER_UNITS:g} of its region's, is refused at once as in other units. Answers "
+        f"1/{OTHER_UNITS:g} of its region's, is refused at once as in other units; in either "
+        f"mode, one beyond {SCALE_RANGE:g} times or 1/{SCALE_RANGE:g}. In similarity mode the "
+        f"scale is held where the scaled follow-up is {OTHER_UNITS:g} times the baseline's "
+        f"size at most and 1/{OTHER_UNITS:g} of its region's at least, and a fit held at "
+        "either bound is refused with the scale and the bound. Answers "
         "the 4x4 transform onto the baseline, the RMS and 95th percentile of the residuals "
         "of the follow-up's region against the baseline's over the overlap (mesh units, and "
         "mm with `units`), the overlap, and the baseline's frame expressed for the follow-up, "

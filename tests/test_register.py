@@ -21,7 +21,7 @@ from service.cli import main
 from service.samples import SAMPLES
 from transforms import registration
 
-from .conftest import load_sample, slow
+from .conftest import grid_mesh, load_sample, slow
 from .test_api import flatten, obj_of, problem
 from .test_landmarks import on_head
 from .test_measure import NAME
@@ -550,3 +550,20 @@ async def test_a_follow_up_in_smaller_units_registers_in_similarity_mode(client,
     found = np.asarray(answer["transform"])
     gap = np.linalg.norm(moved_by(found, follow) - crop, axis=1).max()
     assert gap <= 1e-4, gap  # mm, on a head 200 mm across
+
+
+@slow
+async def test_a_follow_up_shrinking_onto_the_baseline_is_refused_at_the_scales_floor(client):
+    """A flat square 40 mm across over the crown: the smaller it is, the closer it lies to
+    the dome, so ICP's scale shrank it towards a point, which lies on the baseline whole
+    (refused before as two alignments 101 degrees apart, "73% and 73%" on it). The scale is
+    held where it would spread a quarter as far as the scalp, and refused there by name."""
+    square, faces = grid_mesh(np.linspace(-20, 20, 41), np.linspace(-20, 20, 41), 95.0)
+    response = await register(client, {"mode": "similarity"}, obj_of(square, faces))
+    body = problem(response, 422, "follow_up")
+    told = re.search(r"the fitted scale ([\d.]+) is held at its floor ([\d.]+)", body["detail"])
+    vertices, base_faces = load_sample(NAME)
+    region = (await flatten(client, NAME, SCALP)).json()["faces"]["ids"]
+    floor = spread(vertices, base_faces[region]) / (4 * spread(square, faces))
+    assert told and float(told.group(2)) == pytest.approx(floor, rel=0.02), (body, floor)
+    assert float(told.group(1)) == pytest.approx(float(told.group(2)), rel=1e-2)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import io
 import json
 import re
+import time
 from functools import cache
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from service.cli import main
 from service.samples import SAMPLES
 from transforms import registration
 
-from .conftest import load_sample, slow
+from .conftest import grid_mesh, load_sample, slow
 from .test_api import flatten, obj_of, problem
 from .test_landmarks import on_head
 from .test_measure import NAME
@@ -488,3 +489,81 @@ async def test_a_follow_up_far_smaller_than_the_region_is_told_so_in_rigid_mode(
     ratio = spread(moved, kept) / spread(vertices, faces[region])
     assert told and float(told.group(1)) == pytest.approx(ratio, rel=0.02), (body, ratio)
     assert "send mode similarity" in body["detail"]
+
+
+# -- the scale's floor and ceiling (issue 32) ----------------------------------------------
+
+#: The scalp's cone, and a narrow one on the crown.
+CONE_15 = {"cone": {"axis": [0, 0, 1], "half_angle_deg": 15}}
+
+
+@pytest.mark.parametrize(
+    ("mode", "scale"),
+    [("similarity", s) for s in (1e-90, 1e-20, 1e20, 1e40, 1e90)]
+    + [("rigid", 1e-90), ("rigid", 1e90)],
+)
+async def test_a_follow_up_beyond_a_hundred_times_the_size_is_refused_at_once(client, mode, scale):
+    """fsaverage scaled: refused before after 53 s (1e40), or failing with "SVD did not
+    converge" (1e60, 1e90) and "Non-positive determinant" (1e-90), its areas and squares
+    overflowing or underflowing; now its size is taken in its own unit, and refused before
+    any alignment beyond 1/100 of the region's to 100 times the whole baseline's."""
+    vertices, faces = load_sample(NAME)
+    start = time.perf_counter()
+    response = await register(client, {"mode": mode}, obj_of(scale * vertices, faces))
+    elapsed = time.perf_counter() - start
+    body = problem(response, 422, "follow_up")
+    told = re.search(r"it is ([\d.e+-]+) times the baseline(?: region)?'s size", body["detail"])
+    assert told and float(told.group(1)) == pytest.approx(scale, rel=0.5), body["detail"]
+    assert "from 1/100 of the baseline region's size to 100 times" in body["detail"]
+    assert elapsed < 5, elapsed
+
+
+@pytest.mark.parametrize(
+    ("scale", "region"),
+    [
+        (0.1, "15-degree cone"),
+        pytest.param(0.1, "scalp", marks=slow),
+        pytest.param(0.3, "scalp", marks=slow),
+        pytest.param(0.3, "15-degree cone", marks=slow),
+    ],
+)
+async def test_a_follow_up_in_smaller_units_registers_in_similarity_mode(client, scale, region):
+    """fsaverage at 0.3 and 0.1 times (a follow-up in cm on a baseline in mm, declared mm),
+    turned, moved and cropped: refused before as two alignments 180 degrees apart with
+    "100% and 100%" of the follow-up on the baseline, every start's ICP having shrunk it
+    onto a point of the baseline; ICP's scale has a floor now. The crop's faces over the
+    region are the baseline's own, so the motion comes back to within 1e-4 mm (2e-5
+    measured)."""
+    vertices, faces = load_sample(NAME)
+    height = vertices[faces].mean(axis=1)[:, 2]
+    crop, crop_faces = cropped(vertices, faces, height > np.quantile(height, 0.2))
+    motion = rigid(TURN, SHIFT * scale)
+    motion[:3, :3] *= scale
+    follow = moved_by(motion, crop)
+    params = {"mode": "similarity"}
+    if region != "scalp":
+        params["region"] = CONE_15
+    response = await register(client, params, obj_of(follow, crop_faces))
+    assert response.status_code == 200, response.text
+    answer = response.json()
+    assert answer["scale"] == pytest.approx(1 / scale, rel=1e-3)
+    found = np.asarray(answer["transform"])
+    gap = np.linalg.norm(moved_by(found, follow) - crop, axis=1).max()
+    assert gap <= 1e-4, gap  # mm, on a head 200 mm across
+
+
+@slow
+async def test_a_follow_up_shrinking_onto_the_baseline_is_refused_at_the_scales_floor(client):
+    """A flat square 40 mm across over the crown: the smaller it is, the closer it lies to
+    the dome, so ICP's scale shrank it towards a point, which lies on the baseline whole
+    (refused before as two alignments 101 degrees apart, "73% and 73%" on it). The scale is
+    held where it would spread a quarter as far as the scalp, and refused there by name."""
+    square, faces = grid_mesh(np.linspace(-20, 20, 41), np.linspace(-20, 20, 41), 95.0)
+    response = await register(client, {"mode": "similarity"}, obj_of(square, faces))
+    body = problem(response, 422, "follow_up")
+    told = re.search(r"the fitted scale ([\d.]+) is held at its floor ([\d.]+)", body["detail"])
+    vertices, base_faces = load_sample(NAME)
+    region = (await flatten(client, NAME, SCALP)).json()["faces"]["ids"]
+    floor = spread(vertices, base_faces[region]) / (4 * spread(square, faces))
+    assert told and float(told.group(2)) == pytest.approx(floor, rel=0.02), (body, floor)
+    assert float(told.group(1)) == pytest.approx(float(told.group(2)), rel=1e-2)

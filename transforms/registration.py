@@ -14,6 +14,7 @@ its stages in closed form.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -25,6 +26,9 @@ from trimesh.registration import procrustes
 
 from .arrays import combine, face_cross, triangle_areas, unit_rows
 from .sampling import systematic_picks
+
+#: A scale's bounds (least, most), or None for none.
+Bounds = tuple[float, float] | None
 
 #: Samples drawn on each surface (area-weighted, the same for any pose of it).
 SAMPLES = 20_000
@@ -68,6 +72,22 @@ class Surface:
         weights = np.column_stack([1.0 - root, 0.5 * root, 0.5 * root])
         normals, _ = unit_rows(face_cross(vertices, faces[face]))
         return cls(combine(vertices, faces, face, weights), normals)
+
+    @staticmethod
+    def log_size(vertices: np.ndarray, faces: np.ndarray) -> float:
+        """log2 of :attr:`size` for the surface ``faces`` ((m, 3) int) of ``vertices`` ((n, 3)
+        float), computed on the vertices divided by a power of two near their largest
+        coordinate (an exact scaling), so that no area or square overflows or underflows
+        whatever the scan's unit (section 15); -inf for a surface of no area."""
+        top = float(np.max(np.abs(vertices[faces]))) if len(faces) else 0.0
+        if not 0.0 < top < math.inf:
+            return -math.inf
+        exponent = int(np.frexp(top)[1])
+        scaled = np.ldexp(vertices, -exponent)
+        if not triangle_areas(scaled, faces).sum() > 0:
+            return -math.inf
+        size = Surface.of(scaled, faces).size
+        return math.log2(size) + exponent if size > 0 else -math.inf
 
     @cached_property
     def size(self) -> float:
@@ -118,7 +138,9 @@ def from_pairs(source: np.ndarray, target: np.ndarray, scale: bool) -> np.ndarra
     return matrix
 
 
-def moment_starts(source: Surface, target: Surface, scale: bool = False) -> list[np.ndarray]:
+def moment_starts(
+    source: Surface, target: Surface, scale: bool = False, bounds: Bounds = None
+) -> list[np.ndarray]:
     """4x4 starts that take ``source``'s principal axes onto ``target``'s in each of the 24
     proper ways (the axes' order and signs: a cropped scan's axes may come in another order
     than the whole one's), each with the translation that matches the centroids and, along
@@ -126,7 +148,7 @@ def moment_starts(source: Surface, target: Surface, scale: bool = False) -> list
     ``CROPPED`` of its extent, the two that match its one end or the other: a cropped scan's
     centroid is not the whole one's. With ``scale``, every start comes twice: unscaled, and
     scaled by the ratio of the samples' RMS distances from their centroids (the scale ICP
-    then refines)."""
+    then refines), each scale held within ``bounds`` (:func:`clamped`)."""
     frames = []
     for surface in (source, target):
         centre = surface.points.mean(axis=0)
@@ -136,6 +158,7 @@ def moment_starts(source: Surface, target: Surface, scale: bool = False) -> list
     # With a scale, both the scans' own sizes and their spreads matched: a cropped scan
     # spreads less than the whole, so the second alone would enlarge it past its place.
     grows = (1.0, target.size / source.size) if scale and source.size > 0 else (1.0,)
+    grows = tuple(dict.fromkeys(clamped(grow, bounds) for grow in grows))
     target_low, target_high = _extent(target.points @ a_t.T)
     starts = []
     for grow, order in itertools.product(grows, itertools.permutations(range(3))):
@@ -157,6 +180,20 @@ def moment_starts(source: Surface, target: Surface, scale: bool = False) -> list
     return starts
 
 
+def clamped(grow: float, bounds: Bounds) -> float:
+    """``grow`` held within ``bounds`` (least, most), when given."""
+    return grow if bounds is None else float(np.clip(grow, *bounds))
+
+
+def held(grow: float, bounds: Bounds) -> bool:
+    """Whether the scale ``grow`` lies at either bound of ``bounds`` (to rounding): where
+    :func:`icp` held a scale that would have gone beyond."""
+    if bounds is None:
+        return False
+    low, high = bounds
+    return bool(grow <= low * (1 + 1e-9) or grow >= high * (1 - 1e-9))
+
+
 def _extent(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return points.min(axis=0), points.max(axis=0)
 
@@ -167,12 +204,15 @@ def icp(
     start: np.ndarray,
     scale: bool = False,
     rounds: int = MAX_ROUNDS,
+    bounds: Bounds = None,
 ) -> Registration:
     """Point-to-plane ICP from ``start`` (eq. 15.1), by small_gicp's ``PLANE_ICP``, in stages
     of ``STAGE_ROUNDS`` rounds: each stage leaves out the pairs farther apart than the
     trimming distance of the pose it starts from, so the distance shrinks as the surfaces
     settle; with ``scale``, each stage then takes the scale about the follow-up's centroid
-    that best fits the pairs along the target normals (eq. 15.2). It stops when a stage
+    that best fits the pairs along the target normals (eq. 15.2), held within ``bounds``
+    (least, most: so that it cannot collapse to a point lying on the target, nor blow up;
+    the start's scale is held there too, about the follow-up's centroid). It stops when a stage
     moves the samples by less than ``SETTLED`` of their spread (in radians, and in units of
     the spread)."""
     cloud, cloud_tree = target.cloud
@@ -182,6 +222,7 @@ def icp(
     rigid = start.copy()
     rigid[:3, :3] /= grow
     rigid[:3, 3] += (grow - 1.0) * rigid[:3, :3] @ centre  # start = rigid @ (scale about c)
+    grow = clamped(grow, bounds) if scale else grow
     points = moving = None
     for _ in range(max(rounds // STAGE_ROUNDS, 1)):
         if moving is None or scale:  # the samples as scaled now (rigid: once)
@@ -207,7 +248,8 @@ def icp(
         turn = float(Rotation.from_matrix(step[:3, :3]).magnitude())
         moved = np.linalg.norm(apply(rigid, centre[None, :])[0] - landed) + turn * grow * spread
         if scale:
-            before, grow = grow, _scale_fit(source, target, rigid, centre, grow)
+            before = grow
+            grow = clamped(_scale_fit(source, target, rigid, centre, grow), bounds)
             moved += abs(grow - before) * spread
         if moved < SETTLED * grow * spread:
             break
@@ -264,14 +306,16 @@ def register(
     target: Surface,
     pairs: tuple[np.ndarray, np.ndarray] | None = None,
     scale: bool = False,
+    bounds: Bounds = None,
 ) -> Registration:
     """The follow-up (``source``) registered to the baseline (``target``, the whole scan):
     from the landmarks' ``pairs`` ((k, 3) each, follow-up then baseline) when given; else
     each of :func:`moment_starts` is refined on every ``COARSE_EVERY``-th sample, the two
-    best distinct ones (by the share of samples on the target) on all of them, and the better
-    kept, unless the other fits about as well (``AMBIGUOUS``) and either fits (``PLAUSIBLE``).
-    The residuals are against the whole baseline (:func:`register_region` goes on to the
-    region).
+    best distinct ones (by the share of samples on the target, a scale :func:`held` at a
+    bound ranked last) on all of them, and the better kept, unless the other fits about as
+    well (``AMBIGUOUS``) and either fits (``PLAUSIBLE``), neither held. The residuals are
+    against the whole baseline (:func:`register_region` goes on to the region). With
+    ``scale``, every scale is held within ``bounds`` (:func:`icp`).
 
     Raises
     ------
@@ -280,35 +324,48 @@ def register(
         the baseline within ``AMBIGUOUS`` of each other, the better at least ``PLAUSIBLE``.
     """
     if pairs is not None:
-        return icp(source, target, from_pairs(*pairs, scale=scale), scale)
-    return _best_of_moments(source, target, scale)
+        return icp(source, target, from_pairs(*pairs, scale=scale), scale, bounds=bounds)
+    return _best_of_moments(source, target, scale, bounds)
 
 
-def _best_of_moments(source: Surface, target: Surface, scale: bool) -> Registration:
+def _best_of_moments(source: Surface, target: Surface, scale: bool, bounds: Bounds):
     coarse_source, coarse_target = source.every(COARSE_EVERY), target.every(COARSE_EVERY)
     coarse_tolerance = on_surface_distance(coarse_target)
-    starts = moment_starts(source, target, scale)
+    starts = moment_starts(source, target, scale, bounds)
 
     def landed(start: np.ndarray) -> float:  # the share of samples the start puts on it
         distance, _ = coarse_target.tree.query(apply(start, coarse_source.points))
         return float(np.mean(distance <= coarse_tolerance))
 
-    ranked = np.argsort([landed(start) for start in starts], kind="stable")[::-1]
     trials = [
-        icp(coarse_source, coarse_target, starts[i], scale, rounds=COARSE_ROUNDS)
-        for i in ranked[:REFINED_STARTS]
+        icp(coarse_source, coarse_target, starts[i], scale, COARSE_ROUNDS, bounds)
+        for i in _chosen(starts, [landed(start) for start in starts])
     ]
     # Ranked on the whole baseline: the coarse samples lie too far apart to tell a head
     # turned half round from the right one.
     tolerance = on_surface_distance(target)
-    trials.sort(key=lambda trial: -_share(measured(coarse_source, target, trial.matrix), tolerance))
+
+    # A scale held at a bound ranks last: shrunk towards a point, any follow-up lies on it.
+    def rank(trial: Registration) -> tuple[bool, float]:
+        share = _share(measured(coarse_source, target, trial.matrix), tolerance)
+        return held(trial.scale, bounds), -share
+
+    trials.sort(key=rank)
     best = [trials[0]]
-    best += [t for t in trials[1:] if _angle(t.matrix, trials[0].matrix) > DISTINCT_DEG][:1]
+    best += [
+        t
+        for t in trials[1:]
+        if _angle(t.matrix, trials[0].matrix) > DISTINCT_DEG and not held(t.scale, bounds)
+    ][:1]
     refined = sorted(
-        (icp(source, target, trial.matrix, scale) for trial in best),
-        key=lambda found: -_share(found, tolerance),
+        (icp(source, target, trial.matrix, scale, bounds=bounds) for trial in best),
+        key=lambda found: (held(found.scale, bounds), -_share(found, tolerance)),
     )
-    if len(refined) > 1 and _angle(refined[0].matrix, refined[1].matrix) > DISTINCT_DEG:
+    if (
+        len(refined) > 1
+        and not any(held(found.scale, bounds) for found in refined)
+        and (_angle(refined[0].matrix, refined[1].matrix) > DISTINCT_DEG)
+    ):
         shares = (_share(refined[0], tolerance), _share(refined[1], tolerance))
         if shares[0] >= PLAUSIBLE and shares[0] - shares[1] < AMBIGUOUS:
             raise RegistrationAmbiguous(_angle(refined[0].matrix, refined[1].matrix), shares)
@@ -399,13 +456,15 @@ class OnRegion:
 REGION_ROUNDS = 3
 
 
-def register_region(scans: RegionScans, whole: Registration, scale: bool = False) -> OnRegion:
+def register_region(
+    scans: RegionScans, whole: Registration, scale: bool = False, bounds: Bounds = None
+) -> OnRegion:
     """The follow-up registered on the baseline's region (section 15), from ``whole``, its
     registration on the whole scans (:func:`register`, which a cropped follow-up survives):
     up to ``REGION_ROUNDS`` times, the follow-up's faces over the region chosen
     (:meth:`RegionScans.over`) and their samples aligned by :func:`icp` on the region's,
-    until the choice holds. The residuals are the follow-up's region's, against the
-    baseline's region alone."""
+    until the choice holds (with ``scale``, held within ``bounds``). The residuals are the
+    follow-up's region's, against the baseline's region alone."""
     found = whole
     over = np.zeros(len(scans.follow_faces), dtype=bool)
     source = None
@@ -418,11 +477,28 @@ def register_region(scans: RegionScans, whole: Registration, scale: bool = False
             break
         if source is scans.follow and scans.target is scans.base:  # the start's own pair
             break
-        found = icp(source, scans.target, found.matrix, scale)
+        found = icp(source, scans.target, found.matrix, scale, bounds=bounds)
     if source is None:
         empty = np.empty(0)
         return OnRegion(Registration(found.matrix, found.scale, empty, empty), over, None)
     return OnRegion(measured(source, scans.target, found.matrix), over, source)
+
+
+def _chosen(starts: list[np.ndarray], landed: list[float]) -> list[int]:
+    """Which ``starts`` (4x4 each) to refine: those that put the most samples on the target
+    (``landed``), ``REFINED_STARTS`` in all, an equal number of each scale: a follow-up
+    started far smaller than the target lies on it whole wherever it starts (a tenth of the
+    size, any start near its surface), and would take every place."""
+    ranked = np.argsort(landed, kind="stable")[::-1]
+    grows = [round(float(np.cbrt(np.linalg.det(start[:3, :3]))), 9) for start in starts]
+    each = REFINED_STARTS // len(set(grows))
+    taken: dict[float, int] = {}
+    chosen = []
+    for i in ranked:
+        if taken.get(grows[i], 0) < each:
+            chosen.append(int(i))
+            taken[grows[i]] = taken.get(grows[i], 0) + 1
+    return chosen
 
 
 def on_surface_distance(surface: Surface) -> float:

@@ -6,6 +6,7 @@ expressed for the follow-up, so that both scans get the same map (docs/math.md, 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Annotated, Literal
@@ -19,6 +20,7 @@ from transforms.registration import (
     RegionScans,
     RegistrationAmbiguous,
     Surface,
+    held,
     register,
     register_region,
 )
@@ -190,16 +192,18 @@ def register_scans(given: RegisterInput, ctx: Context) -> Registered:
                         region.selection.faces)  # fmt: skip
     pairs = _landmark_pairs(mesh, follow, params)
     similar = params.mode is RegisterMode.SIMILARITY
-    outside = _out_of_scale(scans.follow, scans, OTHER_UNITS)
-    if not similar and outside is not None:
-        raise _unregistered("a rigid motion keeps sizes", outside, similar, landmarks_help=False)
+    sizes = _log_sizes(scans)
+    _check_sizes(sizes, similar)
+    bounds = _scale_bounds(sizes) if similar else None
     try:
-        whole = register(scans.follow, scans.base, pairs, scale=similar)
+        whole = register(scans.follow, scans.base, pairs, scale=similar, bounds=bounds)
     except RegistrationAmbiguous as error:
         raise _unregistered(str(error), _mismatch(scans, None), similar) from None
+    _check_scale(whole.scale, bounds)
     within = OVERLAP_MM / scale if scale is not None else OVERLAP_SHARE * scans.target.size
     _check_agreement(scans, whole.matrix, within, scale, similar, None)
-    on = register_region(scans, whole, scale=similar)
+    on = register_region(scans, whole, scale=similar, bounds=bounds)
+    _check_scale(on.found.scale, bounds)
     on_base = on.found.residuals <= within
     overlap = float(on_base.mean()) if on_base.size else 0.0
     if overlap < MIN_OVERLAP:
@@ -276,24 +280,107 @@ def _distance(within: float, scale: float | None) -> str:
 #: cropped to the region is as large as the region); the follow-up's region, once found,
 #: against the baseline's region.
 SIZE_MISMATCH, OTHER_UNITS = 2.5, 4.0
+#: In similarity mode, the follow-up may spread at most ``SCALE_RANGE`` times as far as the
+#: whole baseline and at least 1/``SCALE_RANGE`` as far as its region (checked before any
+#: alignment, on sizes taken in each scan's own unit: docs/math.md, section 15); the scale
+#: fitted must leave it within ``OTHER_UNITS`` of them, as rigid mode asks of it as sent:
+#: ICP holds its scale there, and a fit held at either bound is refused (a collapse onto a
+#: point of the baseline, or a blow-up).
+SCALE_RANGE = 100.0
 
 
-def _out_of_scale(follow: Surface, scans: RegionScans, factor: float) -> str | None:
-    """What is wrong with ``follow``'s size, when its samples spread more than ``factor``
+@dataclass(frozen=True)
+class LogSizes:
+    """log2 of the spreads (:attr:`Surface.size`) of the whole follow-up, the whole baseline
+    and the baseline's region, each taken in its scan's own unit (no overflow)."""
+
+    follow: float
+    base: float
+    region: float
+
+
+def _log_sizes(scans: RegionScans) -> LogSizes:
+    region = scans.base_faces[scans.region]
+    return LogSizes(
+        Surface.log_size(scans.follow_vertices, scans.follow_faces),
+        Surface.log_size(scans.base_vertices, scans.base_faces),
+        Surface.log_size(scans.base_vertices, region),
+    )
+
+
+def _times(log2: float) -> str:
+    """``2 ** log2`` in words: a float's ``.3g``, or a power of ten beyond its range."""
+    if abs(log2) < 1000:
+        return f"{2.0**log2:.3g}"
+    return f"about 1e{round(log2 * math.log10(2))}" if math.isfinite(log2) else "0"
+
+
+def _check_sizes(sizes: LogSizes, similar: bool) -> None:
+    """Refuse, before any alignment, a follow-up whose size is out of the mode's range:
+    ``SCALE_RANGE`` in either mode (no similarity would do: its units are told), and in rigid
+    mode ``OTHER_UNITS`` (similarity would)."""
+    beyond = _out_of_scale(sizes, SCALE_RANGE)
+    if not similar and beyond is None:
+        outside = _out_of_scale(sizes, OTHER_UNITS)
+        if outside is not None:
+            why = "a rigid motion keeps sizes"
+            raise _unregistered(why, outside, similar, landmarks_help=False)
+    if beyond is None:
+        return
+    raise InvalidInput(
+        "follow_up",
+        f"could not register it: {beyond} (its spread about its centroid), and similarity "
+        f"mode registers follow-ups from 1/{SCALE_RANGE:g} of the baseline region's size to "
+        f"{SCALE_RANGE:g} times the whole baseline's; send it in units nearer the baseline's",
+    )
+
+
+def _out_of_scale(sizes: LogSizes, factor: float) -> str | None:
+    """What is wrong with the follow-up's size, when its samples spread more than ``factor``
     times as far as the whole baseline's, or less than 1/``factor`` of its region's; else
     None."""
-    if follow.size > factor * scans.base.size > 0:
-        return f"it is {follow.size / scans.base.size:.3g} times the baseline's size"
-    if follow.size * factor < scans.target.size:
-        return f"it is {follow.size / scans.target.size:.3g} times the baseline region's size"
+    if not math.isfinite(sizes.follow):
+        return "it has no area"
+    if sizes.follow - sizes.base > math.log2(factor):
+        return f"it is {_times(sizes.follow - sizes.base)} times the baseline's size"
+    if sizes.region - sizes.follow > math.log2(factor):
+        return f"it is {_times(sizes.follow - sizes.region)} times the baseline region's size"
     return None
+
+
+def _scale_bounds(sizes: LogSizes) -> tuple[float, float]:
+    """The least and the most scale a similarity may fit: the follow-up then at least
+    1/``OTHER_UNITS`` of the baseline region's size, and at most ``OTHER_UNITS`` times the
+    whole baseline's."""
+    room = math.log2(OTHER_UNITS)
+    return 2.0 ** (sizes.region - sizes.follow - room), 2.0 ** (sizes.base - sizes.follow + room)
+
+
+def _check_scale(fitted: float, bounds: tuple[float, float] | None) -> None:
+    """Refuse a similarity whose fitted scale ICP held at a bound of ``bounds``: it would
+    have gone beyond (a follow-up shrinking onto a point of the baseline lies on it whole)."""
+    if not held(fitted, bounds):
+        return
+    low, high = bounds
+    if fitted <= low * (1 + 1e-9):
+        what = (
+            f"its floor {low:.3g} (the follow-up 1/{OTHER_UNITS:g} of the baseline region's size)"
+        )
+    else:
+        what = f"its ceiling {high:.3g} (the follow-up {OTHER_UNITS:g} times the baseline's size)"
+    raise InvalidInput(
+        "follow_up",
+        f"could not register it: the fitted scale {fitted:.3g} is held at {what}, the bound "
+        "ICP keeps it within (beyond it the follow-up would collapse towards a point of the "
+        "baseline, or swell past it); give the landmarks of both scans, or a region both show",
+    )
 
 
 def _mismatch(scans: RegionScans, on: OnRegion | None) -> str | None:
     """The size hint of a refusal after an alignment: the follow-up's region against the
     baseline's once found, else the follow-up's whole (``SIZE_MISMATCH``)."""
     if on is None or on.source is None or not scans.target.size > 0:
-        return _out_of_scale(scans.follow, scans, SIZE_MISMATCH)
+        return _out_of_scale(_log_sizes(scans), SIZE_MISMATCH)
     ratio = on.source.size / scans.target.size
     if 1 / SIZE_MISMATCH <= ratio <= SIZE_MISMATCH:
         return None
@@ -438,7 +525,11 @@ ROWS = (
         "follow-up's faces over the baseline's region aligned on that region (docs/math.md, "
         "section 15). In rigid mode a follow-up more than "
         f"{OTHER_UNITS:g} times the whole baseline's size, or less than "
-        f"1/{OTHER_UNITS:g} of its region's, is refused at once as in other units. Answers "
+        f"1/{OTHER_UNITS:g} of its region's, is refused at once as in other units; in either "
+        f"mode, one beyond {SCALE_RANGE:g} times or 1/{SCALE_RANGE:g}. In similarity mode the "
+        f"scale is held where the scaled follow-up is {OTHER_UNITS:g} times the baseline's "
+        f"size at most and 1/{OTHER_UNITS:g} of its region's at least, and a fit held at "
+        "either bound is refused with the scale and the bound. Answers "
         "the 4x4 transform onto the baseline, the RMS and 95th percentile of the residuals "
         "of the follow-up's region against the baseline's over the overlap (mesh units, and "
         "mm with `units`), the overlap, and the baseline's frame expressed for the follow-up, "

@@ -44,7 +44,7 @@ from .topology import RegionEdges, region_edges
 from .untangle import Untangled, untangle
 from .validation import STRETCHED_ENERGY, RegionValidation, validate
 from .warp import distorted_forward, distorted_inverse, pole_warp
-from .zones import Polyline, ZoneCover, cover_zone, lift_curve
+from .zones import Polyline, ZoneCover, cover_zone, curve_crossings, lift_curve
 
 __all__ = [
     "DEGENERATE_RTOL",
@@ -91,6 +91,7 @@ __all__ = [
     "check_rotation",
     "check_sigma",
     "cover_zone",
+    "curve_crossings",
     "default_choice",
     "distorted_forward",
     "distorted_inverse",

@@ -37,6 +37,15 @@ PICTURE_BYTES_PER_FACE = 400
 #: /v1/locate via the map): 308 at the peak of building them and 66 for a zone over most of a
 #: million-face map, measured with tracemalloc, with room.
 MAP_BYTES_PER_FACE = 450
+#: What a zone's ring point costs wherever zones are covered (/v1/measure, /v1/sites): its
+#: pieces paired with the triangles of their cells, clipped and kept with the cover; about
+#: 8 KB measured (peak RSS, a 50,000-point ring on 1.5k- and 24k-face scalps), with room.
+ZONE_BYTES_PER_POINT = 10_000
+#: What a curve's crossing of a triangle edge (as :func:`transforms.curve_crossings` counts
+#: them) costs in /v1/measure: the trace's pairs at its peak and the lifted point in the
+#: answer; about 1.9 KB a crossing measured (tracemalloc and peak RSS, zig-zags over 1.5k-
+#: and 24k-face scalps), and the count errs high by some 14%.
+CURVE_BYTES_PER_CROSSING = 2_500
 #: What placing a site may take: its candidates and trees while placing, its values and their
 #: JSON after (about 330 bytes of JSON a site).
 SITE_BYTES = 2_000

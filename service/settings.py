@@ -30,7 +30,7 @@ class Settings:
         request (an outline a surgeon draws has hundreds)
     max_curve_crossings : MESHFLAT_MAX_CURVE_CROSSINGS, the triangle edges all the curves of
         a /v1/measure request may cross (counted from their lengths on the map before they
-        are lifted: a point of the answer and some 2 KB of memory each)
+        are lifted: a point of the answer and under 1 KB of memory each)
     max_sites : MESHFLAT_MAX_SITES, sites one /v1/sites request may place
     threads : MESHFLAT_THREADS, threads one request's computation may use
     max_jobs : MESHFLAT_MAX_JOBS, jobs computed at once per process

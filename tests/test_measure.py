@@ -314,26 +314,35 @@ async def test_a_zig_zag_curve_over_the_crossings_limit_is_a_413_naming_the_sett
 
 async def test_a_curve_is_charged_at_least_what_measuring_it_allocates(monkeypatch):
     """Every byte the request allocates (tracemalloc's peak: the body, the mesh, the map, the
-    curve's trace and its answer) was charged to the budget first: a zig-zag of 1,000 points
-    once took some 100 MB beyond its charge (issue 32)."""
+    curve's trace and its answer) was charged to the budget first, and what a zig-zag of
+    1,000 points adds to a short curve's request is within what its crossings add to the
+    charge: it once took some 90 MB, charged nothing (issue 32)."""
     charged = []
     charge = Ticket.charge
     monkeypatch.setattr(Ticket, "charge", lambda self, n: (charged.append(n), charge(self, n)))
+
+    async def peak_and_charge(client, curve) -> tuple[int, int]:
+        charged.clear()
+        tracemalloc.start()
+        try:
+            response = await measure(client, {"curves": [curve]})
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert response.status_code == 200
+        return peak, sum(charged)
+
     app = create_app(Settings())
     async with app.router.lifespan_context(app):
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as client:
-            curve = await zig_zag(client, 1000)
-            charged.clear()
-            tracemalloc.start()
-            try:
-                response = await measure(client, {"curves": [curve]})
-                peak = tracemalloc.get_traced_memory()[1]
-            finally:
-                tracemalloc.stop()
-    assert response.status_code == 200
-    assert len(response.json()["curves"][0]["faces"]) > 40_000  # crossings
-    assert peak <= sum(charged), f"{peak / 2**20:.0f} MiB taken, {sum(charged) / 2**20:.0f} charged"
+            short = await peak_and_charge(client, await zig_zag(client, 2))
+            long = await peak_and_charge(client, await zig_zag(client, 1000))
+    assert long[0] <= long[1], f"{long[0] / 2**20:.0f} MiB taken, {long[1] / 2**20:.0f} charged"
+    added, added_charge = long[0] - short[0], long[1] - short[1]
+    assert added <= added_charge, (
+        f"{added / 2**20:.0f} MiB more, {added_charge / 2**20:.0f} charged"
+    )
 
 
 @pytest.mark.parametrize("output", ["svg", "png"])

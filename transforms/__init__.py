@@ -37,6 +37,7 @@ from .metrics import (
 )
 from .predicates import orient3d_sign
 from .region import FlatRegion, assess_region, flatten_region
+from .segments import curve_crossings
 from .selection import EmptyRegionError
 from .separable import separable_forward, separable_inverse, separable_residual
 from .spherical import cartesian_to_spherical, spherical_to_cartesian
@@ -44,7 +45,7 @@ from .topology import RegionEdges, region_edges
 from .untangle import Untangled, untangle
 from .validation import STRETCHED_ENERGY, RegionValidation, validate
 from .warp import distorted_forward, distorted_inverse, pole_warp
-from .zones import Polyline, ZoneCover, cover_zone, curve_crossings, lift_curve
+from .zones import Polyline, ZoneCover, cover_zone, lift_curve
 
 __all__ = [
     "DEGENERATE_RTOL",

@@ -42,10 +42,10 @@ MAP_BYTES_PER_FACE = 450
 #: 8 KB measured (peak RSS, a 50,000-point ring on 1.5k- and 24k-face scalps), with room.
 ZONE_BYTES_PER_POINT = 10_000
 #: What a curve's crossing of a triangle edge (as :func:`transforms.curve_crossings` counts
-#: them) costs in /v1/measure: the trace's pairs at its peak and the lifted point in the
-#: answer; about 1.9 KB a crossing measured (tracemalloc and peak RSS, zig-zags over 1.5k-
-#: and 24k-face scalps), and the count errs high by some 14%.
-CURVE_BYTES_PER_CROSSING = 2_500
+#: them, some 14% high) costs in /v1/measure: its runs and lifted point, its part of the
+#: answer, and a share of the trace (one block of pieces at a time, :func:`transforms.lift_curve`);
+#: about 560 bytes a crossing measured (tracemalloc, zig-zags over 1.5k- and 24k-face scalps).
+CURVE_BYTES_PER_CROSSING = 800
 #: What placing a site may take: its candidates and trees while placing, its values and their
 #: JSON after (about 330 bytes of JSON a site).
 SITE_BYTES = 2_000

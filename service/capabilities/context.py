@@ -41,10 +41,11 @@ MAP_BYTES_PER_FACE = 450
 #: pieces paired with the triangles of their cells, clipped and kept with the cover; about
 #: 8 KB measured (peak RSS, a 50,000-point ring on 1.5k- and 24k-face scalps), with room.
 ZONE_BYTES_PER_POINT = 10_000
-#: What a curve's crossing of a triangle edge (as :func:`transforms.curve_crossings` counts
-#: them, some 14% high) costs in /v1/measure: its runs and lifted point, its part of the
-#: answer, and a share of the trace (one block of pieces at a time, :func:`transforms.lift_curve`);
-#: about 560 bytes a crossing measured (tracemalloc, zig-zags over 1.5k- and 24k-face scalps).
+#: What a curve's crossing of a triangle edge costs in /v1/measure: its runs and lifted
+#: point, its part of the answer and a share of the trace (a block of pieces at a time, see
+#: :func:`transforms.lift_curve`); about 560 bytes measured (tracemalloc, zig-zags over 1.5k-
+#: and 24k-face scalps), charged for each crossing :func:`transforms.curve_crossings` counts
+#: (1.1 to 2.6 times as many as there are on scalps).
 CURVE_BYTES_PER_CROSSING = 800
 #: What placing a site may take: its candidates and trees while placing, its values and their
 #: JSON after (about 330 bytes of JSON a site).

@@ -27,7 +27,11 @@ class Settings:
     max_vertices, max_faces : MESHFLAT_MAX_VERTICES, MESHFLAT_MAX_FACES, per mesh
     max_points : MESHFLAT_MAX_POINTS, per /v1/points or /v1/locate request
     max_drawn_points : MESHFLAT_MAX_DRAWN_POINTS, the points of all the zones' rings and the
-        curves of a /v1/measure request (an outline a surgeon draws has hundreds)
+        curves of a /v1/measure request, and of the zones of a /v1/sites or /v1/register
+        request (an outline a surgeon draws has hundreds)
+    max_curve_crossings : MESHFLAT_MAX_CURVE_CROSSINGS, the triangle edges all the curves of
+        a /v1/measure request may cross (counted from their lengths on the map before they
+        are lifted: a point of the answer and under 1 KB of memory each)
     max_sites : MESHFLAT_MAX_SITES, sites one /v1/sites request may place
     max_image_pixels : MESHFLAT_MAX_IMAGE_PIXELS, pixels of a PNG part (a mask, a density
         map, an image), from its header before a pixel is decoded
@@ -63,6 +67,7 @@ class Settings:
     max_faces: int = Limits.max_faces
     max_points: int = 5_000_000
     max_drawn_points: int = 100_000
+    max_curve_crossings: int = 250_000
     max_sites: int = 1_000_000
     max_image_pixels: int = MAX_PIXELS
     threads: int = 1

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import tracemalloc
 
 import httpx
 import numpy as np
@@ -15,6 +16,7 @@ import shapely
 from service.app import create_app
 from service.cli import main
 from service.samples import SAMPLES
+from service.server.jobs import Ticket
 from service.settings import Settings
 
 from .test_api import flatten, problem
@@ -376,6 +378,62 @@ async def test_too_many_drawn_points_is_a_413():
             zone = {"name": "many", "outer": ring(np.stack([np.cos(t), np.sin(t)], axis=1))}
             body = problem(await measure(client, {"zones": [zone]}), 413, "params.zones")
             assert "the limit is 10 (MESHFLAT_MAX_DRAWN_POINTS)" in body["detail"]
+
+
+async def zig_zag(client, n: int) -> dict:
+    """A curve of ``n`` points from one side of the scalp's map to the other and back, each
+    pass a little higher: every pass crosses a row of triangles."""
+    answer = (await flatten(client, NAME, PARAMS)).json()
+    x, y = np.asarray(answer["vertices"]["x"]), np.asarray(answer["vertices"]["y"])
+    xs = np.where(np.arange(n) % 2 == 0, x.min(), x.max())
+    return {"name": "zig-zag", "x": xs.tolist(), "y": np.linspace(y.min(), y.max(), n).tolist()}
+
+
+async def test_a_zig_zag_curve_over_the_crossings_limit_is_a_413_naming_the_setting():
+    """A curve's crossings of triangle edges are counted from its length before any is
+    built: a few points zig-zagging over the map cross thousands (issue 32)."""
+    app = create_app(Settings(max_curve_crossings=1000))
+    async with app.router.lifespan_context(app):
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as client:
+            curve = await zig_zag(client, 40)
+            body = problem(await measure(client, {"curves": [curve]}), 413, "params.curves")
+            assert "the limit is 1,000 (MESHFLAT_MAX_CURVE_CROSSINGS)" in body["detail"]
+            hairline = {"name": "hairline", "x": [-2.0, -1.57, -1.1], "y": [1.45, 1.35, 1.45]}
+            assert (await measure(client, {"curves": [hairline]})).status_code == 200
+
+
+async def test_a_curve_is_charged_at_least_what_measuring_it_allocates(monkeypatch):
+    """Every byte the request allocates (tracemalloc's peak: the body, the mesh, the map, the
+    curve's trace and its answer) was charged to the budget first, and what a zig-zag of
+    1,000 points adds to a short curve's request is within what its crossings add to the
+    charge: it once took some 90 MB, charged nothing (issue 32)."""
+    charged = []
+    charge = Ticket.charge
+    monkeypatch.setattr(Ticket, "charge", lambda self, n: (charged.append(n), charge(self, n)))
+
+    async def peak_and_charge(client, curve) -> tuple[int, int]:
+        charged.clear()
+        tracemalloc.start()
+        try:
+            response = await measure(client, {"curves": [curve]})
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert response.status_code == 200
+        return peak, sum(charged)
+
+    app = create_app(Settings())
+    async with app.router.lifespan_context(app):
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as client:
+            short = await peak_and_charge(client, await zig_zag(client, 2))
+            long = await peak_and_charge(client, await zig_zag(client, 1000))
+    assert long[0] <= long[1], f"{long[0] / 2**20:.0f} MiB taken, {long[1] / 2**20:.0f} charged"
+    added, added_charge = long[0] - short[0], long[1] - short[1]
+    assert added <= added_charge, (
+        f"{added / 2**20:.0f} MiB more, {added_charge / 2**20:.0f} charged"
+    )
 
 
 @pytest.mark.parametrize("output", ["svg", "png"])

@@ -8,6 +8,7 @@ import io
 import json
 import math
 import struct
+import tracemalloc
 
 import httpx
 import numpy as np
@@ -19,6 +20,7 @@ from scipy.spatial.transform import Rotation
 from service.app import create_app
 from service.cli import main
 from service.samples import SAMPLES
+from service.server.jobs import Ticket
 from service.settings import Settings
 from transforms import Framing, Layout
 from transforms.arrays import triangle_areas
@@ -584,6 +586,56 @@ async def test_too_many_sites_is_a_413():
         async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as client:
             body = problem(await sites(client, {"density_per_cm2": 30}), 413, "sites")
             assert "the limit is 1,000 (MESHFLAT_MAX_SITES)" in body["detail"]
+
+
+async def test_too_many_zone_points_is_a_413_naming_the_zones():
+    """Each zone point costs some kilobytes to cover: they are bounded as /v1/measure's are
+    (issue 32)."""
+    app = create_app(Settings(max_drawn_points=10))
+    async with app.router.lifespan_context(app):
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as client:
+            t = np.linspace(0, 2 * np.pi, 11, endpoint=False)
+            ring = {"x": (-1.5 + 0.1 * np.cos(t)).tolist(), "y": (1.5 + 0.1 * np.sin(t)).tolist()}
+            zone = {"name": "many", "outer": ring, "density_per_cm2": 1}
+            params = {"zones": [zone], "units": "mm"}
+            body = problem(await sites(client, params), 413, "params.zones")
+            assert "the limit is 10 (MESHFLAT_MAX_DRAWN_POINTS)" in body["detail"]
+
+
+async def test_a_zones_points_are_charged_at_least_what_covering_them_allocates(monkeypatch):
+    """What a ring of 5,000 points adds to a square's request (tracemalloc's peak: its
+    pieces paired with the triangles, the cover kept) is within what it adds to the charge:
+    it once took some 8 KB a point, charged nothing beyond its JSON (issue 32)."""
+    charged = []
+    charge = Ticket.charge
+    monkeypatch.setattr(Ticket, "charge", lambda self, n: (charged.append(n), charge(self, n)))
+
+    async def peak_and_charge(client, n: int) -> tuple[int, int]:
+        t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+        ring = {"x": (-1.5 + 0.2 * np.cos(t)).tolist(), "y": (1.5 + 0.2 * np.sin(t)).tolist()}
+        zone = {"name": "ring", "outer": ring, "density_per_cm2": 1}
+        charged.clear()
+        tracemalloc.start()
+        try:
+            response = await sites(client, {"zones": [zone], "units": "mm"})
+            peak = tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+        assert response.status_code == 200, response.text
+        return peak, sum(charged)
+
+    app = create_app(Settings())
+    async with app.router.lifespan_context(app):
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as client:
+            few = await peak_and_charge(client, 4)
+            many = await peak_and_charge(client, 5000)
+    assert many[0] <= many[1]
+    added, added_charge = many[0] - few[0], many[1] - few[1]
+    assert added <= added_charge, (
+        f"{added / 2**20:.0f} MiB more, {added_charge / 2**20:.0f} charged"
+    )
 
 
 async def test_the_command_line_places_sites_into_a_ply(client, tmp_path):

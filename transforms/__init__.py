@@ -37,6 +37,7 @@ from .metrics import (
 )
 from .predicates import orient3d_sign
 from .region import FlatRegion, assess_region, flatten_region
+from .segments import curve_crossings
 from .selection import EmptyRegionError
 from .separable import separable_forward, separable_inverse, separable_residual
 from .spherical import cartesian_to_spherical, spherical_to_cartesian
@@ -91,6 +92,7 @@ __all__ = [
     "check_rotation",
     "check_sigma",
     "cover_zone",
+    "curve_crossings",
     "default_choice",
     "distorted_forward",
     "distorted_inverse",

@@ -26,11 +26,8 @@ import numpy as np
 from .cellgrid import Boxes, CellGrid, CellIndex
 from .clipping import clip_ring, map_box
 from .mapping import MapTriangles
+from .segments import Cut, blocks, cut_pieces, within_map
 
-#: Cells are this many typical triangles wide.
-CELL_TRIANGLES = 2.0
-#: Outlines are cut into at most this many pieces (longer pieces past it).
-MAX_PIECES = 1 << 20
 #: Points of a triangle tried as the reference ``O`` (barycentric weights), the one furthest
 #: from the outline's edges in the triangle kept.
 REFERENCE_WEIGHTS = np.array(
@@ -119,12 +116,18 @@ class Trace:
     t1: np.ndarray
 
     @classmethod
-    def of(cls, triangles: MapTriangles, a: np.ndarray, b: np.ndarray) -> Trace:
-        """Trace the segments ``a -> b`` ((E, 2) float each) over ``triangles``."""
+    def of(
+        cls, triangles: MapTriangles, a: np.ndarray, b: np.ndarray, cut: Cut | None = None
+    ) -> Trace:
+        """Trace the segments ``a -> b`` ((E, 2) float each) over ``triangles``; with
+        ``cut``, on the grid and into the pieces of a trace of more segments that these are
+        a block of (the same pieces and pairs as that trace's)."""
         points = np.concatenate([a, b])
         low, high = points.min(0), points.max(0)
-        grid = CellGrid.covering(low, high, CELL_TRIANGLES * triangles.typical_size)
-        piece_a, piece_b, segment, s0, s1 = _cut(a, b, grid.size)
+        if cut is None:
+            cut = Cut.of(triangles, a, b)
+        grid = cut.grid
+        piece_a, piece_b, segment, s0, s1 = cut_pieces(a, b, cut.piece)
         index = CellIndex.of(
             grid,
             grid.boxes(
@@ -154,22 +157,6 @@ class Trace:
     def near_triangles(self) -> np.ndarray:
         """(q,) int: the triangles a piece may run through."""
         return self.candidates[self.near]
-
-
-def _cut(a: np.ndarray, b: np.ndarray, size: float):
-    """Segments ``a -> b`` cut into pieces no longer than ``size`` (longer when there would
-    be more than ``MAX_PIECES``): ``(piece_a, piece_b, segment, s0, s1)``."""
-    lengths = np.linalg.norm(b - a, axis=1)
-    size = max(size, float(lengths.sum()) / MAX_PIECES)
-    counts = np.maximum(1, np.ceil(lengths / size)).astype(np.int64)
-    segment = np.repeat(np.arange(len(a)), counts)
-    rank = np.arange(len(segment)) - np.repeat(np.cumsum(counts) - counts, counts)
-    n = counts[segment]
-    s0, s1 = rank / n, (rank + 1) / n
-    d = (b - a)[segment]
-    piece_a = np.where((rank == 0)[:, None], a[segment], a[segment] + s0[:, None] * d)
-    piece_b = np.where((rank + 1 == n)[:, None], b[segment], a[segment] + s1[:, None] * d)
-    return piece_a, piece_b, segment, s0, s1
 
 
 def counter_clockwise(corners: np.ndarray) -> np.ndarray:
@@ -282,6 +269,16 @@ _NO_LINE = Polyline(np.empty((0, 2)), np.empty((0, 3)), np.empty(0, dtype=np.int
 def lift_polyline(triangles: MapTriangles, trace: Trace, segments: np.ndarray) -> Polyline:
     """The pieces of ``trace`` on the ``segments`` ((S,) int, consecutive and ascending) of
     its segments, lifted and joined in order along them."""
+    origin = _segment_starts(trace)
+    direction = _segment_ends(trace) - origin
+    runs = _runs(triangles, trace, segments, direction)
+    return _joined(triangles, origin, direction, *runs)
+
+
+def _runs(triangles: MapTriangles, trace: Trace, segments: np.ndarray, direction: np.ndarray):
+    """The parts of the ``segments`` of ``trace`` inside its triangles, a corner grazed left
+    out: ``(segment, start, stop, triangle)``, (r,) each, ``start`` and ``stop`` along the
+    segment (of map vector ``direction[segment]``) in [0, 1]."""
     s_piece = trace.segment[trace.piece]
     keep = (trace.t1 > trace.t0) & np.isin(s_piece, segments)
     piece, t0, t1 = trace.piece[keep], trace.t0[keep], trace.t1[keep]
@@ -289,13 +286,16 @@ def lift_polyline(triangles: MapTriangles, trace: Trace, segments: np.ndarray) -
     s0, s1 = trace.s0[piece], trace.s1[piece]
     start = np.where(t0 == 0, s0, s0 + t0 * (s1 - s0))
     stop = np.where(t1 == 1, s1, s0 + t1 * (s1 - s0))
-    origin = _segment_starts(trace)
-    direction = _segment_ends(trace) - origin
     # A triangle that the segment only grazes (at a corner) would be sorted out of turn.
     length = np.linalg.norm(direction, axis=1)[trace.segment[piece]]
     kept = (stop - start) * length > GRAZE * triangles.typical_size
     piece, triangle, start, stop = piece[kept], triangle[kept], start[kept], stop[kept]
-    segment = trace.segment[piece]
+    return trace.segment[piece], start, stop, triangle
+
+
+def _joined(triangles: MapTriangles, origin, direction, segment, start, stop, triangle):
+    """The polyline of the runs (as :func:`_runs` gives them) on the segments from
+    ``origin`` along ``direction`` ((S, 2) float each), lifted and joined in order."""
     if len(segment) == 0:
         return _NO_LINE
     order = np.lexsort((start, segment))
@@ -332,43 +332,18 @@ def lift_curve(triangles: MapTriangles, points) -> Polyline:
     Polyline
     """
     points = np.asarray(points, dtype=np.float64)
-    a, b = _within_map(triangles, points[:-1], points[1:])
-    trace = Trace.of(triangles, a, b)
-    return lift_polyline(triangles, trace, np.arange(len(points) - 1))
-
-
-def _within_map(triangles: MapTriangles, a: np.ndarray, b: np.ndarray):
-    """The segments ``a -> b`` ((E, 2) float each) cut to the triangles' box on the map,
-    grown by their typical size; a segment that misses it becomes a point at its corner.
-
-    A point far off the map (1e12 away, say) would stretch the cell grid and leave the
-    region's stretch of the segment too small a share of it to be told apart. Each cut end
-    is reckoned from the segment's end nearer to it, so that it keeps its precision."""
-    low, high = map_box(triangles)
-    d = b - a
-    enter_t, enter_u = [np.zeros(len(a))], [np.ones(len(a))]  # not cut: t = 0, u = 1 - t
-    leave_t, leave_u = [np.ones(len(a))], [np.zeros(len(a))]
-    missed = np.zeros(len(a), dtype=bool)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for k in range(2):
-            t_low, u_low = (low[k] - a[:, k]) / d[:, k], (b[:, k] - low[k]) / d[:, k]
-            t_high, u_high = (high[k] - a[:, k]) / d[:, k], (b[:, k] - high[k]) / d[:, k]
-            up, down = d[:, k] > 0, d[:, k] < 0
-            enter_t.append(np.where(up, t_low, np.where(down, t_high, -np.inf)))
-            enter_u.append(np.where(up, u_low, u_high))
-            leave_t.append(np.where(up, t_high, np.where(down, t_low, np.inf)))
-            leave_u.append(np.where(up, u_high, u_low))
-            missed |= ~up & ~down & ((a[:, k] < low[k]) | (a[:, k] > high[k]))
-    rows = np.arange(len(a))
-    enter = np.argmax(np.column_stack(enter_t), axis=1)
-    leave = np.argmin(np.column_stack(leave_t), axis=1)
-    t0, u0 = np.column_stack(enter_t)[rows, enter], np.column_stack(enter_u)[rows, enter]
-    t1, u1 = np.column_stack(leave_t)[rows, leave], np.column_stack(leave_u)[rows, leave]
-    start = np.where((t0 <= u0)[:, None], a + t0[:, None] * d, b - u0[:, None] * d)
-    stop = np.where((t1 <= u1)[:, None], a + t1[:, None] * d, b - u1[:, None] * d)
-    missed |= t0 > t1
-    start[missed] = stop[missed] = low
-    return start, stop
+    a, b = within_map(triangles, points[:-1], points[1:])
+    # Traced a block of segments at a time: the pairs of pieces and triangles, some 30 a
+    # piece, are held for one block only.
+    cut = Cut.of(triangles, a, b)
+    runs = []
+    for first, last in blocks(cut.pieces(a, b)):
+        block = slice(first, last)
+        trace = Trace.of(triangles, a[block], b[block], cut)
+        segment, *rest = _runs(triangles, trace, np.arange(last - first), b[block] - a[block])
+        runs.append((segment + first, *rest))
+    joined = [np.concatenate(column) for column in zip(*runs, strict=True)]
+    return _joined(triangles, a, b - a, *joined)
 
 
 def _segment_starts(trace: Trace) -> np.ndarray:

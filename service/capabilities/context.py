@@ -37,6 +37,18 @@ PICTURE_BYTES_PER_FACE = 400
 #: /v1/locate via the map): 308 at the peak of building them and 66 for a zone over most of a
 #: million-face map, measured with tracemalloc, with room.
 MAP_BYTES_PER_FACE = 450
+#: What a zone's ring point costs wherever zones are covered (/v1/measure, /v1/sites): its
+#: piece paired with the triangles of its cells (some 26), clipped and kept with the cover,
+#: and the shares' terms of those pairs at their peak; 8.2 to 8.9 KB measured (tracemalloc
+#: and peak RSS, rings of 5,000 to 50,000 points on 1.5k- and 24k-face scalps), with room
+#: for a ring over the map's denser middle, where a cell holds a third more triangles.
+ZONE_BYTES_PER_POINT = 12_000
+#: What a curve's crossing of a triangle edge costs in /v1/measure: its runs and lifted
+#: point, its part of the answer and a share of the trace (a block of pieces at a time, see
+#: :func:`transforms.lift_curve`); about 560 bytes measured (tracemalloc, zig-zags over 1.5k-
+#: and 24k-face scalps), charged for each crossing :func:`transforms.curve_crossings` counts
+#: (1.1 to 2.6 times as many as there are on scalps).
+CURVE_BYTES_PER_CROSSING = 800
 #: What placing a site may take: its candidates and trees while placing, its values and their
 #: JSON after (about 330 bytes of JSON a site).
 SITE_BYTES = 2_000

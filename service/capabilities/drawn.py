@@ -11,6 +11,7 @@ when the numbers look like degrees: the layout is in radians).
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -21,8 +22,8 @@ from scipy import sparse
 
 from transforms import Layout, MapTriangles, ZoneCover
 
-from ..errors import InvalidInput
-from .context import Context
+from ..errors import InvalidInput, check_count
+from .context import ZONE_BYTES_PER_POINT, Context
 from .fields import MapCoordinates, Name, Strict
 from .warnings import WarningCode
 
@@ -78,6 +79,31 @@ def check_names(kind: str, drawn: list) -> None:
                 "each needs its own"
             )
         seen[item.name] = i
+
+
+def zone_points(zones: Sequence[Zone]) -> int:
+    """The points of all the rings of ``zones``."""
+    return sum(len(zone.outer.x) + sum(len(hole.x) for hole in zone.holes) for zone in zones)
+
+
+def check_drawn(
+    ctx: Context, zones: Sequence[Zone], curves: Sequence[Curve] = (), cover: bool = True
+) -> None:
+    """Refuse more points in ``zones`` and ``curves`` than MESHFLAT_MAX_DRAWN_POINTS (named
+    ``zones``, or ``curves`` when the zones alone are within it), and, for zones that will be
+    covered (``cover``), charge their points' cost before a ring is checked.
+
+    Raises
+    ------
+    OverLimit
+        Too many points.
+    """
+    zoned = zone_points(zones)
+    drawn = zoned + sum(len(curve.x) for curve in curves)
+    field = "zones" if zoned > ctx.settings.max_drawn_points or not curves else "curves"
+    check_count(drawn, ctx.settings.max_drawn_points, field, "MESHFLAT_MAX_DRAWN_POINTS")
+    if cover:
+        ctx.charge(ZONE_BYTES_PER_POINT * zoned)
 
 
 #: Where GEOS says a polygon is invalid: "Self-intersection[x y]".

@@ -10,18 +10,26 @@ from typing import Annotated
 import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
-from transforms import MapTriangles, Polyline, ZoneCover, cover_zone, lift_curve
+from transforms import (
+    MapTriangles,
+    Polyline,
+    ZoneCover,
+    cover_zone,
+    curve_crossings,
+    lift_curve,
+)
 from transforms.region import flagged_mask
 
 from ..encoding import Answer
 from ..errors import check_count
 from ..outputs import Output
 from ..outputs.picture import Drawn
-from .context import Context
+from .context import CURVE_BYTES_PER_CROSSING, Context
 from .drawn import (
     Curve,
     Outline,
     Zone,
+    check_drawn,
     check_names,
     checked_curve,
     checked_zone,
@@ -128,14 +136,13 @@ def measure(given: MeshInput[MeasureParams], ctx: Context) -> Measured:
     """The zones and curves of ``params``, drawn on the map of the region it names, measured
     on the surface (:func:`transforms.cover_zone`, :func:`transforms.lift_curve`)."""
     params = given.params
-    drawn = sum(len(z.outer.x) + sum(len(h.x) for h in z.holes) for z in params.zones)
-    drawn += sum(len(curve.x) for curve in params.curves)
-    check_count(drawn, ctx.settings.max_drawn_points, "zones", "MESHFLAT_MAX_DRAWN_POINTS")
+    check_drawn(ctx, params.zones, params.curves)
     outlines = [checked_zone(zone, k) for k, zone in enumerate(params.zones)]
     curves = [checked_curve(curve, k) for k, curve in enumerate(params.curves)]
     scale = mm_per_unit(params.units)
     region = flatten(given, ctx)
     triangles = map_triangles(region, ctx)
+    _charge_crossings(ctx, triangles, curves)
     covers = [cover_zone(triangles, outline.rings) for outline in outlines]
     pairs = overlaps(outlines)
     areas = shared_areas(triangles, covers, pairs).tolist()
@@ -154,6 +161,22 @@ def measure(given: MeshInput[MeasureParams], ctx: Context) -> Measured:
         shared,
         scale,
     )
+
+
+def _charge_crossings(ctx: Context, triangles: MapTriangles, curves: list[np.ndarray]) -> None:
+    """Refuse curves that cross more triangle edges than MESHFLAT_MAX_CURVE_CROSSINGS (as
+    :func:`transforms.curve_crossings` counts them, before any is built), and charge the
+    others' crossings."""
+    crossings = sum(curve_crossings(triangles, points) for points in curves)
+    check_count(
+        crossings,
+        ctx.settings.max_curve_crossings,
+        "curves",
+        "MESHFLAT_MAX_CURVE_CROSSINGS",
+        "the items are the triangle edges the curves cross on the map, counted from their "
+        "lengths over the triangles' size: draw them shorter, with fewer back-and-forths",
+    )
+    ctx.charge(CURVE_BYTES_PER_CROSSING * crossings)
 
 
 def _warn(ctx: Context, params, region: MeshRegion, zones, curves, scale) -> None:

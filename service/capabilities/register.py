@@ -30,7 +30,15 @@ from ..meshio import Mesh
 from ..outputs import Output
 from ..outputs.picture import Drawn
 from .context import Context
-from .drawn import Outline, Zone, beside_map, check_names, checked_zone, warn_outside
+from .drawn import (
+    Outline,
+    Zone,
+    beside_map,
+    check_drawn,
+    check_names,
+    checked_zone,
+    warn_outside,
+)
 from .fields import PictureParams, Strict, choice, output_choice
 from .inputs import MeshPart, PngFile
 from .region.answers import ResolvedParams
@@ -186,6 +194,7 @@ def register_scans(given: RegisterInput, ctx: Context) -> Registered:
     the regions'; refused when too little of the follow-up's region lies on the baseline's
     afterwards."""
     mesh, follow, params = given.baseline, given.follow_up, given.params
+    check_drawn(ctx, params.zones, cover=False)  # only drawn: checked, never covered
     scale = mm_per_unit(params.units)
     region = flatten(MeshInput(mesh, params, given.mask), ctx)
     scans = RegionScans(follow.vertices, follow.faces, mesh.vertices, mesh.faces,

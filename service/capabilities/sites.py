@@ -27,7 +27,15 @@ from ..errors import InvalidInput, check_count
 from ..outputs import Output
 from ..outputs.picture import Drawn
 from .context import SITE_BYTES, Context
-from .drawn import Outline, Zone, check_names, checked_zone, overlaps, warn_outside
+from .drawn import (
+    Outline,
+    Zone,
+    check_drawn,
+    check_names,
+    checked_zone,
+    overlaps,
+    warn_outside,
+)
 from .fields import PictureParams, choice, output_choice
 from .inputs import PngFile, PngPart
 from .region.answers import ResolvedParams
@@ -236,6 +244,7 @@ def place(given: SitesInput, ctx: Context) -> Placed:
             "units",
             "sites per cm² need the mesh's length unit (mm, cm or m) or a known distance",
         )
+    check_drawn(ctx, params.zones)
     outlines = _apart([checked_zone(zone, k) for k, zone in enumerate(params.zones)])
     image = _density_image(params, given.density_map, ctx)
     region = flatten(given, ctx)

@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 from transforms.ownframe import OwnFrame
 
 from .conftest import load_sample, scalp
+from .test_api import flatten, obj_of
 
 
 def dense_points(vertices: np.ndarray, faces: np.ndarray, n: int = 20) -> tuple:
@@ -80,3 +81,33 @@ def test_the_frame_is_immutable():
         frame.axes[0, 0] = 2.0
     with pytest.raises(AttributeError):
         frame.scale = 2.0
+
+
+@pytest.mark.parametrize("factor", [1e90, 1e-90, 2.0**-300, 1e99])
+def test_a_surface_far_from_unit_size_has_the_same_frame_scaled(factor):
+    """Moments hold fourth powers of the coordinates: 1e90 would overflow them, 1e-90 lose
+    them below the normal floats. The frame is the unit scan's, scaled."""
+    vertices, faces = scalp()
+    with np.errstate(all="raise"):
+        far = OwnFrame.of_triangles(vertices * factor, faces)
+    near = OwnFrame.of_triangles(vertices, faces)
+    assert np.allclose(far.origin / factor, near.origin, rtol=1e-12, atol=0)
+    assert far.scale / factor == pytest.approx(near.scale, rel=1e-12)
+    assert np.allclose(far.axes, near.axes, atol=1e-12)
+
+
+@pytest.mark.anyio
+async def test_a_scan_in_units_of_1e90_is_flattened_and_fitted_as_in_millimetres(client):
+    """Found on a scan scaled by 1e90 (its own frame overflowed: a 500)."""
+    vertices, faces = load_sample("fsaverage-head.ply")
+    params = {"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}}
+    answers = []
+    for factor in (1.0, 1e90):
+        response = await flatten(client, "m.obj", params, data=obj_of(vertices * factor, faces),
+                                 endpoint="/v1/fit")  # fmt: skip
+        assert response.status_code == 200, response.text
+        answers.append(response.json())
+    assert answers[1]["params"]["sigma"] == pytest.approx(answers[0]["params"]["sigma"], rel=1e-9)
+    assert answers[1]["metrics"]["isometric"]["p50"] == pytest.approx(
+        answers[0]["metrics"]["isometric"]["p50"], rel=1e-9
+    )

@@ -13,6 +13,8 @@ same frame and a mesh of unequal triangles is not pulled towards its dense parts
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .arrays import triangle_areas
@@ -20,6 +22,10 @@ from .arrays import triangle_areas
 #: Relative size of a third moment below which its sign is taken as undecided (a symmetric
 #: surface): the axis then keeps the sign the eigen-solver gave it.
 SKEW_RTOL = 1e-9
+
+#: Coordinates up to 2 to this power are taken as they are (their moments stay finite and
+#: normal); beyond it, :meth:`OwnFrame.of_triangles` works on them divided by a power of two.
+UNSCALED_EXPONENT = 64
 
 
 class OwnFrame:
@@ -60,8 +66,15 @@ class OwnFrame:
         """The frame of the surface of ``faces`` ((m, 3) int) over ``vertices`` ((n, 3)).
 
         Triangles of no area in all: the vertices' mean, the world axes and their RMS
-        distance from it (a scale of 1 when they coincide).
+        distance from it (a scale of 1 when they coincide). Coordinates far from 1 (beyond
+        2^±64: the fourth powers the moments hold would overflow near 1e77) are first
+        divided by a power of two, exactly, and the frame scaled back.
         """
+        largest = float(np.abs(vertices).max()) if len(vertices) else 0.0
+        exponent = int(np.frexp(largest)[1]) if largest > 0 else 0
+        if abs(exponent) > UNSCALED_EXPONENT:
+            unit = cls.of_triangles(np.ldexp(vertices, -exponent), faces)
+            return cls(np.ldexp(unit.origin, exponent), unit.axes, math.ldexp(unit.scale, exponent))
         areas = triangle_areas(vertices, faces)
         total = areas.sum()
         if not total > 0:

@@ -7,6 +7,10 @@ Runs a real server (``--workers`` processes, API keys on) and, one case after an
   under tracemalloc), and the peak resident memory a worker gained while it handled the
   request (from /proc, sampled every 5 ms) against what the job was charged to the memory
   budget (service.server.jobs); and two /v1/points bodies of that size, one of empty objects;
+* **planning routes**: the requests of :mod:`benchmarks.attack_planning` (a zig-zag curve,
+  a zone of 400,000 points, a palette PNG bomb, 256 nested zones, far corners, a truncated
+  density map, a follow-up at 1e40 or 1e-90, a decoy boundary), each with the statuses it may
+  answer and what its answer must hold;
 * **slow clients**: ``--slow`` connections at once that send their body at 1 KB/s, that
   declare a Content-Length and stop sending, that send nothing, or that send a header line a
   second; meanwhile a probe posts ``/v1/points`` and a small ``/v1/flatten`` in turn, and
@@ -42,6 +46,7 @@ from dataclasses import dataclass, field
 
 import httpx
 
+from benchmarks.attack_planning import PlanningCase, planning_cases
 from benchmarks.docs import publish
 from benchmarks.server import children_of, rss_bytes, serving
 from fixtures.hostile import HOSTILE, HOSTILE_JSON
@@ -70,6 +75,8 @@ class Row:
     probe_p99: float | None = None
     probe_statuses: Counter = field(default_factory=Counter)
     healthy: bool = False
+    expected: frozenset | None = None  # the statuses a planning case may answer
+    held: bool | None = None  # whether its answer held what it must
 
     @property
     def per_byte(self) -> float | None:
@@ -83,8 +90,12 @@ class Row:
             checks["reader at most 8 B/B + 16 MiB"] = (
                 self.reader <= 8 * self.uploaded + READER_CONSTANT
             )
-        if self.peak is not None:
+        if self.peak is not None and self.charged is not None:
             checks["worker's growth within its charge"] = self.peak <= self.charged
+        if self.expected is not None:
+            allowed = "/".join(map(str, sorted(self.expected)))
+            checks[f"answered {allowed}"] = set(self.statuses) <= self.expected
+            checks["its answer right"] = bool(self.held)
         if self.probe_p99 is not None:
             checks["probes: only 200"] = set(self.probe_statuses) == {200}
             checks["probes: p99 under 1 s"] = self.probe_p99 < 1.0
@@ -243,6 +254,22 @@ def measured(client: httpx.Client, server: int, row: Row, send) -> Row:
         row.seconds = time.perf_counter() - started
     row.peak = watch.peak
     row.healthy = healthy(client)
+    return row
+
+
+def planning_case(client: httpx.Client, server: int, case: PlanningCase) -> Row:
+    """A planning route's hostile request (:mod:`benchmarks.attack_planning`): its status
+    among those it may answer, and its answer right."""
+    row = Row(case.name, expected=case.expected)
+    answers = []
+
+    def send() -> httpx.Response:
+        answers.append(case.send(client, HEADERS))
+        row.uploaded = int(answers[-1].request.headers.get("Content-Length", 0))
+        return answers[-1]
+
+    measured(client, server, row, send)
+    row.held = bool(answers) and case.holds(answers[-1])
     return row
 
 
@@ -408,6 +435,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(rows[-1].line(), file=sys.stderr)
             for case, (name, data, params) in honest_scans().items():
                 rows.append(upload_case(client, server, case, name, data, params))
+                print(rows[-1].line(), file=sys.stderr)
+            for case in planning_cases():
+                rows.append(planning_case(client, server, case))
                 print(rows[-1].line(), file=sys.stderr)
             for case in SLOW:
                 rows.append(slow_case(client, served.url, served.port, case, args.slow, args.hold))

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import io
 import math
 import os
@@ -74,14 +75,21 @@ def load_sample(name: str) -> tuple[np.ndarray, np.ndarray]:
     return vertices, faces
 
 
-@pytest.fixture
-async def client():
-    """An httpx client of a started app with the default settings."""
-    app = create_app(Settings())
+@contextlib.asynccontextmanager
+async def started(settings: Settings):
+    """An httpx client of an app started (its lifespan run) with ``settings``."""
+    app = create_app(settings)
     async with app.router.lifespan_context(app):
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as c:
             yield c
+
+
+@pytest.fixture
+async def client():
+    """An httpx client of a started app with the default settings."""
+    async with started(Settings()) as c:
+        yield c
 
 
 @pytest.fixture

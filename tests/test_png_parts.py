@@ -8,16 +8,15 @@ from __future__ import annotations
 import json
 import struct
 import zlib
-from contextlib import asynccontextmanager
 from functools import cache
 
 import httpx
 import numpy as np
 import pytest
 
-from service.app import create_app
 from service.settings import MiB, Settings
 
+from .conftest import started
 from .test_api import problem
 from .test_painted import VERTICES, textured_obj
 from .test_sites import sites_with_map
@@ -109,15 +108,6 @@ async def test_a_palette_png_needs_its_palette_and_indices_within_it(client):
     assert "past its palette's 1 colours" in body["detail"]
 
 
-@asynccontextmanager
-async def client_of(settings: Settings):
-    app = create_app(settings)
-    async with app.router.lifespan_context(app):
-        transport = httpx.ASGITransport(app=app)
-        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as c:
-            yield c
-
-
 async def test_a_png_part_beyond_the_pixel_limit_is_a_422_from_its_header():
     """A 8192 x 8192 palette mask with transparency, a few hundred KB, decoded to 3 GB. It is
     refused from its header before its pixels are charged: the 256 MiB budget, which it
@@ -136,7 +126,7 @@ async def test_a_png_part_beyond_the_pixel_limit_is_a_422_from_its_header():
         ]
     )
     assert len(data) < 1 * MiB
-    async with client_of(Settings(memory_budget=256 * MiB)) as client:
+    async with started(Settings(memory_budget=256 * MiB)) as client:
         body = problem(await send(client, "mask", data), 422, "mask")
     assert "8192 x 8192 pixels (67,108,864)" in body["detail"]
     assert "at most 16,777,216 (MESHFLAT_MAX_IMAGE_PIXELS)" in body["detail"]
@@ -144,7 +134,7 @@ async def test_a_png_part_beyond_the_pixel_limit_is_a_422_from_its_header():
 
 async def test_the_pixel_limit_is_a_setting():
     limited = Settings.from_env({"MESHFLAT_MAX_IMAGE_PIXELS": str(1200 * 800 - 1)})
-    async with client_of(limited) as client:
+    async with started(limited) as client:
         body = problem(await send(client, "density_map", grey(1200, 800, 800)), 422)
         assert body["field"] == "density_map" and "at most 959,999" in body["detail"]
         assert (await send(client, "image", grey(900, 600, 600))).status_code == 200

@@ -11,20 +11,18 @@ import time
 from functools import cache
 from pathlib import Path
 
-import httpx
 import numpy as np
 import pytest
 import trimesh
 from scipy.spatial.transform import Rotation
 
 from fixtures import zoo
-from service.app import create_app
 from service.cli import main
 from service.samples import SAMPLES
 from service.settings import Settings
 from transforms import registration
 
-from .conftest import grid_mesh, load_sample, slow
+from .conftest import grid_mesh, load_sample, slow, started
 from .test_api import flatten, obj_of, problem
 from .test_landmarks import on_head
 from .test_measure import NAME
@@ -199,16 +197,13 @@ async def test_bad_register_requests_name_the_part_or_field(client):
 async def test_too_many_zone_points_is_a_413_naming_the_zones():
     """Zones drawn on the overlay are bounded as /v1/measure's are, before the follow-up is
     registered (issue 32)."""
-    app = create_app(Settings(max_drawn_points=10))
-    async with app.router.lifespan_context(app):
-        transport = httpx.ASGITransport(app=app)
-        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as client:
-            t = np.linspace(0, 2 * np.pi, 11, endpoint=False)
-            ring = {"x": (-1.5 + 0.1 * np.cos(t)).tolist(), "y": (1.5 + 0.1 * np.sin(t)).tolist()}
-            data, _, _, _ = follow_up()
-            response = await register(client, {"zones": [{"name": "many", "outer": ring}]}, data)
-            body = problem(response, 413, "params.zones")
-            assert "the limit is 10 (MESHFLAT_MAX_DRAWN_POINTS)" in body["detail"]
+    async with started(Settings(max_drawn_points=10)) as client:
+        t = np.linspace(0, 2 * np.pi, 11, endpoint=False)
+        ring = {"x": (-1.5 + 0.1 * np.cos(t)).tolist(), "y": (1.5 + 0.1 * np.sin(t)).tolist()}
+        data, _, _, _ = follow_up()
+        response = await register(client, {"zones": [{"name": "many", "outer": ring}]}, data)
+        body = problem(response, 413, "params.zones")
+        assert "the limit is 10 (MESHFLAT_MAX_DRAWN_POINTS)" in body["detail"]
 
 
 @slow

@@ -39,7 +39,7 @@ from transforms.sites import (
 )
 from transforms.zones import cover_zone
 
-from .conftest import load_sample, sphere_mesh
+from .conftest import load_sample, sphere_mesh, started
 from .test_api import flatten, obj_of, problem
 from .test_mapping import jittered_mesh
 from .test_measure import NAME
@@ -591,16 +591,13 @@ async def test_too_many_sites_is_a_413():
 async def test_too_many_zone_points_is_a_413_naming_the_zones():
     """Each zone point costs some kilobytes to cover: they are bounded as /v1/measure's are
     (issue 32)."""
-    app = create_app(Settings(max_drawn_points=10))
-    async with app.router.lifespan_context(app):
-        transport = httpx.ASGITransport(app=app)
-        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as client:
-            t = np.linspace(0, 2 * np.pi, 11, endpoint=False)
-            ring = {"x": (-1.5 + 0.1 * np.cos(t)).tolist(), "y": (1.5 + 0.1 * np.sin(t)).tolist()}
-            zone = {"name": "many", "outer": ring, "density_per_cm2": 1}
-            params = {"zones": [zone], "units": "mm"}
-            body = problem(await sites(client, params), 413, "params.zones")
-            assert "the limit is 10 (MESHFLAT_MAX_DRAWN_POINTS)" in body["detail"]
+    async with started(Settings(max_drawn_points=10)) as client:
+        t = np.linspace(0, 2 * np.pi, 11, endpoint=False)
+        ring = {"x": (-1.5 + 0.1 * np.cos(t)).tolist(), "y": (1.5 + 0.1 * np.sin(t)).tolist()}
+        zone = {"name": "many", "outer": ring, "density_per_cm2": 1}
+        params = {"zones": [zone], "units": "mm"}
+        body = problem(await sites(client, params), 413, "params.zones")
+        assert "the limit is 10 (MESHFLAT_MAX_DRAWN_POINTS)" in body["detail"]
 
 
 async def test_a_zones_points_are_charged_at_least_what_covering_them_allocates(monkeypatch):

@@ -4,13 +4,13 @@ with their normals, face ids and map points (docs/math.md, section 13)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Annotated
 
 import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
-from transforms import Framing, MapTriangles, cover_zone, world_to_angles
+from transforms import MapTriangles, world_to_angles
 from transforms.region import flagged_mask
 from transforms.sites import (
     SPACING_RULE,
@@ -44,6 +44,7 @@ from .region.pictures import glb, map_renderers
 from .region.resolve import MeshInput, MeshRegion, flatten, map_triangles
 from .rows import MeshCapability
 from .scalp import warn_implausible
+from .siteparts import SiteZoneResult, density_map_part, part_quotas, zone_parts
 from .units import KnownDistance, LengthUnit, Units, in_cm2, mm_per_unit, warn_of_size
 from .warnings import WarnedAnswer
 
@@ -170,34 +171,6 @@ class SitesParams(MeshParams, PictureParams):
 
 
 @dataclass(frozen=True)
-class SiteZoneResult:
-    """One part that got sites: a zone, or the whole region (``outline`` None).
-
-    Attributes
-    ----------
-    name : str
-    outline : Outline or None
-    area : float, its surface area, mesh units²
-    open_area : float, the part of it sites may go on (flagged triangles left out unless
-        allowed), mesh units²
-    density_per_cm2 : float, the density asked for
-    quota : int, its sites
-    spacing : float or None, the least distance between its sites and any other, mesh units
-        (None without sites)
-    achieved : float, its sites per cm² of ``open_area``
-    """
-
-    name: str
-    outline: Outline | None
-    area: float
-    open_area: float
-    density_per_cm2: float
-    quota: int
-    spacing: float | None
-    achieved: float
-
-
-@dataclass(frozen=True)
 class Placed:
     """Sites placed on a region (docs/math.md, section 13).
 
@@ -253,9 +226,9 @@ def place(given: SitesInput, ctx: Context) -> Placed:
     flagged = flagged_mask(region.flat.validation, len(triangles), stretched=False)
     open_faces = ~flagged | params.allow_flagged
     if image is not None:
-        found = [_density_map_part(region, triangles, image, open_faces)]
+        found = [density_map_part(region, triangles, image, open_faces)]
     else:
-        found = list(_zone_parts(triangles, params, outlines, open_faces))
+        found = list(zone_parts(triangles, params, outlines, open_faces))
     unit_area = in_cm2(1.0, scale)  # cm² per mesh unit²
     expected = [float(np.dot(part.core.area, part.core.density)) * unit_area for part in found]
     total = params.count if params.count is not None else sum(expected)
@@ -263,7 +236,7 @@ def place(given: SitesInput, ctx: Context) -> Placed:
     size = warn_of_size(ctx, params.units, scale, region)
     check_count(round(total), ctx.settings.max_sites, "sites", "MESHFLAT_MAX_SITES", size or "")
     _warn_outside(ctx, region, outlines, found)
-    quotas = _quotas(expected, params.count)
+    quotas = part_quotas(expected, params.count)
     ctx.charge(SITE_BYTES * sum(quotas))
     asked = None if params.min_spacing_mm is None else params.min_spacing_mm / scale
     parts, results = [], []
@@ -333,64 +306,6 @@ def _placed(triangles: MapTriangles, parts: list[SitePart], params: SitesParams,
         ) from None
 
 
-@dataclass(frozen=True)
-class _Part:
-    """A zone's (or the region's) triangles open to sites, as the core's part before its
-    quota and spacing (known once every part's expected count is), with what the answer says
-    of the zone: its outline, its whole surface area and the one density asked for (None for
-    a density map). ``core.density`` is the density asked for on each triangle, per cm²."""
-
-    core: SitePart
-    outline: Outline | None
-    area: float
-    asked: float | None
-
-    def sites(self, quota: int, spacing: np.ndarray) -> SitePart:
-        """The core's part: ``quota`` sites at ``spacing`` ((j,) float) on these triangles."""
-        return replace(self.core, quota=quota, spacing=spacing)
-
-    def result(self, quota: int, spacing: float | None, unit_area: float) -> SiteZoneResult:
-        weight, density = self.core.area, self.core.density
-        open_area = float(weight[density > 0].sum())
-        mean = self.asked
-        if mean is None:  # a density map: its mean over the area it puts sites on
-            mean = float(np.dot(weight, density) / open_area) if open_area else 0.0
-        open_cm2 = open_area * unit_area
-        achieved = quota / open_cm2 if open_cm2 > 0 else 0.0
-        return SiteZoneResult(
-            self.core.name, self.outline, self.area, open_area, mean, quota, spacing, achieved
-        )
-
-
-def _zone_parts(triangles: MapTriangles, params: SitesParams, outlines, open_faces):
-    """A part for each zone (its own density, or params.density_per_cm2), or the region's."""
-    area = triangles.surface_area
-    if not outlines:
-        faces = np.flatnonzero(open_faces)
-        asked = float(params.density_per_cm2)
-        density = np.full(len(faces), asked)
-        core = SitePart(faces, area[faces], 0, 0.0, density, name="region")
-        yield _Part(core, None, float(area.sum()), asked)
-        return
-    for outline, zone in zip(outlines, params.zones, strict=True):
-        cover = cover_zone(triangles, outline.rings)
-        faces = np.concatenate([cover.inside, cover.partial])
-        weight = np.concatenate([area[cover.inside], area[cover.partial] * cover.share])
-        partial = np.r_[np.zeros(len(cover.inside), bool), np.ones(len(cover.partial), bool)]
-        keep = open_faces[faces]
-        asked = float(zone.density_per_cm2 or params.density_per_cm2)
-        density = np.full(int(keep.sum()), asked)
-
-        def inside(faces, weights, cover=cover):
-            return cover.winding(triangles.on_map(faces, weights)) != 0
-
-        core = SitePart(
-            faces[keep], weight[keep], 0, 0.0, density, partial[keep], inside,
-            area[faces[keep]], outline.name,
-        )  # fmt: skip
-        yield _Part(core, outline, cover.total(area), asked)
-
-
 def _density_image(
     params: SitesParams, density_map: PngFile | None, ctx: Context
 ) -> np.ndarray | None:
@@ -416,38 +331,6 @@ def _density_image(
         )
     low, high = params.density_range
     return low + (high - low) * density_map.read(params, ctx).values
-
-
-def _density_map_part(region: MeshRegion, triangles: MapTriangles, image, open_faces) -> _Part:
-    """The region's open triangles, each at the density of the pixel under its centroid on
-    the map, in the framing of the PNG answer (:class:`transforms.Framing`)."""
-    height, width = image.shape
-    x, y = region.layout
-    framing = Framing.of(x, y, region.flat.layout, width, height)
-    centroids = np.column_stack([triangles.corner_x.mean(axis=0), triangles.corner_y.mean(axis=0)])
-    column, row = np.floor(framing.pixels(centroids)).astype(np.int64).T
-    shown = (column >= 0) & (column < width) & (row >= 0) & (row < height)
-    density = np.zeros(len(centroids))
-    density[shown] = image[row[shown], column[shown]]
-    faces = np.flatnonzero(open_faces)
-    area = triangles.surface_area
-    core = SitePart(faces, area[faces], 0, 0.0, density[faces], name="density map")
-    return _Part(core, None, float(area.sum()), None)
-
-
-def _quotas(expected: list[float], count: int | None) -> list[int]:
-    """Each part's sites: its expected number rounded, or, with ``count``, its share of
-    ``count`` by the largest remainders (the total exact, the ratios kept)."""
-    expected = np.asarray(expected, dtype=np.float64)
-    if count is None:
-        return np.rint(expected).astype(int).tolist()
-    if not expected.sum() > 0:
-        raise InvalidInput("count", "no part of the region is open to sites at a density above 0")
-    share = expected / expected.sum() * count
-    quotas = np.floor(share).astype(int)
-    order = np.argsort(-(share - quotas), kind="stable")
-    quotas[order[: count - quotas.sum()]] += 1
-    return quotas.tolist()
 
 
 class SiteArrays(Answer):

@@ -47,15 +47,18 @@ class Cut:
 
     def pieces(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """(E,) int64: the pieces each segment ``a -> b`` is cut into."""
-        lengths = np.linalg.norm(b - a, axis=1)
-        return np.maximum(1, np.ceil(lengths / self.piece)).astype(np.int64)
+        return _piece_counts(a, b, self.piece)
+
+
+def _piece_counts(a: np.ndarray, b: np.ndarray, size: float) -> np.ndarray:
+    """(E,) int64: how many pieces no longer than ``size`` each segment ``a -> b`` takes."""
+    return np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / size)).astype(np.int64)
 
 
 def cut_pieces(a: np.ndarray, b: np.ndarray, size: float):
     """Segments ``a -> b`` cut into pieces no longer than ``size``: ``(piece_a, piece_b,
     segment, s0, s1)``."""
-    lengths = np.linalg.norm(b - a, axis=1)
-    counts = np.maximum(1, np.ceil(lengths / size)).astype(np.int64)
+    counts = _piece_counts(a, b, size)
     segment = np.repeat(np.arange(len(a)), counts)
     rank = np.arange(len(segment)) - np.repeat(np.cumsum(counts) - counts, counts)
     n = counts[segment]

@@ -464,7 +464,8 @@ def cover_zone(triangles: MapTriangles, rings) -> ZoneCover:
     """
     rings = [np.asarray(r, dtype=np.float64) for r in rings]
     map_area = abs(ring_area(rings[0])) - float(sum(abs(ring_area(r)) for r in rings[1:]))
-    clipped = [clip_ring(r, *map_box(triangles)) for r in rings]
+    box = map_box(triangles)
+    clipped = [clip_ring(r, *box) for r in rings]
     kept = [k for k, r in enumerate(clipped) if len(r)]
     if not len(clipped[0]):
         missed = np.empty(0, dtype=np.int64)

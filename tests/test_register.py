@@ -531,6 +531,35 @@ async def test_a_follow_up_beyond_a_hundred_times_the_size_is_refused_at_once(cl
     assert elapsed < 5, elapsed
 
 
+async def _registered_at(client, factor: float) -> dict:
+    """fsaverage turned and moved as the follow-up of itself, both scans times ``factor``."""
+    vertices, faces = load_sample(NAME)
+    moved = TURN.apply(np.array(vertices)) + SHIFT
+    files = {"baseline": ("b.obj", obj_of(factor * vertices, faces)),
+             "follow_up": ("f.obj", obj_of(factor * moved, faces))}  # fmt: skip
+    response = await client.post("/v1/register", files=files,
+                                 data={"params": json.dumps({"mode": "similarity"})})  # fmt: skip
+    assert response.status_code == 200, response.text
+    return response.json()
+
+
+@pytest.mark.parametrize("factor", [1e-90, 1e-30, 1e30, 1e90])
+async def test_scans_of_any_size_register_as_they_do_in_millimetres(client, factor):
+    """Both scans 1e-90 times fsaverage took 19 s (their squares subnormal, and ICP's
+    tolerances absolute); registered in a unit where the region spreads about 1, any size
+    gives the answer of the scans in mm, its lengths times the factor."""
+    at_one, scaled = await _registered_at(client, 1.0), await _registered_at(client, factor)
+    turn = np.array(scaled["transform"])[:3, :3]
+    np.testing.assert_allclose(turn, np.array(at_one["transform"])[:3, :3], atol=1e-6)
+    np.testing.assert_allclose(turn, TURN.as_matrix().T, atol=1e-6)
+    shift = np.array(scaled["transform"])[:3, 3] / factor
+    np.testing.assert_allclose(shift, np.array(at_one["transform"])[:3, 3], rtol=1e-6, atol=1e-6)
+    assert scaled["scale"] == pytest.approx(1.0, abs=1e-9)
+    assert scaled["overlap"] == at_one["overlap"] == 1.0
+    for length in ("rms", "p95", "overlap_distance"):
+        assert scaled[length] == pytest.approx(at_one[length] * factor, rel=1e-6, abs=1e-9 * factor)
+
+
 @pytest.mark.parametrize(
     ("scale", "region"),
     [

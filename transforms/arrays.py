@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from .checkpoints import checkpoint
 from .errors import TransformInputError, listed_rows
 
 #: Largest coordinate magnitude accepted: squares and triple products stay finite.
@@ -287,7 +288,9 @@ def combine(values: np.ndarray, faces: np.ndarray, triangles, weights) -> np.nda
 
 
 def blocks(n: int, size: int | None = None):
-    """Slices ``[start, stop)`` covering ``range(n)`` in steps of ``size`` (``BLOCK_ROWS``)."""
+    """Slices ``[start, stop)`` covering ``range(n)`` in steps of ``size`` (``BLOCK_ROWS``),
+    each after a :func:`~transforms.checkpoints.checkpoint`."""
     size = size or BLOCK_ROWS
     for start in range(0, n, size):
+        checkpoint()
         yield slice(start, min(start + size, n))

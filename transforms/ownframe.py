@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from .arrays import triangle_areas
+from .checkpoints import checkpoint
 
 #: Relative size of a third moment below which its sign is taken as undecided (a symmetric
 #: surface): the axis then keeps the sign the eigen-solver gave it.
@@ -75,6 +76,7 @@ class OwnFrame:
         if abs(exponent) > UNSCALED_EXPONENT:
             unit = cls.of_triangles(np.ldexp(vertices, -exponent), faces)
             return cls(np.ldexp(unit.origin, exponent), unit.axes, math.ldexp(unit.scale, exponent))
+        checkpoint()
         areas = triangle_areas(vertices, faces)
         total = areas.sum()
         if not total > 0:
@@ -91,10 +93,12 @@ class OwnFrame:
         offsets = vertices - origin
         sums -= 3.0 * origin
         moment = (offsets * weights[:, None]).T @ offsets + (sums * areas[:, None]).T @ sums
+        checkpoint()
         variances, vectors = np.linalg.eigh(moment / (12.0 * total))
         axes = vectors[:, ::-1].T.copy()  # rows, largest variance first
         scale = float(np.sqrt(max(variances.sum(), 0.0)))
         for row in range(2):  # two axes, not a loop over the mesh
+            checkpoint()
             skew = _third_moment(offsets @ axes[row], faces, areas)
             if skew < -SKEW_RTOL * scale**3 * total:
                 axes[row] = -axes[row]

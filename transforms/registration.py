@@ -24,7 +24,8 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 from trimesh.registration import procrustes
 
-from .arrays import combine, face_cross, triangle_areas, unit_rows
+from .arrays import blocks, combine, face_cross, triangle_areas, unit_rows
+from .checkpoints import checkpoint
 from .sampling import systematic_picks
 
 #: A scale's bounds (least, most), or None for none.
@@ -124,6 +125,21 @@ class Registration:
     scale: float
     residuals: np.ndarray
     distances: np.ndarray
+
+    def scaled(self, factor: float) -> Registration:
+        """The same registration of the scans with their lengths multiplied by ``factor``
+        (its matrix's translation, the residuals and distances; rotation and scale stay)."""
+        matrix = self.matrix.copy()
+        matrix[:3, 3] *= factor
+        return Registration(matrix, self.scale, self.residuals * factor, self.distances * factor)
+
+
+def unit_of(log2_size: float) -> float:
+    """The power of two that brings a spread of ``2 ** log2_size`` to between 1/sqrt(2) and
+    sqrt(2) (section 15). Scans registered in it compute no subnormal number (whose arithmetic
+    is a hundred times slower) and meet every tolerance at the scale it was set for, and the
+    scaling is exact."""
+    return math.ldexp(1.0, -round(log2_size))
 
 
 def apply(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -225,6 +241,7 @@ def icp(
     grow = clamped(grow, bounds) if scale else grow
     points = moving = None
     for _ in range(max(rounds // STAGE_ROUNDS, 1)):
+        checkpoint()
         if moving is None or scale:  # the samples as scaled now (rigid: once)
             points = centre + grow * (source.points - centre)
             moving = small_gicp.PointCloud(points)
@@ -384,6 +401,12 @@ class RegionScans:
     base_faces: np.ndarray
     region: np.ndarray
 
+    def scaled(self, factor: float) -> RegionScans:
+        """The same scans with their lengths multiplied by ``factor`` (a power of two:
+        :func:`unit_of`)."""
+        return RegionScans(self.follow_vertices * factor, self.follow_faces,
+                           self.base_vertices * factor, self.base_faces, self.region)  # fmt: skip
+
     @cached_property
     def follow(self) -> Surface:
         """The whole follow-up's samples."""
@@ -413,8 +436,11 @@ class RegionScans:
         centroid's nearest baseline face centroid is a region face's (a scan registered to
         itself has the region's own faces)."""
         tree, inside = self._centroids
-        moved = apply(matrix, self.follow_vertices[self.follow_faces].mean(axis=1))
-        return inside[tree.query(moved)[1]]
+        over = np.empty(len(self.follow_faces), dtype=bool)
+        for block in blocks(len(over)):
+            moved = apply(matrix, self.follow_vertices[self.follow_faces[block]].mean(axis=1))
+            over[block] = inside[tree.query(moved)[1]]
+        return over
 
     def agreement(self, matrix: np.ndarray, within: float) -> tuple[float, float]:
         """How far the whole scans agree under the 4x4 ``matrix``: the share of the
@@ -450,6 +476,12 @@ class OnRegion:
     faces: np.ndarray
     source: Surface | None
 
+    def scaled(self, factor: float) -> OnRegion:
+        """The same with lengths multiplied by ``factor`` (:meth:`Registration.scaled`)."""
+        source = None if self.source is None else Surface(self.source.points * factor,
+                                                          self.source.normals)  # fmt: skip
+        return OnRegion(self.found.scaled(factor), self.faces, source)
+
 
 #: Times the follow-up's region is chosen again and aligned on the baseline's at the most:
 #: each alignment moves its border, which the next choice follows.
@@ -469,6 +501,7 @@ def register_region(
     over = np.zeros(len(scans.follow_faces), dtype=bool)
     source = None
     for _ in range(REGION_ROUNDS):
+        checkpoint()
         chosen = scans.over(found.matrix)
         if np.array_equal(chosen, over):
             break

@@ -25,6 +25,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .arrays import combine, face_cross, unit_rows
+from .checkpoints import checkpoint
 
 #: Random sequential adsorption of disks of diameter ``r`` jams at ``JAMMING / r**2`` sites per
 #: unit area (a coverage of 0.547 of the plane).
@@ -258,6 +259,7 @@ def _adsorb(points, faces, part: SitePart, rng, kept: _Kept):
     budget = MAX_TRIES_PER_SITE * part.quota / inside
     largest = max(256, BATCH_PER_CAPACITY * part.capacity() / inside)
     while count < part.quota and total > 0 and tried < budget:
+        checkpoint()
         need = part.quota - count
         size = int(min(max(need * factor / inside, 256), largest, MAX_BATCH, budget - tried + 256))
         tried += size

@@ -10,6 +10,7 @@ import numpy as np
 from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from .checkpoints import checkpoint
 from .parallel import map_blocks
 
 
@@ -56,12 +57,20 @@ def face_components(faces: np.ndarray, positions: np.ndarray | None = None) -> n
         return np.zeros(0, dtype=np.int64)
     if positions is not None:
         faces = welded(faces, positions)
+    checkpoint()
     n = int(faces.max()) + 1
-    ends = faces[:, [0, 1, 2]], faces[:, [1, 2, 0]]
-    keys = np.minimum(*ends).astype(np.int64) * n + np.maximum(*ends)  # an edge, one number
+    # An edge as one number, low * n + high, built in place: two (m, 3) temporaries.
+    high = faces[:, [1, 2, 0]].astype(np.int64)
+    keys = np.minimum(faces, high, dtype=np.int64)
+    np.maximum(faces, high, out=high)
+    keys *= n
+    keys += high
+    del high
     order = np.argsort(keys.ravel())
+    checkpoint()
     ordered = keys.ravel()[order]
     pairs = np.flatnonzero(ordered[1:] == ordered[:-1])
+    checkpoint()
     graph = coo_matrix(
         (np.ones(len(pairs), dtype=np.int8), (order[pairs] // 3, order[pairs + 1] // 3)),
         shape=(m, m),

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
+from .checkpoints import checkpoint
 from .predicates import orient3d_sign
 
 #: Rings of neighbours a patch may take in, doubling each time: 1, 2, 4, 8.
@@ -260,7 +261,7 @@ def _minimise_patch(
     for _ in range(_OUTER):
         found = minimize(
             energy, current, args=(eps,), jac=True, method="L-BFGS-B",
-            options={"maxiter": 60, "gtol": 1e-7},
+            options={"maxiter": 60, "gtol": 1e-7}, callback=lambda _: checkpoint(),
         )  # fmt: skip
         if not np.isfinite(found.x).all():
             break  # keep the last finite layout

@@ -23,6 +23,7 @@ from transforms.registration import (
     held,
     register,
     register_region,
+    unit_of,
 )
 
 from ..errors import InvalidInput
@@ -197,28 +198,32 @@ def register_scans(given: RegisterInput, ctx: Context) -> Registered:
     check_drawn(ctx, params.zones, cover=False)  # only drawn: checked, never covered
     scale = mm_per_unit(params.units)
     region = flatten(MeshInput(mesh, params, given.mask), ctx)
-    scans = RegionScans(follow.vertices, follow.faces, mesh.vertices, mesh.faces,
-                        region.selection.faces)  # fmt: skip
-    pairs = _landmark_pairs(mesh, follow, params)
+    sent = RegionScans(follow.vertices, follow.faces, mesh.vertices, mesh.faces,
+                       region.selection.faces)  # fmt: skip
     similar = params.mode is RegisterMode.SIMILARITY
-    sizes = _log_sizes(scans)
+    sizes = _log_sizes(sent)
     _check_sizes(sizes, similar)
     bounds = _scale_bounds(sizes) if similar else None
+    # Registered in a unit where the region spreads about 1, and answered in the scans'.
+    unit = unit_of(sizes.region)
+    scans = sent.scaled(unit)
+    pairs = _landmark_pairs(mesh, follow, params, unit)
     try:
         whole = register(scans.follow, scans.base, pairs, scale=similar, bounds=bounds)
     except RegistrationAmbiguous as error:
         raise _unregistered(str(error), _mismatch(scans, None), similar) from None
     _check_scale(whole.scale, bounds)
-    within = OVERLAP_MM / scale if scale is not None else OVERLAP_SHARE * scans.target.size
-    _check_agreement(scans, whole.matrix, within, scale, similar, None)
+    within = OVERLAP_MM / scale * unit if scale is not None else OVERLAP_SHARE * scans.target.size
+    _check_agreement(scans, whole.matrix, within, _Reach(scale, unit), similar, None)
     on = register_region(scans, whole, scale=similar, bounds=bounds)
     _check_scale(on.found.scale, bounds)
     on_base = on.found.residuals <= within
     overlap = float(on_base.mean()) if on_base.size else 0.0
     if overlap < MIN_OVERLAP:
-        why = _too_little(on, overlap, within, scale)
+        why = _too_little(on, overlap, within / unit, scale)
         raise _unregistered(why, _mismatch(scans, on), similar)
-    _check_agreement(scans, on.found.matrix, within, scale, similar, on)
+    _check_agreement(scans, on.found.matrix, within, _Reach(scale, unit), similar, on)
+    on, within = on.scaled(1.0 / unit), within / unit
     residuals = on.found.residuals[on_base]
     rms, p95 = float(np.sqrt(np.mean(residuals**2))), float(np.percentile(residuals, 95))
     # Baseline local = R (s A p + t - c) = s R A (p - A^T (c - t) / s): the same angles.
@@ -257,15 +262,25 @@ def _too_little(on: OnRegion, overlap: float, within: float, scale: float | None
     )
 
 
-def _check_agreement(scans: RegionScans, matrix, within, scale, similar, on) -> None:
+@dataclass(frozen=True)
+class _Reach:
+    """How the scans' lengths are told: ``mm_per_unit`` (None without units) of the scans
+    as sent, registered in ``unit`` (:func:`transforms.registration.unit_of`) times them."""
+
+    mm_per_unit: float | None
+    unit: float
+
+
+def _check_agreement(scans: RegionScans, matrix, within, reach: _Reach, similar, on) -> None:
     """Refuse a registration under whose 4x4 ``matrix`` the whole scans disagree: checked
     on the whole scans' alignment (before the regions', which a misplaced start would only
-    spend time on) and on the regions' (``on``), which must not slide the scans apart."""
+    spend time on) and on the regions' (``on``), which must not slide the scans apart.
+    ``scans``, ``matrix`` and ``within`` are in the registration's unit (``reach``)."""
     agree = scans.agreement(matrix, within)
     if max(agree) >= MIN_OVERLAP:
         return
     stage = "the whole scans'" if on is None else "the regions'"
-    distance = _distance(within, scale)
+    distance = _distance(within / reach.unit, reach.mm_per_unit)
     why = (
         f"after the best alignment found ({stage}) only {agree[0]:.0%} of the follow-up lies "
         f"within {distance} of the baseline, and {agree[1]:.0%} of the baseline within it of "
@@ -425,9 +440,9 @@ def _follow_boundary(follow: Mesh, over: np.ndarray, frame: Frame, region) -> np
     return points[flat.validation.boundary_edges]
 
 
-def _landmark_pairs(mesh: Mesh, follow: Mesh, params: RegisterParams):
-    """The landmarks both scans give, follow-up then baseline ((k, 3) each), or None. The
-    baseline's come from params.landmarks.baseline or params.frame."""
+def _landmark_pairs(mesh: Mesh, follow: Mesh, params: RegisterParams, unit: float):
+    """The landmarks both scans give, follow-up then baseline ((k, 3) each, times ``unit``),
+    or None. The baseline's come from params.landmarks.baseline or params.frame."""
     given = params.landmarks
     baseline = given.baseline if given is not None and given.baseline is not None else None
     if baseline is None and params.frame is not None:
@@ -437,7 +452,7 @@ def _landmark_pairs(mesh: Mesh, follow: Mesh, params: RegisterParams):
     base = checked_landmarks(mesh, baseline, "landmarks.baseline").named()
     other = checked_landmarks(follow, given.follow_up, "landmarks.follow_up").named()
     common = [name for name in base if name in other]
-    return np.stack([other[n] for n in common]), np.stack([base[n] for n in common])
+    return unit * np.stack([other[n] for n in common]), unit * np.stack([base[n] for n in common])
 
 
 class RegisterResponse(WarnedAnswer):

@@ -19,9 +19,11 @@ charge that does not fit is a 503 (a job that could never fit, a 413), so no mix
 requests takes a worker past it.
 
 The time limit runs from admission. A body still arriving at the limit gets a 408; a job
-still computing gets a 504 at the limit. Its thread cannot be stopped, so it stops at its
-next stage (see :class:`~service.timings.Timings`) and holds its slot until then: the limit
-bounds how long a client waits, and admission keeps counting the work that is still running.
+still computing gets a 504 at the limit. Its thread cannot be stopped from outside, so it
+stops itself: at its next stage (see :class:`~service.timings.Timings`) or at the next
+:func:`~transforms.checkpoints.checkpoint` of a long loop, whichever comes first, and holds
+its slot until then (well under a second: ``make attack`` measures it). Admission keeps
+counting the work that is still running.
 
 Times are read from a clock given to the gate (``time.monotonic`` by default), so that the
 idle timer and the deadlines can be tested without waiting.
@@ -36,6 +38,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 from typing import TypeVar
+
+from transforms.checkpoints import checked
 
 from ..observability import (
     COMPUTE_SECONDS,
@@ -318,6 +322,12 @@ class Ticket:
         with self._lock:
             self._reserved += nbytes
 
+    @property
+    def charged(self) -> int:
+        """The bytes of the memory budget charged so far (given back when the admission
+        ends; this stays the total)."""
+        return self._reserved
+
     def charge_mesh(self, nbytes: int) -> None:
         """Hold ``nbytes`` for the mesh's computation, or the growth over what an earlier
         count of the same mesh held."""
@@ -357,7 +367,8 @@ class Ticket:
             started = clock()
             try:
                 deadline.check()
-                result = work(*args)
+                with checked(deadline.check):
+                    result = work(*args)
                 self._gate._record(clock() - started)
                 return result
             finally:

@@ -21,13 +21,15 @@ between its ends (the radius is then the arc's distance, :func:`transforms.margi
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
-from ..arrays import unit_rows
+from ..arrays import cross_rows, unit_rows
+from ..checkpoints import checkpoint
 from ..margins import arcs_to_point
 
 #: Rounds of :func:`exact_empty_cap`, and the most directions a round adds (a region that
@@ -93,6 +95,7 @@ def exact_empty_cap(
     units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
     subset = np.arange(len(units)) if rows is None else np.unique(rows)
     for _ in range(_ROUNDS):
+        checkpoint()
         pole, _ = largest_empty_cap(units[subset])
         cosine = units @ pole
         held = np.flatnonzero(cosine > cosine[subset].max())
@@ -138,9 +141,11 @@ def free_cap(
     """
     units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
     pole, vertex_gap = exact_empty_cap(units, rows)
+    checkpoint()
     corners = units[faces[:, 0]], units[faces[:, 1]], units[faces[:, 2]]
+    sides = _Sides.of(*corners)
     poles = [pole, *_boundary_poles(units, boundary)]
-    clear = [_clear(units, corners, candidate) for candidate in poles]
+    clear = [_clear(units, corners, sides, candidate) for candidate in poles]
     best = int(np.argmax(clear))
     return poles[best], clear[best], vertex_gap
 
@@ -168,13 +173,34 @@ def _boundary_poles(units: np.ndarray, boundary: np.ndarray | None) -> list[np.n
     return poles
 
 
-def _clear(units: np.ndarray, corners: tuple, pole: np.ndarray) -> float:
+@dataclass(frozen=True)
+class _Sides:
+    """The normals of the great circles through each spherical triangle's sides (``ab``,
+    ``bc``, ``ca``: (m, 3) each, not unit) and the sum of its corners ((m, 3)): what
+    :func:`_covers` asks of every candidate pole, computed once."""
+
+    ab: np.ndarray
+    bc: np.ndarray
+    ca: np.ndarray
+    middle: np.ndarray
+
+    @classmethod
+    def of(cls, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> _Sides:
+        sides = []
+        for start, end in ((a, b), (b, c), (c, a)):
+            checkpoint()
+            sides.append(cross_rows(start, end))
+        return cls(*sides, a + b + c)
+
+
+def _clear(units: np.ndarray, corners: tuple, sides: _Sides, pole: np.ndarray) -> float:
     """Radians from unit ``pole`` to the nearest point of the region seen from the centre:
     0 when a face's spherical triangle holds it, else the nearest vertex or edge arc (an
     arc of length L whose nearer end is d away comes no nearer than d - L / 2, so only the
     arcs that may come nearer than the vertices are measured)."""
+    checkpoint()
     a, b, c = corners
-    if _covers(a, b, c, pole).any():
+    if _covers(sides, pole).any():
         return 0.0
     free = cap_radius(units, pole)
     for start, end in ((a, b), (b, c), (c, a)):
@@ -187,13 +213,13 @@ def _clear(units: np.ndarray, corners: tuple, pole: np.ndarray) -> float:
     return free
 
 
-def _covers(a: np.ndarray, b: np.ndarray, c: np.ndarray, pole: np.ndarray) -> np.ndarray:
-    """(m,) bool: whether the spherical triangle of unit ``a, b, c`` (m, 3) holds ``pole``
-    (the same side of its three great circles, and on the triangle's side of the sphere)."""
-    sides = np.stack([np.cross(a, b) @ pole, np.cross(b, c) @ pole, np.cross(c, a) @ pole], axis=1)
-    same = (sides >= 0).all(axis=1) | (sides <= 0).all(axis=1)
-    facing = (a + b + c) @ pole > 0
-    return same & facing & (np.abs(sides).sum(axis=1) > 0)
+def _covers(sides: _Sides, pole: np.ndarray) -> np.ndarray:
+    """(m,) bool: whether each spherical triangle (its ``sides``) holds ``pole`` (the same
+    side of its three great circles, and on the triangle's side of the sphere)."""
+    ab, bc, ca = sides.ab @ pole, sides.bc @ pole, sides.ca @ pole
+    same = ((ab >= 0) & (bc >= 0) & (ca >= 0)) | ((ab <= 0) & (bc <= 0) & (ca <= 0))
+    facing = sides.middle @ pole > 0
+    return same & facing & ((ab != 0) | (bc != 0) | (ca != 0))
 
 
 def region_free_cap(

@@ -24,6 +24,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..arrays import blocks, unit_scale
+from ..checkpoints import checkpoint
 from ..errors import TransformInputError
 from ..sampling import area_sample
 from ..topology import region_edges
@@ -310,6 +311,7 @@ def _chebyshev(planes: KernelPlanes, count: int) -> tuple[np.ndarray, float] | N
     rows = np.concatenate([area_sample(planes.areas[:j], _FIRST_FACES), np.arange(j, count)])
     normals, offsets = planes.normals[:count], planes.offsets[:count]
     for _ in range(_ROUNDS):
+        checkpoint()
         center, radius = _deepest(planes, rows)
         if radius <= 1e-12 * planes.size:
             return None
@@ -332,6 +334,7 @@ def _least_backfacing_area(planes: KernelPlanes) -> np.ndarray:
     weights = planes.areas[rows]
     candidates = [planes.middle, planes.box_middle]
     for _ in range(_REWEIGHTING_ROUNDS):
+        checkpoint()
         center = _least_backfacing(planes, rows, weights)
         candidates.append(center)
         behind = np.maximum(planes.normals[rows] @ center - planes.offsets[rows], 0.0)

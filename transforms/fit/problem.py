@@ -23,6 +23,7 @@ import numpy as np
 from ..arrays import as_faces, as_points, as_vector, blocks, unit_rows
 from ..cap import PoleCap
 from ..chart import Chart, Method
+from ..checkpoints import checkpoint
 from ..errors import TransformInputError, listed_rows
 from ..frames import Frame
 from ..layouts import Layout
@@ -326,6 +327,7 @@ class _Problem:
         best_x, best_e = _best_on_grid(grid, energies)
         step = (tops - bottom) / (points - 1)
         for _ in range(zooms):
+            checkpoint()
             grid = best_x[:, None] + np.outer(step, np.linspace(-1.0, 1.0, zoom_points))
             grid = np.clip(grid, bottom, tops[:, None])
             energies = self._line_energies(centers, rotations, grid, sample)

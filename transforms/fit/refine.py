@@ -18,6 +18,7 @@ from scipy.optimize import minimize
 
 from ..arrays import as_direction, cross_rows
 from ..chart import Method
+from ..checkpoints import checkpoint
 from ..sampling import area_sample
 from .kernel import Kernel
 from .objective import Candidates, Motion
@@ -69,6 +70,7 @@ def refined(
         method="L-BFGS-B",
         bounds=coordinates.bounds(),
         options={"maxiter": _REFINE_STEPS, "ftol": _REFINE_TOLERANCE, "gtol": 1e-6},
+        callback=lambda _: checkpoint(),
     )
     ends = cost(np.vstack([x0, found.x]))
     if not ends[1] < ends[0]:

@@ -11,6 +11,9 @@ Runs a real server (``--workers`` processes, API keys on) and, one case after an
   a zone of 400,000 points, a palette PNG bomb, 256 nested zones, far corners, a truncated
   density map, a follow-up at 1e40 or 1e-90, a decoy boundary), each with the statuses it may
   answer and what its answer must hold;
+* **jobs past their time limit**: six registrations of a 1.13M-face head at once on a
+  server whose limit is a few seconds (:mod:`benchmarks.attack_deadline`): how soon after
+  their 504s their slots are free, and other jobs served again;
 * **slow clients**: ``--slow`` connections at once that send their body at 1 KB/s, that
   declare a Content-Length and stop sending, that send nothing, or that send a header line a
   second; meanwhile a probe posts ``/v1/points`` and a small ``/v1/flatten`` in turn, and
@@ -19,7 +22,9 @@ Runs a real server (``--workers`` processes, API keys on) and, one case after an
 Every case ends with a health check: ``/healthz`` and a small flatten answer 200.
 
 Targets (the exit status is 1 when one is missed): every reader at most 8 bytes per byte
-uploaded plus 16 MiB; a worker's growth within its job's charge; no 500; the probes answer
+uploaded plus 16 MiB; a worker's growth within its job's charge (for the planning routes,
+the charge the server logs); slots free, and others served, within 1 s of a late job's 504;
+no 500; the probes answer
 only 200, p99 under 1 s; the server is healthy after every case. ``--short`` (CI) sends
 16 MiB uploads and holds the slow clients for 6 s; ``--write-docs`` records the table in
 docs/benchmarks.md.
@@ -41,11 +46,20 @@ import tempfile
 import threading
 import time
 import tracemalloc
+import uuid
 from collections import Counter
 from dataclasses import dataclass, field
 
 import httpx
 
+from benchmarks.attack_deadline import (
+    AT_ONCE,
+    LIMIT,
+    RELEASE_TARGET,
+    long_job,
+    refusals_round,
+    slots_round,
+)
 from benchmarks.attack_planning import PlanningCase, planning_cases
 from benchmarks.docs import publish
 from benchmarks.server import children_of, rss_bytes, serving
@@ -77,6 +91,9 @@ class Row:
     healthy: bool = False
     expected: frozenset | None = None  # the statuses a planning case may answer
     held: bool | None = None  # whether its answer held what it must
+    free_after: float | None = None  # seconds from the last 504 until the slots were free
+    refused_after: float | None = None  # seconds from the last 504 to the last refusal
+    logged: bool = False  # whether its charge is read from the server's log
 
     @property
     def per_byte(self) -> float | None:
@@ -92,10 +109,18 @@ class Row:
             )
         if self.peak is not None and self.charged is not None:
             checks["worker's growth within its charge"] = self.peak <= self.charged
+        elif self.logged:
+            checks["its charge logged"] = False
         if self.expected is not None:
             allowed = "/".join(map(str, sorted(self.expected)))
             checks[f"answered {allowed}"] = set(self.statuses) <= self.expected
             checks["its answer right"] = bool(self.held)
+        if self.free_after is not None:
+            checks[f"slots free within {RELEASE_TARGET:g} s"] = self.free_after <= RELEASE_TARGET
+        if self.refused_after is not None:
+            checks[f"others refused no later than {RELEASE_TARGET:g} s after"] = (
+                self.refused_after <= RELEASE_TARGET
+            )
         if self.probe_p99 is not None:
             checks["probes: only 200"] = set(self.probe_statuses) == {200}
             checks["probes: p99 under 1 s"] = self.probe_p99 < 1.0
@@ -112,6 +137,10 @@ class Row:
             if self.probe_p99 is not None
             else "-"
         )
+        if self.free_after is not None:
+            probes = f"slots free {self.free_after:.2f} s after the last answer"
+        if self.refused_after is not None:
+            probes = f"last refusal {self.refused_after:+.2f} s from the last answer"
         met = all(self.checks().values())
         return (
             f"| {self.case} | {self.uploaded / MiB:,.1f} | {per_byte} | {peak} | {charged} | "
@@ -257,20 +286,37 @@ def measured(client: httpx.Client, server: int, row: Row, send) -> Row:
     return row
 
 
-def planning_case(client: httpx.Client, server: int, case: PlanningCase) -> Row:
+def planning_case(client: httpx.Client, server: int, case: PlanningCase, log) -> Row:
     """A planning route's hostile request (:mod:`benchmarks.attack_planning`): its status
-    among those it may answer, and its answer right."""
-    row = Row(case.name, expected=case.expected)
+    among those it may answer, its answer right, and the worker's growth against the charge
+    the server's access line gives (``log``: the server's log file)."""
+    row = Row(case.name, expected=case.expected, logged=True)
     answers = []
+    request_id = f"attack-{uuid.uuid4().hex}"
 
     def send() -> httpx.Response:
-        answers.append(case.send(client, HEADERS))
+        answers.append(case.send(client, HEADERS | {"X-Request-ID": request_id}))
         row.uploaded = int(answers[-1].request.headers.get("Content-Length", 0))
         return answers[-1]
 
     measured(client, server, row, send)
     row.held = bool(answers) and case.holds(answers[-1])
+    row.charged = charge_logged(log, request_id)
     return row
+
+
+def charge_logged(log, request_id: str, seconds: float = 5.0) -> int | None:
+    """The ``charged_bytes`` of the request's access line in the server's ``log`` (a file
+    the server writes to), once it is there; None if it never comes. The file is opened
+    anew: reading through the server's own descriptor would move its writing position."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        with open(f"/proc/self/fd/{log.fileno()}", encoding="utf-8", errors="replace") as lines:
+            for line in lines:
+                if request_id in line and '"message": "request"' in line:
+                    return json.loads(line).get("charged_bytes")
+        time.sleep(0.05)
+    return None
 
 
 class Probe(Background):
@@ -383,6 +429,32 @@ def slow_case(client: httpx.Client, url: str, port: int, case: str, count: int, 
     return row
 
 
+def deadline_rows(workers: int) -> list[Row]:
+    """Six jobs past their time limit at once (:mod:`benchmarks.attack_deadline`), on a
+    server of their own whose limit is ``LIMIT``: how soon their slots are free, and how
+    soon other jobs are served again."""
+    files = long_job()
+    settings = {"MESHFLAT_WORKERS": str(workers), "MESHFLAT_API_KEYS": KEY,
+                "MESHFLAT_REQUEST_TIMEOUT": str(LIMIT)}  # fmt: skip
+    rows = []
+    with (
+        serving(settings, own_limits=True) as served,
+        httpx.Client(base_url=served.url, timeout=120) as client,
+    ):
+        for what, run in (("slots", slots_round), ("others", refusals_round)):
+            case = f"{AT_ONCE} registrations of 1.13M faces past a {LIMIT:g} s limit ({what})"
+            found = run(served.url, HEADERS, files)
+            row = Row(case, statuses=found.statuses, seconds=found.last_answer,
+                      expected=frozenset({503, 504}), held=True)  # fmt: skip
+            row.free_after, row.refused_after = found.free_after, found.refused_after
+            if what == "slots" and found.free_after is None:
+                row.free_after = float("inf")  # not free within a minute
+            row.healthy = healthy(client)
+            print(row.line(), file=sys.stderr)
+            rows.append(row)
+    return rows
+
+
 def _quietly(behaviour, sock, stop, length) -> None:
     with contextlib.suppress(OSError):
         behaviour(sock, stop, length)
@@ -437,11 +509,12 @@ def main(argv: list[str] | None = None) -> int:
                 rows.append(upload_case(client, server, case, name, data, params))
                 print(rows[-1].line(), file=sys.stderr)
             for case in planning_cases():
-                rows.append(planning_case(client, server, case))
+                rows.append(planning_case(client, server, case, log_file))
                 print(rows[-1].line(), file=sys.stderr)
             for case in SLOW:
                 rows.append(slow_case(client, served.url, served.port, case, args.slow, args.hold))
                 print(rows[-1].line(), file=sys.stderr)
+        rows += deadline_rows(args.workers)
         log_file.seek(0)
         log = log_file.read()
     plain = [line for line in log.splitlines() if line.strip() and not line.startswith("{")]

@@ -5,8 +5,12 @@ Each is a small upload that once cost a worker gigabytes or minutes, or answered
 200: a curve zig-zagging across the map, a zone of 400,000 points, a palette PNG mask that
 decodes to 8192² pixels, 256 nested zones, a follow-up scaled by 1e40 or shrunk onto a
 point, a zone whose corners lie 1e15 off the map, a truncated density map, and a form whose
-Content-Type names a decoy boundary. The rows measure the worker's growth as the others do;
-the charge is the server's own, so these rows check the statuses, the time and the health.
+Content-Type names a decoy boundary. Beside them, what the bounds still let through, the
+largest of each: a curve crossing just under ``MESHFLAT_MAX_CURVE_CROSSINGS`` edges, a zone
+just under ``MESHFLAT_MAX_DRAWN_POINTS``, a mask of ``MESHFLAT_MAX_IMAGE_PIXELS``, and two
+1.13M-face heads registered. The rows measure the worker's growth as the others do,
+against the charge the server's access line gives for the request (its ``charged_bytes``:
+eight bytes per byte of the body, then what the job declared before allocating it).
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from dataclasses import dataclass
 
 import httpx
 
+from fixtures.meshes import subdivided_ply
 from service.samples import SAMPLES
 
 SCALP = {"region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}}, "units": "mm"}
@@ -94,12 +99,13 @@ def _png(width: int, height: int, colour: int, rows: bytes, extra: bytes = b"") 
             + chunk(b"IDAT", zlib.compress(rows, 9)) + chunk(b"IEND", b""))  # fmt: skip
 
 
-def _palette_bomb() -> bytes:
-    """A palette PNG with transparency that decodes to 8192² pixels, in some 70 KB."""
-    side = 8192
-    palette = struct.pack(">I", 3) + b"PLTE" + b"\0\0\0"
-    palette += struct.pack(">I", zlib.crc32(b"PLTE\0\0\0"))
-    alpha = struct.pack(">I", 1) + b"tRNS" + b"\0" + struct.pack(">I", zlib.crc32(b"tRNS\0"))
+def _palette_bomb(side: int = 8192, opaque: bool = False) -> bytes:
+    """A palette PNG with transparency that decodes to ``side``² pixels (8192²: in some
+    70 KB), each of them black and transparent, or white and opaque."""
+    colour, alpha = (b"\xff\xff\xff", b"\xff") if opaque else (b"\0\0\0", b"\0")
+    palette = struct.pack(">I", 3) + b"PLTE" + colour
+    palette += struct.pack(">I", zlib.crc32(b"PLTE" + colour))
+    alpha = struct.pack(">I", 1) + b"tRNS" + alpha + struct.pack(">I", zlib.crc32(b"tRNS" + alpha))
     return _png(side, side, 3, bytes((1 + side) * side), palette + alpha)
 
 
@@ -164,6 +170,26 @@ def _register(scale: float, cone_deg: float | None = None):
     return send
 
 
+def _large_registration(client: httpx.Client, headers: dict) -> httpx.Response:
+    """The 1.13M-face head (Lee Perry-Smith split three times) registered to itself."""
+    head = subdivided_ply("lee-perry-smith.glb", 3)
+    files = {"baseline": ("b.ply", head), "follow_up": ("f.ply", head)}
+    return client.post("/v1/register", files=files, data={"params": "{}"}, headers=headers)
+
+
+def _mask(side: int):
+    def send(client: httpx.Client, headers: dict) -> httpx.Response:
+        files = {
+            "mesh": ("h.obj", _textured_head()),
+            "mask": ("m.png", _palette_bomb(side, side <= 4096)),
+        }
+        params = {"region": {"texture_mask": {}}}
+        return client.post("/v1/flatten", files=files, data={"params": json.dumps(params)},
+                           headers=headers)  # fmt: skip
+
+    return send
+
+
 def planning_cases() -> list[PlanningCase]:
     """The cases, each with the statuses it must answer (issue 32's list)."""
     return [
@@ -172,12 +198,15 @@ def planning_cases() -> list[PlanningCase]:
         PlanningCase("zone of 400,000 points (/v1/sites)", frozenset({413}),
                      _post("/v1/sites", _many_points(400_000))),
         PlanningCase("palette PNG mask of 8192² pixels (/v1/flatten)", frozenset({422}),
-                     lambda c, h: c.post(
-                         "/v1/flatten",
-                         files={"mesh": ("h.obj", _textured_head()),
-                                "mask": ("m.png", _palette_bomb())},
-                         data={"params": json.dumps({"region": {"texture_mask": {}}})},
-                         headers=h)),
+                     _mask(8192)),
+        PlanningCase("curve crossing some 246,000 edges, under the bound (/v1/measure)",
+                     frozenset({200}), _post("/v1/measure", _zig_zag(2_900))),
+        PlanningCase("zone of 99,000 points, under the bound (/v1/sites)", frozenset({200}),
+                     _post("/v1/sites", _many_points(99_000))),
+        PlanningCase("opaque PNG mask of 4096² pixels, the bound (/v1/flatten)",
+                     frozenset({200}), _mask(4096)),
+        PlanningCase("two 1.13M-face heads registered (/v1/register)", frozenset({200}),
+                     _large_registration),
         PlanningCase("256 nested 16-gons (/v1/measure)", frozenset({200}),
                      _post("/v1/measure", _nested(256))),
         PlanningCase("zone corners 1e15 off the map (/v1/measure)", frozenset({200}),

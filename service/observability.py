@@ -176,15 +176,16 @@ class RequestContext:
             labels = (route, method, str(status))
             REQUESTS.labels(*labels).inc()
             LATENCY.labels(*labels).observe(seconds)
-            logger.info(
-                "request",
-                extra={
-                    "method": method,
-                    "route": route,
-                    "status": status,
-                    "duration_ms": round(seconds * 1e3, 1),
-                },
-            )
+            extra = {
+                "method": method,
+                "route": route,
+                "status": status,
+                "duration_ms": round(seconds * 1e3, 1),
+            }
+            charged = scope.get("state", {}).get("charged_bytes")
+            if charged is not None:  # a mesh or JSON job's charge to the memory budget
+                extra["charged_bytes"] = charged
+            logger.info("request", extra=extra)
             request_id.reset(token)
 
     def _route_of(self, scope: Scope) -> str:

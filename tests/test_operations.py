@@ -479,6 +479,30 @@ async def test_request_ids_are_accepted_returned_and_logged():
     assert {"time", "level", "logger", "duration_ms", "method"} <= set(by_id[fresh])
 
 
+async def test_a_jobs_access_line_gives_what_it_was_charged(client):
+    """``charged_bytes``: what ``make attack`` weighs a worker's growth against; at least
+    the body and the reader's seven bytes per byte of it, and the mesh's computation."""
+    stream = io.StringIO()
+    handler = logging.StreamHandler(stream)
+    handler.setFormatter(JsonFormatter())
+    logging.getLogger("meshflat").addHandler(handler)
+    try:
+        response = await client.post(
+            "/v1/flatten",
+            files={"mesh": (HEAD, SAMPLES[HEAD].path.read_bytes())},
+            headers={"X-Request-ID": "charged-1"},
+        )
+        assert response.status_code == 200
+        assert (await client.get("/healthz", headers={"X-Request-ID": "free-1"})).is_success
+    finally:
+        logging.getLogger("meshflat").removeHandler(handler)
+    lines = [json.loads(line) for line in stream.getvalue().splitlines()]
+    by_id = {line["request_id"]: line for line in lines if line["message"] == "request"}
+    body = int(response.request.headers["content-length"])
+    assert by_id["charged-1"]["charged_bytes"] > 8 * body
+    assert "charged_bytes" not in by_id["free-1"]  # not a job
+
+
 async def test_logs_hold_nothing_of_the_mesh(client):
     secret = "patient-4d2b"
     obj = f"g {secret}\nv 0 0 1\nv 1 0 1\nv 0 1 1\nf 1 2 3\nf 1 2 9\n".encode()

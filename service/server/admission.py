@@ -76,6 +76,7 @@ async def run_job(request: Request, work: Work, parse_bytes_per_byte: int) -> Re
         # A computation that started ends the admission itself, even one that runs on after
         # its client had the 504; this ends it for one that never started.
         ticket.release()
+        request.state.charged_bytes = ticket.charged  # for the access log line
 
 
 async def read_body(

@@ -52,6 +52,10 @@ CURVE_BYTES_PER_CROSSING = 800
 #: What placing a site may take: its candidates and trees while placing, its values and their
 #: JSON after (about 330 bytes of JSON a site).
 SITE_BYTES = 2_000
+#: What a growth field takes (docs/math.md, section 19): its grid's solve, a fixed size; and
+#: per site its directions, their pushing forward and the pairs its smoothness is measured on.
+GROWTH_BYTES = 256 * 2**20
+GROWTH_BYTES_PER_SITE = 2_000
 
 
 def job_bytes(vertices: int, faces: int) -> int:

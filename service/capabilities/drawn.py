@@ -20,10 +20,10 @@ import shapely
 from pydantic import Field, model_validator
 from scipy import sparse
 
-from transforms import Layout, MapTriangles, ZoneCover
+from transforms import Layout, MapTriangles, ZoneCover, curve_crossings
 
 from ..errors import InvalidInput, check_count
-from .context import ZONE_BYTES_PER_POINT, Context
+from .context import CURVE_BYTES_PER_CROSSING, ZONE_BYTES_PER_POINT, Context
 from .fields import MapCoordinates, Name, Strict
 from .warnings import WarningCode
 
@@ -87,11 +87,15 @@ def zone_points(zones: Sequence[Zone]) -> int:
 
 
 def check_drawn(
-    ctx: Context, zones: Sequence[Zone], curves: Sequence[Curve] = (), cover: bool = True
+    ctx: Context,
+    zones: Sequence[Zone],
+    curves: Sequence[Curve] = (),
+    cover: bool = True,
+    curves_field: str = "curves",
 ) -> None:
     """Refuse more points in ``zones`` and ``curves`` than MESHFLAT_MAX_DRAWN_POINTS (named
-    ``zones``, or ``curves`` when the zones alone are within it), and, for zones that will be
-    covered (``cover``), charge their points' cost before a ring is checked.
+    ``zones``, or ``curves_field`` when the zones alone are within it), and, for zones that
+    will be covered (``cover``), charge their points' cost before a ring is checked.
 
     Raises
     ------
@@ -100,10 +104,28 @@ def check_drawn(
     """
     zoned = zone_points(zones)
     drawn = zoned + sum(len(curve.x) for curve in curves)
-    field = "zones" if zoned > ctx.settings.max_drawn_points or not curves else "curves"
+    field = "zones" if zoned > ctx.settings.max_drawn_points or not curves else curves_field
     check_count(drawn, ctx.settings.max_drawn_points, field, "MESHFLAT_MAX_DRAWN_POINTS")
     if cover:
         ctx.charge(ZONE_BYTES_PER_POINT * zoned)
+
+
+def charge_crossings(
+    ctx: Context, triangles: MapTriangles, curves: list[np.ndarray], field: str = "curves"
+) -> None:
+    """Refuse curves that cross more triangle edges than MESHFLAT_MAX_CURVE_CROSSINGS (as
+    :func:`transforms.curve_crossings` counts them, before any is built), and charge the
+    others' crossings."""
+    crossings = sum(curve_crossings(triangles, points) for points in curves)
+    check_count(
+        crossings,
+        ctx.settings.max_curve_crossings,
+        field,
+        "MESHFLAT_MAX_CURVE_CROSSINGS",
+        "the items are the triangle edges the curves cross on the map, counted from their "
+        "lengths over the triangles' size: draw them shorter, with fewer back-and-forths",
+    )
+    ctx.charge(CURVE_BYTES_PER_CROSSING * crossings)
 
 
 #: Where GEOS says a polygon is invalid: "Self-intersection[x y]".
@@ -191,18 +213,18 @@ def _ring(ring: Ring, field: str, label: tuple[str, str, str]) -> np.ndarray:
     return points
 
 
-def checked_curve(curve: Curve, number: int) -> np.ndarray:
+def checked_curve(curve: Curve, number: int, field: str = "curves") -> np.ndarray:
     """(n, 2) float: the curve's points, repeated ones dropped.
 
     Raises
     ------
     InvalidInput
-        Fewer than two distinct points (named ``curves.{number}``).
+        Fewer than two distinct points (named ``{field}.{number}``).
     """
     points = _distinct_in_turn(curve.x, curve.y)
     if len(points) < 2:
         raise InvalidInput(
-            f"curves.{number}", "a curve needs at least two distinct points", name=curve.name
+            f"{field}.{number}", "a curve needs at least two distinct points", name=curve.name
         )
     return points
 

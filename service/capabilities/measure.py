@@ -15,20 +15,19 @@ from transforms import (
     Polyline,
     ZoneCover,
     cover_zone,
-    curve_crossings,
     lift_curve,
 )
 from transforms.region import flagged_mask
 
 from ..encoding import Answer
-from ..errors import check_count
 from ..outputs import Output
 from ..outputs.picture import Drawn
-from .context import CURVE_BYTES_PER_CROSSING, Context
+from .context import Context
 from .drawn import (
     Curve,
     Outline,
     Zone,
+    charge_crossings,
     check_drawn,
     check_names,
     checked_curve,
@@ -142,7 +141,7 @@ def measure(given: MeshInput[MeasureParams], ctx: Context) -> Measured:
     scale = mm_per_unit(params.units)
     region = flatten(given, ctx)
     triangles = map_triangles(region, ctx)
-    _charge_crossings(ctx, triangles, curves)
+    charge_crossings(ctx, triangles, curves)
     covers = [cover_zone(triangles, outline.rings) for outline in outlines]
     pairs = overlaps(outlines)
     areas = shared_areas(triangles, covers, pairs).tolist()
@@ -161,22 +160,6 @@ def measure(given: MeshInput[MeasureParams], ctx: Context) -> Measured:
         shared,
         scale,
     )
-
-
-def _charge_crossings(ctx: Context, triangles: MapTriangles, curves: list[np.ndarray]) -> None:
-    """Refuse curves that cross more triangle edges than MESHFLAT_MAX_CURVE_CROSSINGS (as
-    :func:`transforms.curve_crossings` counts them, before any is built), and charge the
-    others' crossings."""
-    crossings = sum(curve_crossings(triangles, points) for points in curves)
-    check_count(
-        crossings,
-        ctx.settings.max_curve_crossings,
-        "curves",
-        "MESHFLAT_MAX_CURVE_CROSSINGS",
-        "the items are the triangle edges the curves cross on the map, counted from their "
-        "lengths over the triangles' size: draw them shorter, with fewer back-and-forths",
-    )
-    ctx.charge(CURVE_BYTES_PER_CROSSING * crossings)
 
 
 def _warn(ctx: Context, params, region: MeshRegion, zones, curves, scale) -> None:

@@ -26,7 +26,7 @@ from ..encoding import Answer
 from ..errors import InvalidInput, check_count
 from ..outputs import Output
 from ..outputs.picture import Drawn
-from .context import SITE_BYTES, Context
+from .context import GROWTH_BYTES, GROWTH_BYTES_PER_SITE, SITE_BYTES, Context
 from .drawn import (
     Outline,
     Zone,
@@ -37,6 +37,18 @@ from .drawn import (
     warn_outside,
 )
 from .fields import PictureParams, choice, output_choice
+from .growth import (
+    ExitAngle,
+    Grown,
+    Growth,
+    GrowthAnswer,
+    SitesAt,
+    check_growth,
+    grow,
+    growth_answer,
+    site_growth,
+    zone_growth,
+)
 from .inputs import PngFile, PngPart
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
@@ -63,6 +75,11 @@ class SiteZone(Zone):
 
     density_per_cm2: DensityPerCm2 | None = Field(
         None, description="Sites per cm² of the zone's surface (default: params.density_per_cm2)."
+    )
+    exit_angle_deg: ExitAngle | None = Field(
+        None,
+        description="With params.growth: the angle between the hair and the scalp in this "
+        "zone, degrees (default: growth.exit_angle_deg).",
     )
 
 
@@ -105,6 +122,13 @@ class SitesParams(MeshParams, PictureParams):
         "stand for, [lo, hi] (linear between).",
     )  # fmt: skip
     seed: int = Field(0, ge=0, le=2**63 - 1, description="Same inputs and seed: same sites.")
+    growth: Growth | None = Field(
+        None,
+        description="Which way the hair grows (docs/math.md, section 19): flow curves and "
+        "whorls drawn on the map, and the exit angle; each site then has its direction. "
+        "Without flow or whorls, the head's landmarks (params.frame or region.scalp) give the "
+        "default: a whorl at the vertex, turning clockwise.",
+    )
     allow_flagged: bool = Field(
         False,
         description="Whether sites may go on triangles the validation flags (stretched "
@@ -185,6 +209,7 @@ class Placed:
     zones : tuple of SiteZoneResult, in the order of ``sites.part``
     min_distance : float, the smallest distance between two sites, measured
     mm_per_unit : float
+    grown : Grown or None, each site's growth (with ``params.growth``)
     """
 
     region: MeshRegion
@@ -197,6 +222,7 @@ class Placed:
     zones: tuple[SiteZoneResult, ...]
     min_distance: float
     mm_per_unit: float
+    grown: Grown | None = None
 
 
 @dataclass(frozen=True)
@@ -218,6 +244,7 @@ def place(given: SitesInput, ctx: Context) -> Placed:
             "sites per cm² need the mesh's length unit (mm, cm or m) or a known distance",
         )
     check_drawn(ctx, params.zones)
+    flows = check_growth(ctx, params.growth, params.zones) if params.growth else []
     outlines = _apart([checked_zone(zone, k) for k, zone in enumerate(params.zones)])
     image = _density_image(params, given.density_map, ctx)
     region = flatten(given, ctx)
@@ -257,10 +284,24 @@ def place(given: SitesInput, ctx: Context) -> Placed:
     normals = site_normals(triangles.surface_points, triangles.faces, sites, region.frame.center)
     map_points = triangles.on_map(sites.triangles, sites.weights)
     theta, phi, _ = world_to_angles(sites.points, region.frame, region.chart)
+    grown = None
+    if params.growth is not None:
+        ctx.charge(GROWTH_BYTES + GROWTH_BYTES_PER_SITE * len(sites.triangles))
+        at = SitesAt(sites, normals, map_points, _exit_angles(params, len(results)),
+                     [zone.spacing for zone in results])  # fmt: skip
+        grown = grow(ctx, params, flows, region, triangles, at)
     return Placed(
         region, triangles, sites, normals, map_points, theta, phi, tuple(results),
-        minimum_distance(sites.points), scale,
+        minimum_distance(sites.points), scale, grown,
     )  # fmt: skip
+
+
+def _exit_angles(params: SitesParams, parts: int) -> list[float]:
+    """Each part's exit angle: its zone's, else growth's."""
+    default = params.growth.exit_angle_deg
+    if not params.zones:
+        return [default] * parts
+    return [default if z.exit_angle_deg is None else z.exit_angle_deg for z in params.zones]
 
 
 def _warn_outside(ctx: Context, region: MeshRegion, outlines: list[Outline], found) -> None:
@@ -352,6 +393,22 @@ class SiteArrays(Answer):
         "on the map (the correspondence of /v1/measure)."
     )
     y: list[float] = Field(description="The layout's y, likewise.")
+    direction: list[list[float]] | None = Field(
+        None,
+        description="With params.growth: the unit vector the hair grows along, cos(a) tangent "
+        "+ sin(a) normal, a the exit angle.",
+    )
+    tangent: list[list[float]] | None = Field(
+        None,
+        description="With params.growth: the growth field's unit tangent at the site, "
+        "orthogonal to normal.",
+    )
+    exit_angle_deg: list[float] | None = Field(
+        None, description="With params.growth: the angle a between direction and the scalp."
+    )
+    map_direction: list[list[float]] | None = Field(
+        None, description="With params.growth: the unit 2D direction of tangent on the map."
+    )
 
 
 class ZoneSites(Answer):
@@ -371,6 +428,15 @@ class ZoneSites(Answer):
         description="The least distance kept between the zone's sites and any other site "
         "(zones are placed densest first, each keeping its own spacing); null without sites."
     )
+    exit_angle_deg: float | None = Field(
+        None, description="With params.growth: the mean exit angle of the zone's sites."
+    )
+    largest_turn_deg: float | None = Field(
+        None,
+        description="With params.growth: the largest angle between the directions of two "
+        "of the zone's sites within two spacings (null for fewer than two): how smooth the "
+        "directions are (a whorl turns them sharply about its centre).",
+    )
 
 
 class SitesResponse(WarnedAnswer):
@@ -383,6 +449,7 @@ class SitesResponse(WarnedAnswer):
         "for fewer than two)."
     )
     min_distance_mm: float | None = Field(description="The same in mm.")
+    growth: GrowthAnswer | None = Field(None, description="With params.growth: what was used.")
     sites: SiteArrays
 
     @classmethod
@@ -402,11 +469,13 @@ class SitesResponse(WarnedAnswer):
                     sites=zone.quota,
                     achieved_density_per_cm2=zone.achieved,
                     spacing_mm=None if zone.spacing is None else zone.spacing * scale,
+                    **zone_growth(placed.grown, k),
                 )
-                for zone in placed.zones
+                for k, zone in enumerate(placed.zones)
             ],
             min_distance=closest,
             min_distance_mm=None if closest is None else closest * scale,
+            **({} if placed.grown is None else {"growth": growth_answer(placed.grown)}),
             sites=SiteArrays.build(
                 position=sites.points,
                 normal=placed.normals,
@@ -416,29 +485,33 @@ class SitesResponse(WarnedAnswer):
                 phi=placed.phi,
                 x=np.ascontiguousarray(placed.map_points[:, 0]),
                 y=np.ascontiguousarray(placed.map_points[:, 1]),
+                **site_growth(placed.grown),
             ),
         )
 
 
 def sites_ply(placed: Placed, params: SitesParams, ctx: Context) -> bytes:
     """The sites as a binary PLY point cloud: ``x y z`` (double), ``nx ny nz`` (float, unit
-    normals) and ``face`` (int, the file's triangle id) per vertex."""
+    normals), with ``params.growth`` ``dx dy dz`` (float, the unit growth direction), and
+    ``face`` (int, the file's triangle id) per vertex."""
     sites = placed.sites
-    row = np.dtype(
-        [("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("nx", "<f4"), ("ny", "<f4"),
-         ("nz", "<f4"), ("face", "<i4")]
-    )  # fmt: skip
-    table = np.empty(len(sites.triangles), dtype=row)
+    vectors = [("n", placed.normals)]
+    if placed.grown is not None:
+        vectors.append(("d", placed.grown.direction))
+    columns = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    columns += [(f"{prefix}{axis}", "<f4") for prefix, _ in vectors for axis in "xyz"]
+    table = np.empty(len(sites.triangles), dtype=np.dtype([*columns, ("face", "<i4")]))
     for k, axis in enumerate("xyz"):
         table[axis] = sites.points[:, k]
-        table[f"n{axis}"] = placed.normals[:, k]
+        for prefix, values in vectors:
+            table[f"{prefix}{axis}"] = values[:, k]
     table["face"] = placed.region.faces[sites.triangles]
+    properties = "".join(
+        f"property {'double' if kind == '<f8' else 'float'} {name}\n" for name, kind in columns
+    )
     header = (
         "ply\nformat binary_little_endian 1.0\ncomment meshflat sites\n"
-        f"element vertex {len(table)}\n"
-        "property double x\nproperty double y\nproperty double z\n"
-        "property float nx\nproperty float ny\nproperty float nz\n"
-        "property int face\nend_header\n"
+        f"element vertex {len(table)}\n{properties}property int face\nend_header\n"
     )
     return header.encode("ascii") + table.tobytes()
 

@@ -11,6 +11,7 @@
     meshflat locate MESH ... --params '{"theta": [...], "phi": [...]}'
     meshflat measure MESH ... --zones zones.json [--units mm] [--out FILE.json|.svg|.png]
     meshflat sites MESH ... [--density 40] [--zones zones.json] [--units mm] [--out sites.ply]
+                      [--flow flow.json]
     meshflat register BASE FOLLOW_UP ... [--units mm] [--params JSON] --out frame.json
                       [--density-map map.png --params '{"density_range": [20, 60]}']
     meshflat batch MANIFEST.jsonl --out DIR [--allow-root DIR] [--processes N]
@@ -85,6 +86,8 @@ def params_of(args: argparse.Namespace) -> dict:
     params.update(_roll(args))
     if getattr(args, "zones", None):
         params.update(_drawn(args.zones))
+    if getattr(args, "flow", None):
+        params["growth"] = _growth(args.flow)
     for option, name in (("density", "density_per_cm2"), ("units", "units")):
         if getattr(args, option, None) is not None:
             params[name] = getattr(args, option)
@@ -139,17 +142,37 @@ def _json_params(text: str | None) -> dict:
     return params
 
 
+def _json_file(path: str, option: str):
+    """The JSON a file holds, or a 422 naming ``option``."""
+    try:
+        return json.loads(Path(path).read_bytes())
+    except OSError as error:
+        raise Problem(
+            422, f"{option}: cannot read {path!r}: {error.strerror}", field=option
+        ) from None
+    except ValueError as error:
+        raise Problem(422, f"{option}: {path!r} is not JSON ({error})", field=option) from None
+
+
+def _growth(path: str) -> dict:
+    """The ``growth`` params a ``--flow`` file holds: a list of flow curves, or an object of
+    them (flow, whorls, exit_angle_deg)."""
+    growth = _json_file(path, "--flow")
+    if isinstance(growth, list):
+        return {"flow": growth}
+    if not isinstance(growth, dict):
+        raise Problem(
+            422,
+            "--flow: a list of flow curves, or an object with flow, whorls and exit_angle_deg",
+            field="--flow",
+        )
+    return growth
+
+
 def _drawn(path: str) -> dict:
     """The params a ``--zones`` file holds: a list of zones, or an object of params (zones,
     curves, units)."""
-    try:
-        drawn = json.loads(Path(path).read_bytes())
-    except OSError as error:
-        raise Problem(
-            422, f"--zones: cannot read {path!r}: {error.strerror}", field="--zones"
-        ) from None
-    except ValueError as error:
-        raise Problem(422, f"--zones: {path!r} is not JSON ({error})", field="--zones") from None
+    drawn = _json_file(path, "--zones")
     if isinstance(drawn, list):
         return {"zones": drawn}
     if not isinstance(drawn, dict):
@@ -264,6 +287,13 @@ def parser() -> argparse.ArgumentParser:
                 command.add_argument(part.name, metavar=argument, help=what)
             else:
                 command.add_argument(argument, dest=part.name, metavar="FILE", help=what)
+        if "growth" in fields:
+            command.add_argument(
+                "--flow",
+                metavar="FILE",
+                help="JSON: a list of flow curves, or an object with flow, whorls and "
+                "exit_angle_deg (params.growth)",
+            )
         if "density_per_cm2" in fields:
             command.add_argument(
                 "--density",

@@ -7,12 +7,18 @@ turned, for the head moved and turned; and every way to ask for a field that can
 
 from __future__ import annotations
 
+import io
 import json
+import struct
 
 import numpy as np
 import pytest
+from PIL import Image
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
+
+from service.cli import main
+from service.samples import SAMPLES
 
 from .conftest import grid_mesh, load_sample
 from .test_api import flatten, obj_of, problem
@@ -308,3 +314,74 @@ async def test_the_ply_carries_each_sites_direction(client):
     directions = np.column_stack([table["dx"], table["dy"], table["dz"]])
     np.testing.assert_allclose(directions, answer["sites"]["direction"], atol=1e-6)
     assert json.dumps(answer["sites"]["face"]) == json.dumps(table["face"].tolist())
+
+
+async def test_the_glb_holds_a_stroke_per_site_coloured_by_its_exit_angle(client):
+    cx, cy, size = await centre_of_map(client)
+    asked = {"density_per_cm2": 2, "growth": hairline_and_crown(cx, cy, size)}
+    answer = (await sites(client, asked)).json()
+    document, binary = glb_parts((await sites(client, asked | {"output": "glb"})).content)
+    (growth,) = [mesh for mesh in document["meshes"] if mesh["name"] == "growth"]
+    (lines,) = growth["primitives"]
+    assert lines["mode"] == 1  # LINES
+    ends = accessor(document, binary, lines["attributes"]["POSITION"])
+    count = answer["count"]
+    assert ends.shape == (2 * count, 3)
+    position, direction = np.asarray(answer["sites"]["position"]), answer["sites"]["direction"]
+    np.testing.assert_allclose(ends[0::2], position, rtol=0, atol=1e-3)
+    np.testing.assert_allclose(unit(ends[1::2] - ends[0::2]), direction, atol=1e-4)
+    np.testing.assert_allclose(np.linalg.norm(ends[1::2] - ends[0::2], axis=1), 3.0, rtol=1e-5)
+    colours = accessor(document, binary, lines["attributes"]["COLOR_0"])
+    assert colours.shape == (2 * count, 3) and len(np.unique(colours, axis=0)) == 1  # one angle
+
+
+@pytest.mark.parametrize("output", ["svg", "png"])
+async def test_the_map_shows_the_strokes_flows_and_whorls(client, output):
+    cx, cy, size = await centre_of_map(client)
+    asked = {"density_per_cm2": 2, "growth": hairline_and_crown(cx, cy, size)}
+    with_growth = (await sites(client, asked | {"output": output})).content
+    without = (await sites(client, {"density_per_cm2": 2, "output": output})).content
+    if output == "svg":
+        text = with_growth.decode()
+        assert 'class="growth"' in text and "hairline" not in text  # flows by number
+        assert "flow 0: flow" in text and "whorl 0: clockwise" in text
+        assert 'class="growth"' not in without.decode()
+    else:
+        shown = np.asarray(Image.open(io.BytesIO(with_growth)).convert("RGB"))
+        plain = np.asarray(Image.open(io.BytesIO(without)).convert("RGB"))
+        assert (np.all(shown == STROKE_RGB, axis=2)).sum() > 10 * (
+            np.all(plain == STROKE_RGB, axis=2)
+        ).sum() + 100
+
+
+STROKE_RGB = (0xB2, 0x18, 0x2B)
+
+
+def glb_parts(data: bytes) -> tuple[dict, bytes]:
+    length = struct.unpack("<I", data[12:16])[0]
+    document = json.loads(data[20 : 20 + length])
+    return document, data[20 + length + 8 :]
+
+
+def accessor(document: dict, binary: bytes, index: int) -> np.ndarray:
+    found = document["accessors"][index]
+    view = document["bufferViews"][found["bufferView"]]
+    columns = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[found["type"]]
+    raw = binary[view["byteOffset"] : view["byteOffset"] + view["byteLength"]]
+    return np.frombuffer(raw, dtype=np.float32).reshape(found["count"], columns)
+
+
+async def test_the_command_line_takes_the_flow_from_a_file(client, tmp_path):
+    cx, cy, size = await centre_of_map(client)
+    growth = hairline_and_crown(cx, cy, size)
+    flow = tmp_path / "flow.json"
+    flow.write_text(json.dumps(growth))
+    out = tmp_path / "sites.json"
+    frame = ["--region-cone", "0,0,1:70", "--pole", "0,0,-1", "--up", "0,1,0", "--sigma", "0.3"]
+    command = ["sites", str(SAMPLES[NAME].path), *frame, "--units", "mm", "--density", "2"]
+    assert main([*command, "--flow", str(flow), "--out", str(out)]) == 0
+    expected = (await sites(client, {"density_per_cm2": 2, "growth": growth})).json()
+    assert json.loads(out.read_bytes()) == expected
+    flow.write_text(json.dumps(growth["flow"]))  # a list: the flow alone
+    assert main([*command, "--flow", str(flow), "--out", str(out)]) == 0
+    assert json.loads(out.read_bytes())["growth"]["whorls"] == []

@@ -20,10 +20,18 @@ from transforms.sites import Sites
 
 from ..encoding import Answer
 from ..errors import InvalidInput
+from ..outputs.colours import STEPS, palette
+from ..outputs.picture import Drawn
 from .context import Context
 from .drawn import Curve, charge_crossings, check_drawn, check_names, checked_curve
 from .fields import Coordinate, Strict, choice
 from .region.resolve import MeshRegion, checked_landmarks
+
+#: A site's stroke in the GLB, millimetres: long enough to see, short of its neighbours at
+#: the densities of a plan (1 to 2 mm apart).
+STROKE_MM = 3.0
+#: A whorl's mark on the map: a circle of this share of the map's larger side.
+WHORL_MARK = 0.015
 
 #: The exit angle when none is given, degrees: the low end of the hairline's 10-20 degrees
 #: in the transplant literature, where a plan is most often drawn.
@@ -294,3 +302,30 @@ def zone_growth(grown: Grown | None, k: int) -> dict:
         "exit_angle_deg": float(grown.zone_exit_angle[k]),
         "largest_turn_deg": turn if np.isfinite(turn) else None,
     }
+
+
+def growth_lines(grown: Grown, points: np.ndarray, mm_per_unit: float):
+    """The GLB's strokes: from each site ``STROKE_MM`` along its direction ((2 n, 3) ends),
+    coloured by its exit angle on the colour map, 0 to 90 degrees ((2 n, 3) in [0, 1])."""
+    ends = np.empty((2 * len(points), 3))
+    ends[0::2] = points
+    ends[1::2] = points + (STROKE_MM / mm_per_unit) * grown.direction
+    steps = np.minimum((grown.exit_angle / 90.0 * STEPS).astype(np.int64), STEPS - 1)
+    colours = np.repeat(palette()[steps] / 255.0, 2, axis=0)
+    return ends, colours
+
+
+def growth_drawn(grown: Grown, triangles: MapTriangles) -> tuple[Drawn, ...]:
+    """The flows and whorls to draw over the map: each flow as a curve, each whorl as a small
+    circle."""
+    flows = tuple(
+        Drawn((points,), False, f"flow {k}", "flow") for k, points in enumerate(grown.flows)
+    )
+    size = float(np.ptp(triangles.map_points, axis=0).max())
+    turn = np.linspace(0.0, 2.0 * np.pi, 25)
+    circle = WHORL_MARK * size * np.column_stack([np.cos(turn), np.sin(turn)])
+    whorls = tuple(
+        Drawn((point + circle,), False, f"whorl {k}", f"{how.value}")
+        for k, (point, how) in enumerate(zip(grown.whorls, grown.turns, strict=True))
+    )
+    return flows + whorls

@@ -46,6 +46,8 @@ from .growth import (
     check_growth,
     grow,
     growth_answer,
+    growth_drawn,
+    growth_lines,
     site_growth,
     zone_growth,
 )
@@ -518,17 +520,24 @@ def sites_ply(placed: Placed, params: SitesParams, ctx: Context) -> bytes:
 
 def sites_glb(placed: Placed, params: SitesParams, ctx: Context) -> bytes:
     """The region as /v1/flatten's GLB, with the sites as a POINTS primitive (none when no
-    site was placed: glTF has no empty accessors)."""
+    site was placed: glTF has no empty accessors) and, with growth, a LINES primitive of a
+    short stroke from each site along its direction, coloured by its exit angle."""
     sites = (placed.sites.points, placed.normals) if len(placed.sites.points) else None
-    return glb(placed.region, params, sites)
+    lines = None
+    if placed.grown is not None and sites is not None:
+        lines = growth_lines(placed.grown, placed.sites.points, placed.mm_per_unit)
+    return glb(placed.region, params, sites, lines)
 
 
 def _site_zones(placed: Placed) -> tuple[Drawn, ...]:
-    return tuple(
+    zones = tuple(
         Drawn(zone.outline.rings, True, zone.name, f"{zone.quota:,} sites")
         for zone in placed.zones
         if zone.outline is not None
     )
+    if placed.grown is None:
+        return zones
+    return zones + growth_drawn(placed.grown, placed.triangles)
 
 
 #: The forms of placed sites besides JSON, by :class:`Output`.
@@ -536,7 +545,12 @@ RENDERERS = {
     Output.PLY: sites_ply,
     Output.GLB: sites_glb,
     # The map with the zones and the sites (an SVG draws up to SVG_SITES of them).
-    **map_renderers(lambda placed: placed.region, _site_zones, lambda placed: placed.map_points),
+    **map_renderers(
+        lambda placed: placed.region,
+        _site_zones,
+        lambda placed: placed.map_points,
+        lambda placed: None if placed.grown is None else placed.grown.map_direction,
+    ),
 }
 
 

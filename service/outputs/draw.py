@@ -23,6 +23,7 @@ from .picture import (
     SINGULAR_COLOUR,
     SITES_COLOUR,
     SITES_KEY,
+    STROKES_COLOUR,
     SVG_SITES,
     Picture,
 )
@@ -84,6 +85,12 @@ def to_svg(picture: Picture) -> bytes:
         shown = p.sites[:SVG_SITES] - 1.0
         parts.append(
             f'<path class="sites" fill="{SITES_COLOUR}" d="{_rows(shown, "M%.1f %.1fh2v2h-2Z")}"/>'
+        )
+    if len(p.strokes):
+        segments = p.strokes[:SVG_SITES].reshape(-1, 4)
+        parts.append(
+            f'<path class="growth" fill="none" stroke="{STROKES_COLOUR}" stroke-width="1" '
+            f'd="{_rows(segments, "M%.1f %.1fL%.1f %.1f")}"/>'
         )
     parts += _svg_overlays(p)
     parts.append("</g>")
@@ -277,6 +284,8 @@ def to_png(picture: Picture) -> bytes:
     font = ImageFont.load_default(size=13)
     if len(p.sites):
         canvas = _png_sites(canvas, p)
+    if len(p.strokes):
+        canvas = _png_strokes(canvas, p)
     if p.overlays:
         canvas = _png_overlays(canvas, p, font)
     draw = ImageDraw.Draw(canvas)
@@ -331,6 +340,16 @@ def _png_sites(canvas: Image.Image, p: Picture) -> Image.Image:
     pixels = np.asarray(canvas).copy()
     for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
         pixels[spots[inside, 1] + dy, spots[inside, 0] + dx] = _rgb(SITES_COLOUR)
+    return Image.fromarray(pixels, "RGB")
+
+
+def _png_strokes(canvas: Image.Image, p: Picture) -> Image.Image:
+    """The canvas with each site's stroke, one pixel wide, inside the plot."""
+    left, top, right, bottom = p.plot
+    painted = np.zeros((bottom - top, right - left), dtype=np.uint8)
+    paint_segments(painted, p.strokes - np.array([left, top], dtype=np.float64), 1)
+    pixels = np.asarray(canvas).copy()
+    pixels[top:bottom, left:right][painted > 0] = _rgb(STROKES_COLOUR)
     return Image.fromarray(pixels, "RGB")
 
 

@@ -33,7 +33,7 @@ from PIL import Image
 #: glTF constants.
 _FLOAT, _UNSIGNED_INT = 5126, 5125
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
-_POINTS, _TRIANGLES = 0, 4
+_POINTS, _LINES, _TRIANGLES = 0, 1, 4
 _GLB_MAGIC, _GLB_VERSION = 0x46546C67, 2
 _JSON_CHUNK, _BIN_CHUNK = 0x4E4F534A, 0x004E4942
 
@@ -60,8 +60,10 @@ def region_glb(
     extras: dict,
     sites: tuple[np.ndarray, np.ndarray] | None = None,
     colours: np.ndarray | None = None,
+    lines: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> bytes:
-    """A GLB of one triangle mesh, and of sites on it as a POINTS primitive.
+    """A GLB of one triangle mesh, of sites on it as a POINTS primitive, and of line
+    segments over it as a LINES primitive.
 
     Parameters
     ----------
@@ -74,8 +76,10 @@ def region_glb(
         ``face_ids_accessor`` added)
     sites : ((n, 3), (n, 3)) float or None: points and their unit normals, a second mesh
         (``sites``: ``POSITION`` and ``NORMAL``, mode POINTS) of a second node
-    colours : (k, 3) float or None, ``COLOR_0`` of the region's vertices (its accessor the
-        last)
+    colours : (k, 3) float or None, ``COLOR_0`` of the region's vertices
+    lines : ((2 s, 3), (2 s, 3)) float or None: segments' ends (each pair one segment) and
+        their colours in [0, 1], a third mesh (``growth``: ``POSITION`` and ``COLOR_0``,
+        mode LINES) of a third node
 
     Returns
     -------
@@ -94,33 +98,14 @@ def region_glb(
         blobs += [("SITE_POSITION", points, _ARRAY_BUFFER), ("NORMAL", normals, _ARRAY_BUFFER)]
     if colours is not None:
         blobs.append(("COLOR_0", np.ascontiguousarray(colours, dtype=np.float32), _ARRAY_BUFFER))
-    buffer_views, accessors, chunks, offset = [], [], [], 0
-    for name, array, target in blobs:
-        data = array.tobytes()
-        view = {"buffer": 0, "byteOffset": offset, "byteLength": len(data)}
-        if target is not None:
-            view["target"] = target
-        buffer_views.append(view)
-        chunks.append(data + b"\0" * (-len(data) % 4))  # views start 4-byte aligned
-        offset += len(chunks[-1])
-        if name == "checker":  # an image, not an accessor
-            continue
-        columns = array.shape[1] if array.ndim == 2 else 1
-        accessor = {
-            "bufferView": len(buffer_views) - 1,
-            "componentType": _FLOAT if array.dtype == np.float32 else _UNSIGNED_INT,
-            "count": len(array),
-            "type": {1: "SCALAR", 2: "VEC2", 3: "VEC3"}[columns],
-            "name": name,
-        }
-        if name in ("POSITION", "TEXCOORD_0", "_VERTEX_ID", "SITE_POSITION"):  # POSITION needs them
-            low, high = array.min(axis=0), array.max(axis=0)
-            accessor["min"] = np.atleast_1d(low).tolist()
-            accessor["max"] = np.atleast_1d(high).tolist()
-        accessors.append(accessor)
+    if lines is not None:
+        ends, tints = (np.ascontiguousarray(a, dtype=np.float32) for a in lines)
+        blobs += [("LINE_POSITION", ends, _ARRAY_BUFFER), ("LINE_COLOR", tints, _ARRAY_BUFFER)]
+    buffer_views, accessors, chunks, offset = _packed(blobs)
+    accessor_of = {accessor["name"]: i for i, accessor in enumerate(accessors)}
     attributes = {name: i for i, (name, _, _) in enumerate(blobs[:3])}
     if colours is not None:
-        attributes["COLOR_0"] = len(accessors) - 1
+        attributes["COLOR_0"] = accessor_of["COLOR_0"]
     document = {
         "asset": {
             "version": "2.0",
@@ -128,7 +113,7 @@ def region_glb(
             "extras": {"meshflat": extras | {"face_ids_accessor": 4}},
         },
         "scene": 0,
-        "scenes": [{"nodes": [0] if sites is None else [0, 1]}],
+        "scenes": [{"nodes": [0]}],
         "nodes": [{"mesh": 0, "name": "region"}],
         "meshes": [
             {
@@ -156,10 +141,10 @@ def region_glb(
         "bufferViews": buffer_views,
         "buffers": [{"byteLength": offset}],
     }
-    if sites is not None:  # accessors 5 and 6, after the region's (the image has none)
-        document["nodes"].append({"mesh": 1, "name": "sites"})
-        points = {"attributes": {"POSITION": 5, "NORMAL": 6}, "mode": _POINTS}
-        document["meshes"].append({"name": "sites", "primitives": [points]})
+    for name, mode, attributes in _OVERLAYS:
+        if attributes["POSITION"] in accessor_of:
+            found = {key: accessor_of[blob] for key, blob in attributes.items()}
+            _add_node(document, name, {"attributes": found, "mode": mode})
     json_chunk = orjson.dumps(document, option=orjson.OPT_SERIALIZE_NUMPY)
     json_chunk += b" " * (-len(json_chunk) % 4)
     binary = b"".join(chunks)
@@ -173,6 +158,50 @@ def region_glb(
             binary,
         ]
     )
+
+
+#: The meshes drawn over the region, when their blobs are there: name, mode, attributes.
+_OVERLAYS = (
+    ("sites", _POINTS, {"POSITION": "SITE_POSITION", "NORMAL": "NORMAL"}),
+    ("growth", _LINES, {"POSITION": "LINE_POSITION", "COLOR_0": "LINE_COLOR"}),
+)
+
+
+def _packed(blobs) -> tuple[list, list, list, int]:
+    """The buffer views, accessors and 4-byte aligned chunks of ``blobs`` ((name, array,
+    target) each; the ``checker`` image gets a view and no accessor), and the bytes in all."""
+    buffer_views, accessors, chunks, offset = [], [], [], 0
+    for name, array, target in blobs:
+        data = array.tobytes()
+        view = {"buffer": 0, "byteOffset": offset, "byteLength": len(data)}
+        if target is not None:
+            view["target"] = target
+        buffer_views.append(view)
+        chunks.append(data + b"\0" * (-len(data) % 4))  # views start 4-byte aligned
+        offset += len(chunks[-1])
+        if name == "checker":  # an image, not an accessor
+            continue
+        columns = array.shape[1] if array.ndim == 2 else 1
+        accessor = {
+            "bufferView": len(buffer_views) - 1,
+            "componentType": _FLOAT if array.dtype == np.float32 else _UNSIGNED_INT,
+            "count": len(array),
+            "type": {1: "SCALAR", 2: "VEC2", 3: "VEC3"}[columns],
+            "name": name,
+        }
+        if name in ("POSITION", "TEXCOORD_0", "_VERTEX_ID", "SITE_POSITION", "LINE_POSITION"):
+            low, high = array.min(axis=0), array.max(axis=0)
+            accessor["min"] = np.atleast_1d(low).tolist()
+            accessor["max"] = np.atleast_1d(high).tolist()
+        accessors.append(accessor)
+    return buffer_views, accessors, chunks, offset
+
+
+def _add_node(document: dict, name: str, primitive: dict) -> None:
+    """A node of its own mesh of one ``primitive``, in the scene."""
+    document["scenes"][0]["nodes"].append(len(document["nodes"]))
+    document["nodes"].append({"mesh": len(document["meshes"]), "name": name})
+    document["meshes"].append({"name": name, "primitives": [primitive]})
 
 
 @cache

@@ -100,6 +100,10 @@ def grid_colour(coloured: bool) -> str:
 
 
 SITES_COLOUR = "#222222"
+#: The colour of the strokes that show which way the hair grows at each site.
+STROKES_COLOUR = "#b2182b"
+#: A stroke's length on the canvas, pixels.
+STROKE_PX = 9.0
 #: Sites an SVG draws at the most (each a little square); a PNG draws them all.
 SVG_SITES = 50_000
 
@@ -131,6 +135,7 @@ class Picture:
         keep the flags' colours)
     colour_bar : ColourBar or None, that measure's scale, drawn under the legend
     grid : (s, 2, 2) float, the reference grid's segments
+    strokes : (n, 2, 2) float, a short segment from each site along its direction on the map
     """
 
     width: int
@@ -154,6 +159,7 @@ class Picture:
     face_colours: np.ndarray | None = None
     colour_bar: ColourBar | None = None
     grid: np.ndarray = field(default_factory=lambda: np.empty((0, 2, 2)))
+    strokes: np.ndarray = field(default_factory=lambda: np.empty((0, 2, 2)))
 
     @property
     def grid_colour(self) -> str:
@@ -223,8 +229,10 @@ def describe(
     sites: np.ndarray | None = None,
     colouring: tuple[np.ndarray, ColourBar] | None = None,
     grid: np.ndarray | None = None,
+    directions: np.ndarray | None = None,
 ) -> Picture:
-    """The picture of a flattened region, with zones, curves and sites over it.
+    """The picture of a flattened region, with zones, curves and sites over it (and, with
+    ``directions``, a stroke from each site along its direction).
 
     Parameters
     ----------
@@ -237,6 +245,7 @@ def describe(
     colouring : ((m, 3) uint8 colours, their bar) or None: the triangles coloured by a
         measure
     grid : (s, 2, 2) float or None, segments of the layout: a reference grid
+    directions : (n, 2) float or None, unit layout directions at the ``sites``
     """
     framing = Framing.of(flat.x, flat.y, flat.layout, width, height)
     x, s, plot = flat.x, framing.s_sign * flat.y, framing.plot
@@ -282,6 +291,11 @@ def describe(
         legend.append(
             (GRID_KEY, grid_colour(colouring is not None), "grid: planes across local X and Z")
         )
+    strokes = np.empty((0, 2, 2))
+    if directions is not None and len(dots):
+        on_canvas = directions * [1.0, framing.s_sign]  # rows grow with s
+        strokes = np.stack([dots, dots + STROKE_PX * on_canvas], axis=1)
+        legend.append((CURVE_KEY, STROKES_COLOUR, "growth: the hair's direction"))
     if seam:
         legend.append((-1, SEAM_COLOUR, "seam (phi +-180 deg)"))
     if singular:
@@ -308,6 +322,7 @@ def describe(
         face_colours=None if colouring is None else colouring[0],
         colour_bar=None if colouring is None else colouring[1],
         grid=lines,
+        strokes=strokes,
     )
 
 

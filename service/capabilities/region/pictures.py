@@ -32,10 +32,14 @@ FLOAT32_EXACT = 2**24
 
 
 def glb(
-    region: MeshRegion, params: MeshParams, sites: tuple[np.ndarray, np.ndarray] | None = None
+    region: MeshRegion,
+    params: MeshParams,
+    sites: tuple[np.ndarray, np.ndarray] | None = None,
+    lines: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> bytes:
     """The region as a GLB with ``TEXCOORD_0`` from the layout (and ``sites``, (n, 3) points
-    and normals, as a POINTS primitive: :func:`service.outputs.glb.region_glb`).
+    and normals, as a POINTS primitive, ``lines``, segments' ends and colours, as a LINES
+    one: :func:`service.outputs.glb.region_glb`).
 
     Raises
     ------
@@ -86,18 +90,20 @@ def glb(
             "p95": bar.p95,
         }
     return region_glb(
-        positions, uv, flat.vertex_ids, flat.faces, region.faces, extras, sites, colours
+        positions, uv, flat.vertex_ids, flat.faces, region.faces, extras, sites, colours, lines
     )
 
 
-def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...] = (), sites=None):
+def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...] = (), sites=None,
+             directions=None):  # fmt: skip
     resolved = plain(ResolvedParams.of_region(region))
     x, y = region.layout  # repaired when untangled
     flat = replace(region.flat, x=x, y=y)
     size = (params.image_width, params.image_height)
     coloured = face_colouring(region, params.colour_by)
     grid = reference_grid(region, params.grid_lines)
-    return describe(flat, resolved, len(region.faces), *size, drawn, sites, coloured, grid)
+    return describe(flat, resolved, len(region.faces), *size, drawn, sites, coloured, grid,
+                    directions)  # fmt: skip
 
 
 def reference_grid(region: MeshRegion, count: int) -> np.ndarray | None:
@@ -134,20 +140,25 @@ def face_colouring(region: MeshRegion, measure: ColourBy):
 Renderer = Callable[..., bytes]
 
 
-def map_renderers(region_of, drawn_of, sites_of=lambda result: None) -> dict[Output, Renderer]:
+def map_renderers(
+    region_of, drawn_of, sites_of=lambda result: None, directions_of=lambda result: None
+) -> dict[Output, Renderer]:
     """The SVG and PNG renderers of a result's region's map (``region_of(result)``) with
-    ``drawn_of(result)`` (zones, curves: :class:`~service.outputs.picture.Drawn`) and
-    ``sites_of(result)`` ((n, 2) layout points or None) over it; the PNG's raster charged
-    first."""
+    ``drawn_of(result)`` (zones, curves: :class:`~service.outputs.picture.Drawn`),
+    ``sites_of(result)`` ((n, 2) layout points or None) and ``directions_of(result)`` ((n, 2)
+    unit layout directions at them, or None) over it; the PNG's raster charged first."""
+
+    def drawn(result, params: PictureParams):
+        return _picture(region_of(result), params, drawn_of(result), sites_of(result),
+                        directions_of(result))  # fmt: skip
 
     def as_svg(result, params: PictureParams, ctx: Context) -> bytes:
-        picture = _picture(region_of(result), params, drawn_of(result), sites_of(result))
-        return to_svg(picture)
+        return to_svg(drawn(result, params))
 
     def as_png(result, params: PictureParams, ctx: Context) -> bytes:
         region = region_of(result)
         ctx.charge(picture_bytes(params.image_width, params.image_height, len(region.mesh.faces)))
-        return to_png(_picture(region, params, drawn_of(result), sites_of(result)))
+        return to_png(drawn(result, params))
 
     return {Output.SVG: as_svg, Output.PNG: as_png}
 

@@ -11,6 +11,7 @@ import io
 import json
 import struct
 
+import httpx
 import numpy as np
 import pytest
 from PIL import Image
@@ -20,9 +21,10 @@ from scipy.spatial.transform import Rotation
 from service.cli import main
 from service.samples import SAMPLES
 
-from .conftest import grid_mesh, load_sample
+from .conftest import grid_mesh, load_sample, real_servers
 from .test_api import flatten, obj_of, problem
 from .test_landmarks import on_head
+from .test_serve import running
 from .test_sites import NAME, SCALP, check_the_same_sites, posed, scalp_map, sites
 
 pytestmark = pytest.mark.anyio
@@ -385,3 +387,23 @@ async def test_the_command_line_takes_the_flow_from_a_file(client, tmp_path):
     flow.write_text(json.dumps(growth["flow"]))  # a list: the flow alone
     assert main([*command, "--flow", str(flow), "--out", str(out)]) == 0
     assert json.loads(out.read_bytes())["growth"]["whorls"] == []
+
+
+@real_servers
+def test_a_real_server_places_sites_with_their_directions():
+    """``meshflat serve`` (the command `make serve` runs), over HTTP: the map, then sites
+    with a hairline and a crown whorl, each with its unit direction."""
+    head = SAMPLES[NAME].path.read_bytes()
+    with running() as server, httpx.Client(base_url=server.url, timeout=60) as client:
+        mapped = client.post("/v1/flatten", files={"mesh": (NAME, head)},
+                             data={"params": json.dumps(SCALP)}).json()["vertices"]  # fmt: skip
+        x, y = np.asarray(mapped["x"]), np.asarray(mapped["y"])
+        growth = hairline_and_crown((x.min() + x.max()) / 2, (y.min() + y.max()) / 2,
+                                    max(np.ptp(x), np.ptp(y)))  # fmt: skip
+        params = SCALP | {"units": "mm", "density_per_cm2": 5, "growth": growth}
+        response = client.post("/v1/sites", files={"mesh": (NAME, head)},
+                               data={"params": json.dumps(params)})  # fmt: skip
+    assert response.status_code == 200, response.text
+    found = response.json()["sites"]
+    assert len(found["direction"]) == response.json()["count"] > 100
+    np.testing.assert_allclose(np.linalg.norm(found["direction"], axis=1), 1.0, atol=1e-12)

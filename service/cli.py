@@ -154,34 +154,29 @@ def _json_file(path: str, option: str):
         raise Problem(422, f"{option}: {path!r} is not JSON ({error})", field=option) from None
 
 
+def _listed_or_object(path: str, option: str, listed: str, what: str) -> dict:
+    """The JSON object a file of ``option`` holds, or ``{listed: [...]}`` for a list (the
+    list alone); a 422 naming the option, saying ``what`` it takes, for anything else."""
+    given = _json_file(path, option)
+    if isinstance(given, list):
+        return {listed: given}
+    if not isinstance(given, dict):
+        raise Problem(422, f"{option}: {what}", field=option)
+    return given
+
+
 def _growth(path: str) -> dict:
     """The ``growth`` params a ``--flow`` file holds: a list of flow curves, or an object of
     them (flow, whorls, exit_angle_deg)."""
-    growth = _json_file(path, "--flow")
-    if isinstance(growth, list):
-        return {"flow": growth}
-    if not isinstance(growth, dict):
-        raise Problem(
-            422,
-            "--flow: a list of flow curves, or an object with flow, whorls and exit_angle_deg",
-            field="--flow",
-        )
-    return growth
+    return _listed_or_object(path, "--flow", "flow", "a list of flow curves, or an object "
+                             "with flow, whorls and exit_angle_deg")  # fmt: skip
 
 
 def _drawn(path: str) -> dict:
     """The params a ``--zones`` file holds: a list of zones, or an object of params (zones,
     curves, units)."""
-    drawn = _json_file(path, "--zones")
-    if isinstance(drawn, list):
-        return {"zones": drawn}
-    if not isinstance(drawn, dict):
-        raise Problem(
-            422,
-            "--zones: a list of zones, or an object with zones, curves and units",
-            field="--zones",
-        )
-    return drawn
+    return _listed_or_object(path, "--zones", "zones", "a list of zones, or an object with "
+                             "zones, curves and units")  # fmt: skip
 
 
 def _cone(text: str) -> dict:

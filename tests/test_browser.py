@@ -381,6 +381,218 @@ def test_grafts_placed_in_a_zone_show_on_the_map_the_head_and_in_the_table(serve
     assert not problems, problems
 
 
+def about_the_middle(flat: dict, offsets: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """Points of the layout at ``offsets`` from the middle of the map, in shares of its width
+    and height."""
+    xs, ys = flat["vertices"]["x"], flat["vertices"]["y"]
+    mid_x, mid_y = (min(xs) + max(xs)) / 2, (min(ys) + max(ys)) / 2
+    width, height = max(xs) - min(xs), max(ys) - min(ys)
+    return [(mid_x + dx * width, mid_y + dy * height) for dx, dy in offsets]
+
+
+def draw_flow(page, flat: dict, points: list[tuple[float, float]]) -> float:
+    """Draw the flow through ``points`` as a user does: Draw the flow, a click at each point
+    but the last, a double click at the last (which ends it). Answers how closely the page can
+    read a click, in layout units (:func:`on_screen`)."""
+    page.click("#draw-flow")
+    clicks, tolerance = on_screen(page, flat, points)
+    for x, y in clicks[:-1]:
+        page.mouse.click(x, y)
+    # While drawing: the points and the open polyline through them.
+    assert page.locator("#map svg .growth-drawing .flow.drawing circle").count() == len(clicks) - 1
+    page.mouse.dblclick(*clicks[-1])
+    assert page.locator("#map svg .growth-drawing .flow.drawing").count() == 0
+    return tolerance
+
+
+def place_whorl(page, flat: dict, point: tuple[float, float], turn: str) -> None:
+    """Place a whorl turning ``turn`` at ``point`` of the layout: its sense, then a click."""
+    page.select_option("#whorl-turn", turn)
+    page.click("#place-whorl")
+    (click,), _ = on_screen(page, flat, [point])
+    page.mouse.click(*click)
+
+
+def sent_params(request) -> dict:
+    """The ``params`` part of the multipart body the page sent."""
+    boundary = request.headers["content-type"].split("boundary=")[1].encode()
+    for part in request.post_data_buffer.split(b"--" + boundary):
+        head, _, content = part.partition(b"\r\n\r\n")
+        if b'name="params"' in head:
+            return json.loads(content.removesuffix(b"\r\n"))
+    raise AssertionError("the request has no params part")
+
+
+def posted(page, route: str) -> list[dict]:
+    """The params the page posts to ``route`` from now on, in order, each request let through
+    unchanged (a route: only there does Chromium give a multipart body that holds a Blob)."""
+    sent: list[dict] = []
+
+    def keep(intercepted) -> None:
+        sent.append(sent_params(intercepted.request))
+        intercepted.continue_()
+
+    page.route(f"**{route}", keep)
+    return sent
+
+
+def place_grafts(page, trigger, sent: list[dict]) -> dict:
+    """Run ``trigger`` (a click on Place grafts, a new exit angle), wait until the page shows
+    the answer or the problem, and answer the params it posted (``sent``: :func:`posted`)."""
+    before = len(sent)
+    trigger()
+    page.wait_for_selector("#sites-status:is([data-state=placed], [data-state=error])",
+                           timeout=30_000)  # fmt: skip
+    assert len(sent) == before + 1, sent
+    return sent[-1]
+
+
+def strokes_on_map(page) -> np.ndarray:
+    """(n, 4): each graft's stroke on the map, its start and its step in SVG pixels."""
+    d = page.locator("#map svg g.sites-drawing path.strokes").get_attribute("d")
+    return np.array(
+        [[float(v) for v in part.replace("l", " ").split()] for part in d.split("M")[1:]]
+    )
+
+
+def assert_sent(growth: dict, flow: list, whorl: tuple[float, float], tolerance: float) -> None:
+    """``growth`` as posted holds the one flow, named, through the points of ``flow`` and the
+    one counterclockwise whorl at ``whorl``, each to ``tolerance`` (layout units)."""
+    (sent_flow,) = growth["flow"]
+    assert sent_flow["name"] == "flow 1"
+    (sent_whorl,) = growth["whorls"]
+    assert sent_whorl["turn"] == "counterclockwise"
+    got = [*zip(sent_flow["x"], sent_flow["y"], strict=True), (sent_whorl["x"], sent_whorl["y"])]
+    assert len(got) == len(flow) + 1
+    for (x, y), (got_x, got_y) in zip([*flow, whorl], got, strict=True):
+        assert abs(got_x - x) < tolerance and abs(got_y - y) < tolerance, (got, flow, whorl)
+
+
+def strokes_about(page, flat: dict, answer: dict, whorl: tuple[float, float]) -> np.ndarray:
+    """Checks the map's strokes: one for each site of the /v1/sites ``answer``, each along its
+    map direction (theta_phi: the picture's rows run with y). Answers how those within 40
+    pixels of ``whorl`` (a layout point) turn about it on the screen: the cross product of
+    the way from it and the stroke's, negative for a counterclockwise turn (rows run down)."""
+    strokes = strokes_on_map(page)
+    assert len(strokes) == answer["count"]
+    along = np.asarray(answer["sites"]["map_direction"])
+    step = strokes[:, 2:] / np.linalg.norm(strokes[:, 2:], axis=1, keepdims=True)
+    assert np.degrees(np.arccos(np.clip((step * along).sum(axis=1), -1, 1))).max() < 2
+    (centre,), _ = on_screen(page, flat, [whorl])
+    box = page.locator("#map svg").bounding_box()
+    _, _, width, _ = map(float, page.locator("#map svg").get_attribute("viewBox").split())
+    away = np.array([box["x"], box["y"]]) + strokes[:, :2] * box["width"] / width - centre
+    near = np.linalg.norm(away, axis=1) < 40
+    return away[near, 0] * step[near, 1] - away[near, 1] * step[near, 0]
+
+
+def test_flows_and_a_whorl_drawn_on_the_map_grow_the_grafts_as_strokes(server):
+    """A zone, a flow of three points (the last a double click) and a counterclockwise whorl
+    drawn on the map, exit angle 15°, Place grafts: the page posts the flow and the whorl at
+    the clicked points of the layout, and shows each graft /v1/sites answers for that request
+    as a stroke along its map direction on the map and as a line segment on the head; the
+    strokes about the whorl turn the way its arrow does; the table gives the zone's exit angle
+    and largest turn. Another exit angle places the grafts again, with it."""
+    flat = post(server, "/v1/flatten", PARAMS)
+    flow = about_the_middle(flat, [(-0.15, 0.06), (0.0, 0.09), (0.15, 0.06)])
+    (whorl,) = about_the_middle(flat, [(0.0, -0.06)])
+    problems: list[str] = []
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        assert page.locator("#draw-flow").is_disabled()  # no map to draw on yet
+        sent = posted(page, "/v1/sites")
+        flatten_sample(page)
+        draw(page, flat, pentagon(flat, 0.2))
+        tolerance = draw_flow(page, flat, flow)
+        place_whorl(page, flat, whorl, "counterclockwise")
+        drawn = page.locator("#growth-status")
+        assert [drawn.get_attribute(f"data-{kind}") for kind in ("flows", "whorls")] == ["1", "1"]
+        # The flow ends in an arrowhead; the whorl's arrow turns its way.
+        assert page.locator("#map svg .growth-drawing .flow polygon").count() == 1
+        assert page.locator("#map svg .whorl[data-turn=counterclockwise]").count() == 1
+        page.fill("#exit-angle", "15")
+        page.wait_for_timeout(500)
+        page.evaluate(CHANGED_PIXELS, True)
+
+        params = place_grafts(page, lambda: page.click("#place-sites"), sent)
+        # The request carried the flow and the whorl where they were clicked, and the angle.
+        assert_sent(params["growth"], flow, whorl, tolerance)
+        assert params["growth"]["exit_angle_deg"] == 15
+
+        # As many strokes, on the map and on the head, as /v1/sites answers for that request.
+        answer = post(server, "/v1/sites", params)
+        count = answer["count"]
+        status = page.locator("#sites-status")
+        assert status.get_attribute("data-state") == "placed", status.inner_text()
+        assert status.get_attribute("data-count") == str(count) and count > 50
+        assert status.get_attribute("data-strokes") == str(count)
+        turning = strokes_about(page, flat, answer, whorl)
+        assert len(turning) >= 5 and (turning < 0).mean() > 0.9, turning  # counterclockwise
+        # The head shows them; the table gives the zone's exit angle and largest turn.
+        page.wait_for_timeout(500)
+        assert page.evaluate(CHANGED_PIXELS, False) > 50
+        (zone,) = answer["zones"]
+        head = page.locator("#sites-table th").all_inner_texts()
+        assert head[-2:] == ["exit angle (°)", "largest turn (°)"]
+        cells = page.locator("#sites-table td").all_inner_texts()
+        assert cells[-2:] == ["15.0", f"{zone['largest_turn_deg']:.1f}"]
+        assert "15° off the scalp" in status.inner_text()
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "demo-growth.png"), full_page=True)
+
+        # Another exit angle: placed again with it.
+        page.fill("#exit-angle", "30")
+        again = place_grafts(page, lambda: page.locator("#exit-angle").blur(), sent)
+        assert again["growth"]["exit_angle_deg"] == 30
+        assert page.locator("#sites-table td").all_inner_texts()[-2] == "30.0"
+        assert status.get_attribute("data-strokes") == str(count)  # the same sites
+    assert not problems, problems
+
+
+def test_a_flow_or_whorl_the_service_refuses_is_named_and_marked_on_the_map(server):
+    """Two flows drawn across each other, then a whorl off the region: Place grafts shows the
+    service's 422 in the grafts' status, naming params.growth.flow.1 and then
+    params.growth.whorls.0, marks that flow or whorl on the map, and places no grafts; Clear
+    takes the flows and whorls away."""
+    flat = post(server, "/v1/flatten", PARAMS)
+    across = about_the_middle(flat, [(-0.1, 0.0), (0.1, 0.0)])
+    down = about_the_middle(flat, [(0.0, -0.1), (0.01, 0.1)])
+    xs, ys = flat["vertices"]["x"], flat["vertices"]["y"]
+    off_the_region = (min(xs) - 0.02 * (max(xs) - min(xs)), min(ys) - 0.02 * (max(ys) - min(ys)))
+    problems: list[str] = []
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        sent = posted(page, "/v1/sites")
+        flatten_sample(page)
+        draw(page, flat, pentagon(flat, 0.2))
+        draw_flow(page, flat, across)
+        draw_flow(page, flat, down)
+        assert page.locator("#growth-status").get_attribute("data-flows") == "2"
+        status = page.locator("#sites-status")
+        params = place_grafts(page, lambda: page.click("#place-sites"), sent)
+        assert [f["name"] for f in params["growth"]["flow"]] == ["flow 1", "flow 2"]
+        assert status.get_attribute("data-state") == "error"
+        text = status.inner_text()
+        assert text.startswith("422: params.growth.flow.1 ('flow 2')"), text
+        assert "crosses growth.flow.0" in text, text
+        flows = page.locator("#map svg .growth-drawing .flow")
+        assert [flows.nth(k).get_attribute("class") for k in range(2)] == ["flow", "flow error"]
+        assert page.locator("#map svg g.sites-drawing").count() == 0
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "demo-growth-refused.png"), full_page=True)
+
+        page.click("#clear-growth")
+        assert page.locator("#map svg .growth-drawing > *").count() == 0
+        assert status.get_attribute("data-state") == "none"
+        place_whorl(page, flat, off_the_region, "clockwise")
+        place_grafts(page, lambda: page.click("#place-sites"), sent)
+        assert status.get_attribute("data-state") == "error"
+        assert status.inner_text().startswith("422: params.growth.whorls.0: lies off the region")
+        assert page.locator("#map svg .growth-drawing .whorl.error").count() == 1
+    # The two 422s, as the browser logs a failed fetch.
+    assert [p for p in problems if "422" not in p] == [], problems
+
+
 #: Which side of the head each landmark is clicked from.
 VIEWS = {
     "nasion": "front",

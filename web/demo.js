@@ -3,8 +3,10 @@
 // (GLB from /v1/flatten, loaded by three.js's GLTFLoader). A zone drawn on the map is
 // measured by /v1/measure: its area, and its outline lifted onto the surface in the 3D view.
 // Grafts placed by /v1/sites (in the zone, or over the region) show on the map and the head,
-// with a table of each zone's area, density and grafts. The units are the sample's (from
-// /v1/samples), and what an answer warns of (units, a zone off the map) is listed.
+// with a table of each zone's area, density and grafts. Flows and whorls drawn on the map
+// give the grafts their growth (params.growth): each shows as a short stroke on the map and
+// the head. The units are the sample's (from /v1/samples), and what an answer warns of
+// (units, a zone off the map) is listed.
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
@@ -26,9 +28,10 @@ const vector = (id) => $(id).value.split(',').map(Number);
 // The API key, when the service requires one (MESHFLAT_API_KEYS); kept in the page only.
 const keyHeaders = () => ($('apikey').value.trim() ? { 'X-API-Key': $('apikey').value.trim() } : {});
 
+// The problem's field comes along: the page marks the flow or whorl a 422 names.
 async function problemOf(response) {
   const problem = await response.json().catch(() => ({ detail: response.statusText }));
-  return new Error(`${response.status}: ${problem.detail}`);
+  return Object.assign(new Error(`${response.status}: ${problem.detail}`), { field: problem.field });
 }
 
 function setStatus(text, isError = false) {
@@ -249,7 +252,7 @@ function removeOutline() {
 function clearZone() {
   Object.assign(zone, { points: [], drawing: false, closed: false, ticket: zone.ticket + 1 });
   mapSvg()?.querySelector('g.zone-drawing')?.remove();
-  $('map').classList.remove('drawing');
+  $('map').classList.toggle('drawing', growth.mode !== null);
   removeOutline();
   zoneStatus('', 'none');
   delete $('zone-area').dataset.ring;
@@ -260,55 +263,115 @@ function clearZone() {
 // -- grafts placed by /v1/sites -------------------------------------------------------------
 
 const SITES_COLOUR = 0x1b1b1b;
+// A graft's stroke in the 3D view runs from its root (the site, dark) to its tip (hair
+// brown): which way it grows shows without an arrowhead.
+const STROKE_ROOT = new THREE.Color(SITES_COLOUR);
+const STROKE_TIP = new THREE.Color(0x8c510a);
+// A stroke's length: on the map in the picture's pixels; on the head a share of the region's
+// size (its bounding sphere's radius), some 5 mm on an adult scalp in any unit.
+const STROKE_PIXELS = 8;
+const STROKE_OF_SIZE = 1 / 20;
 let grafts = null; // the sites in the 3D view
+let strokes = null; // their growth directions in the 3D view
 let sitesTicket = 0;
+
+function dispose(object) {
+  scene.remove(object);
+  object.geometry.dispose();
+  object.material.dispose();
+}
 
 function clearSites() {
   sitesTicket += 1;
   mapSvg()?.querySelector('g.sites-drawing')?.remove();
-  if (grafts) {
-    scene.remove(grafts);
-    grafts.geometry.dispose();
-    grafts.material.dispose();
-    grafts = null;
-  }
+  if (grafts) dispose(grafts);
+  if (strokes) dispose(strokes);
+  grafts = null;
+  strokes = null;
   $('sites-table').replaceChildren();
   $('sites-status').textContent = '';
   $('sites-status').className = '';
   $('sites-status').dataset.state = 'none';
   delete $('sites-status').dataset.count;
+  delete $('sites-status').dataset.strokes;
   showWarnings(null);
 }
 
+// Each site's map direction as a stroke from the site, in the picture's pixels: the layout's
+// unit vector through the UVs' affine map (its y turned over by s_sign), at STROKE_PIXELS.
+function mapStrokes(x, y, mapDirection) {
+  const b = plotBox();
+  const along = [(b.scale * b.width) / b.uSpan, (b.sSign * b.scale * b.height) / b.vSpan];
+  return x.map((xi, i) => {
+    const [px, py] = toPicture([xi, y[i]]);
+    const [dx, dy] = mapDirection[i].map((c, k) => c * along[k]);
+    const length = Math.hypot(dx, dy) || 1;
+    const [sx, sy] = [(dx / length) * STROKE_PIXELS, (dy / length) * STROKE_PIXELS];
+    return `M${px.toFixed(1)} ${py.toFixed(1)}l${sx.toFixed(1)} ${sy.toFixed(1)}`;
+  });
+}
+
+// The growth on the head: a segment from each site along its direction, root to tip.
+function showStrokes(position, direction) {
+  const length = map.size * STROKE_OF_SIZE;
+  const ends = position.flatMap((p, i) => [...p, ...p.map((c, k) => c + length * direction[i][k])]);
+  const colours = position.flatMap(() => [...STROKE_ROOT.toArray(), ...STROKE_TIP.toArray()]);
+  const geometry = new THREE.BufferGeometry();
+  geometry.setAttribute('position', new THREE.Float32BufferAttribute(ends, 3));
+  geometry.setAttribute('color', new THREE.Float32BufferAttribute(colours, 3));
+  strokes = new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ vertexColors: true }));
+  strokes.name = 'growth-strokes';
+  scene.add(strokes);
+  $('sites-status').dataset.strokes = String(geometry.attributes.position.count / 2);
+}
+
+function tableRow(cells, tag) {
+  const row = document.createElement('tr');
+  row.replaceChildren(...cells.map((text) => Object.assign(document.createElement(tag), { textContent: text })));
+  return row;
+}
+
 function showSites(answer) {
-  const { position, x, y } = answer.sites;
+  const { position, x, y, direction, map_direction: mapDirection } = answer.sites;
+  const grown = Boolean(answer.growth);
   const group = document.createElementNS(SVG, 'g');
   group.setAttribute('class', 'sites-drawing');
-  const d = x.map((xi, i) => {
-    const [px, py] = toPicture([xi, y[i]]);
-    return `M${(px - 1).toFixed(1)} ${(py - 1).toFixed(1)}h2v2h-2Z`;
-  });
+  // With growth a stroke from each site along its direction; else a dot at each.
+  const d = grown
+    ? mapStrokes(x, y, mapDirection)
+    : x.map((xi, i) => {
+        const [px, py] = toPicture([xi, y[i]]);
+        return `M${(px - 1).toFixed(1)} ${(py - 1).toFixed(1)}h2v2h-2Z`;
+      });
   const path = document.createElementNS(SVG, 'path');
   path.setAttribute('d', d.join(''));
+  if (grown) path.setAttribute('class', 'strokes');
   group.append(path);
   mapSvg().append(group);
+  // The flows and whorls stay above the strokes, where they can be read.
+  const drawn = mapSvg().querySelector('g.growth-drawing');
+  if (drawn) mapSvg().append(drawn);
   const geometry = new THREE.BufferGeometry();
   geometry.setAttribute('position', new THREE.Float32BufferAttribute(position.flat(), 3));
   grafts = new THREE.Points(geometry, new THREE.PointsMaterial({ color: SITES_COLOUR, size: 3, sizeAttenuation: false }));
   grafts.name = 'grafts';
   scene.add(grafts);
+  if (grown) showStrokes(position, direction);
+  // With growth, each zone's exit angle and its largest turn between neighbouring grafts
+  // (null for fewer than two).
+  const degrees = (value) => (value === null ? '–' : value.toFixed(1));
   const rows = answer.zones.map((z) => {
-    const row = document.createElement('tr');
     const cells = [z.name, z.area_cm2.toFixed(2), z.density_per_cm2.toFixed(1), z.sites.toLocaleString('en')];
-    row.replaceChildren(...cells.map((text) => Object.assign(document.createElement('td'), { textContent: text })));
-    return row;
+    if (grown) cells.push(degrees(z.exit_angle_deg), degrees(z.largest_turn_deg));
+    return tableRow(cells, 'td');
   });
-  const head = document.createElement('tr');
-  head.replaceChildren(...['zone', 'area (cm²)', 'density (per cm²)', 'grafts'].map((text) => Object.assign(document.createElement('th'), { textContent: text })));
-  $('sites-table').replaceChildren(head, ...rows);
+  const names = ['zone', 'area (cm²)', 'density (per cm²)', 'grafts'];
+  if (grown) names.push('exit angle (°)', 'largest turn (°)');
+  $('sites-table').replaceChildren(tableRow(names, 'th'), ...rows);
   // Fewer than two grafts have no distance apart (null).
   const apart = answer.min_distance_mm === null ? '' : `, at least ${answer.min_distance_mm.toFixed(2)} mm apart`;
-  $('sites-status').textContent = `${answer.count.toLocaleString('en')} grafts${apart}`;
+  const angle = grown ? `, ${answer.growth.exit_angle_deg}° off the scalp` : '';
+  $('sites-status').textContent = `${answer.count.toLocaleString('en')} grafts${apart}${angle}`;
   $('sites-status').dataset.count = String(answer.count);
   $('sites-status').dataset.state = 'placed';
 }
@@ -323,6 +386,10 @@ async function placeSites() {
     const ring = zone.points.map(toLayout);
     p.zones = [{ name: 'zone', outer: { x: ring.map((q) => q[0]), y: ring.map((q) => q[1]) } }];
   }
+  const grows = growthParams();
+  if (grows) p.growth = grows;
+  growth.error = null;
+  drawGrowth();
   $('sites-status').textContent = 'placing…';
   $('sites-status').dataset.state = 'placing';
   try {
@@ -336,10 +403,15 @@ async function placeSites() {
     $('sites-status').textContent = error.message;
     $('sites-status').className = 'error';
     $('sites-status').dataset.state = 'error';
+    // A flow or whorl the service refused (params.growth.flow.1): marked on the map.
+    const named = /^params\.growth\.(flow|whorls)\.(\d+)/.exec(error.field ?? '');
+    growth.error = named ? { kind: named[1], index: Number(named[2]) } : null;
+    drawGrowth();
   }
 }
 
 function startZone() {
+  setGrowthMode(null);
   clearZone();
   zone.drawing = true;
   $('map').classList.add('drawing');
@@ -380,11 +452,16 @@ async function measure() {
   }
 }
 
+// Where a click on the map is, in the picture's pixels.
+function pictureAt(event) {
+  const point = new DOMPoint(event.clientX, event.clientY).matrixTransform(mapSvg().getScreenCTM().inverse());
+  return [point.x, point.y];
+}
+
 // A click adds a point (the second click of a double click adds none); a double click closes.
 function addPoint(event) {
   if (!zone.drawing || event.detail > 1) return;
-  const point = new DOMPoint(event.clientX, event.clientY).matrixTransform(mapSvg().getScreenCTM().inverse());
-  zone.points.push([point.x, point.y]);
+  zone.points.push(pictureAt(event));
   drawZone();
 }
 
@@ -394,6 +471,148 @@ function closeZone() {
   $('map').classList.remove('drawing');
   drawZone();
   measure();
+}
+
+// -- the hair's growth: flows and whorls drawn on the map ----------------------------------
+
+// Flows (polylines along which the hair grows, first point to last) and whorls, in the
+// picture's pixels as the zone is; the flow being drawn; the mode ('flow', 'whorl' or null);
+// the item the last refusal named.
+const growth = { flows: [], whorls: [], drawing: null, mode: null, error: null };
+
+function svgElement(name, attributes) {
+  const element = document.createElementNS(SVG, name);
+  Object.entries(attributes).forEach(([key, value]) => element.setAttribute(key, value));
+  return element;
+}
+
+const pointsText = (points) => points.map((p) => p.map((c) => c.toFixed(1)).join(',')).join(' ');
+
+// A filled arrowhead at `to`, pointing away from `from`.
+function arrowhead([fromX, fromY], [toX, toY], size = 12) {
+  const length = Math.hypot(toX - fromX, toY - fromY) || 1;
+  const [dx, dy] = [(toX - fromX) / length, (toY - fromY) / length];
+  const back = [toX - size * dx, toY - size * dy];
+  const side = [(-dy * size) / 2, (dx * size) / 2];
+  return svgElement('polygon', { points: pointsText([[toX, toY], [back[0] + side[0], back[1] + side[1]], [back[0] - side[0], back[1] - side[1]]]) });
+}
+
+// A flow: its polyline, with an arrowhead where the hair grows to once ended, or its points
+// while drawn.
+function flowElement(points, ended) {
+  const group = svgElement('g', { class: ended ? 'flow' : 'flow drawing' });
+  group.append(svgElement('polyline', { points: pointsText(points) }));
+  if (ended) group.append(arrowhead(points.at(-2), points.at(-1)));
+  else group.append(...points.map(([cx, cy]) => svgElement('circle', { cx, cy, r: 3 })));
+  return group;
+}
+
+// A whorl: its centre and three quarters of a circle round it, the arrow turning its way.
+// The picture shows the scalp as seen from outside the head: a turn clockwise from outside
+// is clockwise on it, whatever the layout and the file's winding (transforms/layouts.py,
+// front_orientation, with the rows running down), so the arrow turns as the hair will.
+// SVG's sweep flag 1 is clockwise on screen.
+function whorlElement({ point: [cx, cy], turn }) {
+  const radius = 12;
+  const sense = turn === 'clockwise' ? 1 : -1;
+  const end = (3 * Math.PI) / 2;
+  const [ex, ey] = [cx + radius * Math.cos(sense * end), cy + radius * Math.sin(sense * end)];
+  const arc = `M${cx + radius} ${cy}A${radius} ${radius} 0 1 ${sense > 0 ? 1 : 0} ${ex} ${ey}`;
+  const tangent = [-Math.sin(sense * end) * sense, Math.cos(sense * end) * sense];
+  const group = svgElement('g', { class: 'whorl', 'data-turn': turn });
+  group.append(svgElement('path', { d: arc }), arrowhead([ex - tangent[0], ey - tangent[1]], [ex, ey], 10));
+  group.append(svgElement('circle', { cx, cy, r: 3 }));
+  return group;
+}
+
+function growthText() {
+  if (growth.mode === 'flow') return 'Click along the way the hair grows; double-click to end the flow.';
+  if (growth.mode === 'whorl') return `Click the ${$('whorl-turn').value} whorl's centre on the map.`;
+  const count = (n, word) => `${n} ${word}${n === 1 ? '' : 's'}`;
+  if (!growth.flows.length && !growth.whorls.length) return '';
+  return `${count(growth.flows.length, 'flow')}, ${count(growth.whorls.length, 'whorl')}: the grafts placed grow along them`;
+}
+
+function drawGrowth() {
+  $('growth-status').textContent = growthText();
+  $('growth-status').dataset.flows = String(growth.flows.length);
+  $('growth-status').dataset.whorls = String(growth.whorls.length);
+  const svg = mapSvg();
+  if (!svg) return;
+  let group = svg.querySelector('g.growth-drawing');
+  if (!group) {
+    group = svgElement('g', { class: 'growth-drawing' });
+    svg.append(group);
+  }
+  const flows = growth.flows.map((points) => flowElement(points, true));
+  const whorls = growth.whorls.map(whorlElement);
+  const { kind, index } = growth.error ?? {};
+  ({ flow: flows, whorls })[kind]?.[index]?.classList.add('error');
+  const drawing = growth.drawing ? [flowElement(growth.drawing, false)] : [];
+  group.replaceChildren(...flows, ...drawing, ...whorls);
+}
+
+function setGrowthMode(mode) {
+  growth.mode = mode;
+  growth.drawing = mode === 'flow' ? [] : null;
+  $('map').classList.toggle('drawing', mode !== null || zone.drawing);
+  drawGrowth();
+}
+
+// A zone half drawn is given up: a click goes to one drawing at a time.
+function startGrowth(mode) {
+  if (zone.drawing) clearZone();
+  setGrowthMode(mode);
+}
+
+// Grafts placed with the old growth no longer show it: they go, as when the zone changes.
+function growthChanged() {
+  growth.error = null;
+  if ($('sites-status').dataset.state !== 'none') clearSites();
+  setGrowthMode(null);
+}
+
+function clickGrowth(event) {
+  if (!growth.mode || event.detail > 1) return;
+  const point = pictureAt(event);
+  if (growth.mode === 'whorl') {
+    growth.whorls.push({ point, turn: $('whorl-turn').value });
+    growthChanged();
+    return;
+  }
+  // A point on the last (the first click of the double click that ends) adds nothing.
+  const last = growth.drawing.at(-1);
+  if (!last || Math.hypot(point[0] - last[0], point[1] - last[1]) > 2) growth.drawing.push(point);
+  drawGrowth();
+}
+
+function endFlow() {
+  if (growth.mode !== 'flow' || growth.drawing.length < 2) return;
+  growth.flows.push(growth.drawing);
+  growthChanged();
+}
+
+function clearGrowth() {
+  Object.assign(growth, { flows: [], whorls: [], error: null });
+  if ($('sites-status').dataset.state !== 'none') clearSites();
+  setGrowthMode(null);
+}
+
+// params.growth of the flows and whorls in the layout's coordinates; null without either.
+function growthParams() {
+  if (!growth.flows.length && !growth.whorls.length) return null;
+  const flow = growth.flows.map((points, k) => {
+    const layout = points.map(toLayout);
+    return { name: `flow ${k + 1}`, x: layout.map((q) => q[0]), y: layout.map((q) => q[1]) };
+  });
+  const whorls = growth.whorls.map(({ point, turn }) => {
+    const [x, y] = toLayout(point);
+    return { x, y, turn };
+  });
+  const grows = { flow, whorls };
+  // Blank: the service's default exit angle.
+  if ($('exit-angle').value.trim()) grows.exit_angle_deg = Number($('exit-angle').value);
+  return grows;
 }
 
 // -- landmarks placed on the whole head -----------------------------------------------------
@@ -543,11 +762,15 @@ async function flatten(event) {
   $('go').disabled = true;
   $('draw').disabled = true;
   $('place-sites').disabled = true;
+  $('draw-flow').disabled = true;
+  $('place-whorl').disabled = true;
   $('pick').disabled = true;
   if (landmarks.head) scene.remove(landmarks.head);
   landmarks.head = null;
   landmarks.picking = false;
   $('view').classList.remove('picking');
+  // The flows and whorls are drawn on the map that goes: they go with it, as the zone does.
+  clearGrowth();
   clearZone();
   map = null;
   document.body.dataset.state = 'flattening';
@@ -580,6 +803,8 @@ async function flatten(event) {
     $('draw').disabled = false;
     $('pick').disabled = false;
     $('place-sites').disabled = false;
+    $('draw-flow').disabled = false;
+    $('place-whorl').disabled = false;
     document.body.dataset.vertices = String(vertices);
     document.body.dataset.state = 'shown';
     setStatus(`done in ${Math.round(performance.now() - started)} ms`);
@@ -610,6 +835,14 @@ $('units').addEventListener('change', () => zone.closed && measure());
 $('colour-by').addEventListener('change', () => map && $('form').requestSubmit());
 $('map').addEventListener('click', addPoint);
 $('map').addEventListener('dblclick', closeZone);
+$('draw-flow').addEventListener('click', () => startGrowth('flow'));
+$('place-whorl').addEventListener('click', () => startGrowth('whorl'));
+$('clear-growth').addEventListener('click', clearGrowth);
+$('whorl-turn').addEventListener('change', drawGrowth);
+$('map').addEventListener('click', clickGrowth);
+$('map').addEventListener('dblclick', endFlow);
+// Another exit angle: grafts placed with growth are placed again, with it.
+$('exit-angle').addEventListener('change', () => strokes && placeSites());
 animate();
 loadSamples().then(() => {
   document.body.dataset.state = 'ready';

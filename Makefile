@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-locate bench-measure bench-sites bench-transfer bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-locate bench-measure bench-sites bench-growth bench-transfer bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -65,6 +65,11 @@ bench-measure: $(VENV)/.installed-bench
 # point-cloud-utils', Open3D's and trimesh's samplers (one thread, timed alternately).
 bench-sites: $(VENV)/.installed-bench $(VENV)/.installed-sites-peers
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m benchmarks.sites_bench $(BENCH_ARGS)
+
+# The growth field of 5 flows and a whorl on a million-face scalp, at 100,000 sites, against
+# potpourri3d's vector heat method (one thread, timed alternately; its runs take a minute each).
+bench-growth: $(VENV)/.installed-bench $(VENV)/.installed-growth-peers
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m benchmarks.growth_bench $(BENCH_ARGS)
 
 # Values between the map and the mesh on a million-face scalp (4096² image to the faces,
 # the vertices' values to a 2048² image), against Pillow's ImageDraw a triangle at a time.

@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from service.cli import main
 from service.samples import SAMPLES
+from transforms.growth import _solved
 
 from .conftest import grid_mesh, load_sample, real_servers
 from .test_api import flatten, obj_of, problem
@@ -407,3 +408,15 @@ def test_a_real_server_places_sites_with_their_directions():
     found = response.json()["sites"]
     assert len(found["direction"]) == response.json()["count"] > 100
     np.testing.assert_allclose(np.linalg.norm(found["direction"], axis=1), 1.0, atol=1e-12)
+
+
+def test_the_closed_form_solve_is_the_pseudo_inverses():
+    """The pushing forward solves its 2 x 2 systems in closed form, by the pseudo-inverse
+    where one is near singular (a triangle of no area): both agree with numpy's pinv."""
+    rng = np.random.default_rng(5)
+    matrices = rng.normal(size=(2000, 2, 2))
+    matrices[:50, :, 1] = 3.0 * matrices[:50, :, 0]  # singular: two parallel edges
+    matrices[50:60] = 0.0  # no area at all
+    right = rng.normal(size=(2000, 2))
+    expected = np.einsum("pij,pj->pi", np.linalg.pinv(matrices), right)
+    np.testing.assert_allclose(_solved(matrices, right), expected, rtol=1e-9, atol=1e-12)

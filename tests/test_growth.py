@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from service.cli import main
 from service.samples import SAMPLES
-from transforms.growth import _solved
+from transforms.arrays import solve_2x2
 
 from .conftest import grid_mesh, load_sample, real_servers
 from .test_api import flatten, obj_of, problem
@@ -419,4 +419,4 @@ def test_the_closed_form_solve_is_the_pseudo_inverses():
     matrices[50:60] = 0.0  # no area at all
     right = rng.normal(size=(2000, 2))
     expected = np.einsum("pij,pj->pi", np.linalg.pinv(matrices), right)
-    np.testing.assert_allclose(_solved(matrices, right), expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(solve_2x2(matrices, right), expected, rtol=1e-9, atol=1e-12)

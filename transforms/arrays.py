@@ -294,3 +294,28 @@ def blocks(n: int, size: int | None = None):
     for start in range(0, n, size):
         checkpoint()
         yield slice(start, min(start + size, n))
+
+
+#: A 2 x 2 matrix whose determinant is below this share of its squared size is solved by the
+#: pseudo-inverse (a triangle of no area, on the map or on the surface).
+SINGULAR = 1e-12
+
+
+def solve_2x2(matrices: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """(p, 2) float: ``A^-1 b`` for (p, 2, 2) ``matrices`` and (p, 2) ``right``, in closed
+    form (a hundred times numpy's batched pseudo-inverse), by the pseudo-inverse where ``A``
+    is near singular."""
+    a, b = matrices[:, 0, 0], matrices[:, 0, 1]
+    c, d = matrices[:, 1, 0], matrices[:, 1, 1]
+    det = a * d - b * c
+    size = np.einsum("pij,pij->p", matrices, matrices)
+    regular = np.abs(det) > SINGULAR * size
+    out = np.empty_like(right)
+    safe = np.where(regular, det, 1.0)
+    out[:, 0] = (d * right[:, 0] - b * right[:, 1]) / safe
+    out[:, 1] = (a * right[:, 1] - c * right[:, 0]) / safe
+    if not regular.all():
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pseudo = np.linalg.pinv(matrices[~regular])
+        out[~regular] = np.einsum("pij,pj->pi", pseudo, right[~regular])
+    return out

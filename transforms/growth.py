@@ -27,6 +27,7 @@ import numpy as np
 from scipy.sparse import coo_matrix, diags
 from scipy.sparse.linalg import splu
 
+from .arrays import solve_2x2
 from .checkpoints import checkpoint
 from .mapping import MapTriangles
 from .zones import Polyline
@@ -324,7 +325,7 @@ def pushed_forward(
     corners2 = triangles.map_points[triangles.faces[faces]]
     e3 = np.stack([corners3[:, 1] - corners3[:, 0], corners3[:, 2] - corners3[:, 0]], axis=2)
     e2 = np.stack([corners2[:, 1] - corners2[:, 0], corners2[:, 2] - corners2[:, 0]], axis=2)
-    along = _solved(e2, directions)
+    along = solve_2x2(e2, directions)
     tangent = np.einsum("pij,pj->pi", e3, along)
     tangent -= np.einsum("pi,pi->p", tangent, normals)[:, None] * normals
     size = np.linalg.norm(tangent, axis=1)
@@ -336,32 +337,7 @@ def pushed_forward(
     tangent /= np.where(size > 0, size, 1.0)[:, None]
     # E3^+ t = (E3^T E3)^-1 E3^T t: the normal equations of a 3 x 2 system.
     gram = np.einsum("pki,pkj->pij", e3, e3)
-    on_map = np.einsum("pij,pj->pi", e2, _solved(gram, np.einsum("pki,pk->pi", e3, tangent)))
+    on_map = np.einsum("pij,pj->pi", e2, solve_2x2(gram, np.einsum("pki,pk->pi", e3, tangent)))
     length = np.linalg.norm(on_map, axis=1)
     on_map /= np.where(length > 0, length, 1.0)[:, None]
     return tangent, on_map
-
-
-#: A 2 x 2 matrix whose determinant is below this share of its squared size is solved by the
-#: pseudo-inverse (a triangle of no area, on the map or on the surface).
-SINGULAR = 1e-12
-
-
-def _solved(matrices: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """(p, 2) float: ``A^-1 b`` for (p, 2, 2) ``matrices`` and (p, 2) ``right``, in closed
-    form (a hundred times numpy's batched pseudo-inverse), by the pseudo-inverse where ``A``
-    is near singular."""
-    a, b = matrices[:, 0, 0], matrices[:, 0, 1]
-    c, d = matrices[:, 1, 0], matrices[:, 1, 1]
-    det = a * d - b * c
-    size = np.einsum("pij,pij->p", matrices, matrices)
-    regular = np.abs(det) > SINGULAR * size
-    out = np.empty_like(right)
-    safe = np.where(regular, det, 1.0)
-    out[:, 0] = (d * right[:, 0] - b * right[:, 1]) / safe
-    out[:, 1] = (a * right[:, 1] - c * right[:, 0]) / safe
-    if not regular.all():
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pseudo = np.linalg.pinv(matrices[~regular])
-        out[~regular] = np.einsum("pij,pj->pi", pseudo, right[~regular])
-    return out

@@ -117,8 +117,9 @@ def test_a_check_belongs_to_its_own_thread():
 async def test_a_job_past_its_time_limit_stops_at_its_next_checkpoint(monkeypatch):
     """A registration of two 200k-face heads takes over a second; with a 0.3 s limit its
     client has its 504, and the thread still computing stops at the first check after the
-    limit (one call past it, the one that raises), in the registration's own loop (not at
-    the stage after it), so its slot is soon free."""
+    limit (one call past it, the one that raises), in a loop of the core (the fit's or the
+    registration's, as the machine's speed has it; not at the stage after it), so its slot is
+    soon free."""
     expired_calls = []
     check = jobs.Deadline.check
 
@@ -142,4 +143,4 @@ async def test_a_job_past_its_time_limit_stops_at_its_next_checkpoint(monkeypatc
                 break
             await anyio.sleep(0.05)
         assert gate.in_flight == 0, "the job still holds its slot"
-    assert len(expired_calls) == 1 and expired_calls[0].endswith("registration.py")
+    assert len(expired_calls) == 1 and "/transforms/" in expired_calls[0], expired_calls

@@ -115,7 +115,7 @@ def test_a_check_belongs_to_its_own_thread():
 
 
 async def test_a_job_past_its_time_limit_stops_at_its_next_checkpoint(monkeypatch):
-    """A registration of two 200k-face heads takes over a second; with a 0.3 s limit its
+    """A registration of two 200k-face heads takes over a second; with a 0.5 s limit its
     client has its 504, and the thread still computing stops at the first check after the
     limit (one call past it, the one that raises), in a loop of the core (the fit's or the
     registration's, as the machine's speed has it; not at the stage after it), so its slot is
@@ -130,7 +130,7 @@ async def test_a_job_past_its_time_limit_stops_at_its_next_checkpoint(monkeypatc
 
     monkeypatch.setattr(jobs.Deadline, "check", recorded)
     head = SAMPLES["lee-perry-smith.glb"].path.read_bytes()
-    async with started(Settings(request_timeout=0.3)) as client:
+    async with started(Settings(request_timeout=0.5)) as client:
         response = await client.post(
             "/v1/register",
             files={"baseline": ("b.glb", head), "follow_up": ("f.glb", head)},

@@ -115,11 +115,11 @@ def test_a_check_belongs_to_its_own_thread():
 
 
 async def test_a_job_past_its_time_limit_stops_at_its_next_checkpoint(monkeypatch):
-    """A registration of two 200k-face heads takes over a second; with a 0.5 s limit its
-    client has its 504, and the thread still computing stops at the first check after the
-    limit (one call past it, the one that raises), in a loop of the core (the fit's or the
-    registration's, as the machine's speed has it; not at the stage after it), so its slot is
-    soon free."""
+    """A registration of two 17,670-face heads (Lee Perry-Smith) takes over a second; with a
+    0.5 s limit its client has its 504, and the thread still computing stops at the first
+    check after the limit (one call past it, the one that raises), in a loop of the core (the
+    fit's or the registration's, as the machine's speed has it; not at the stage after it),
+    so its slot is soon free."""
     expired_calls = []
     check = jobs.Deadline.check
 

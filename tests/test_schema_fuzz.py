@@ -41,7 +41,8 @@ app = create_app(Settings(api_keys=(KEY,), max_sites=20_000))
 # content (the schema says "binary"), a point at the centre (no direction), theta, phi and r
 # of different lengths, "sigma or pole_angle_deg, not both" across a nested object, a ring
 # drawn on the map that crosses itself or a hole outside its zone. Their 422
-# is still checked to be a documented problem that conforms to its schema. /v1/sites also
+# is still checked to be a documented problem that conforms to its schema. /v1/sites (and
+# /v1/strands, which takes its params and needs a growth field and a length) also
 # answers 422 to zones that overlap, a density without units or a spacing the sites do not
 # fit at, and 413 to more sites than the limit; /v1/register 422 to a follow-up that cannot
 # be read or registered; /v1/transfer 422 to an image part that is not a PNG of the
@@ -57,7 +58,7 @@ CONFIG = SchemathesisConfig.from_dict(
                 "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx", "422"]}},
             },
             {
-                "include-path-regex": "^/v1/sites$",
+                "include-path-regex": "^/v1/(sites|strands)$",
                 "checks": {
                     "positive_data_acceptance": {"expected-statuses": ["2xx", "413", "422"]}
                 },

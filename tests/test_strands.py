@@ -6,11 +6,16 @@ to every triangle)."""
 
 from __future__ import annotations
 
+import io
+import json
 from functools import cache
 
 import numpy as np
 import pytest
+from PIL import Image
+from scipy.spatial.transform import Rotation
 
+from service.samples import SAMPLES
 from transforms import MapTriangles, fit_region, lift_curve
 from transforms.growth import growth_field, pushed_forward
 from transforms.sites import SitePart, place_sites, site_normals, vertex_normals
@@ -23,6 +28,10 @@ from transforms.strands import (
 )
 
 from .conftest import load_sample
+from .test_api import flatten, problem
+from .test_growth import accessor, centre_of_map, glb_parts, hairline_and_crown
+from .test_sites import PARAMS as SITES_PARAMS
+from .test_sites import posed, sites
 
 NAME = "fsaverage-head.ply"
 
@@ -121,3 +130,121 @@ def test_no_strand_point_is_inside_the_head_or_near_its_surface_past_2_mm(cleara
     gaps = distances_to_surface(points[sample], vertices, faces)
     assert gaps[arc[sample] > 2.0 + 1e-9].min() >= 0.5 * clearance - 1e-9
     assert gaps.min() > 0.0
+
+
+# -- through the API ------------------------------------------------------------------------
+
+
+async def strands_of(client, params: dict, data: bytes | None = None, name: str = NAME):
+    return await flatten(client, name, {**SITES_PARAMS, **params}, data=data,
+                         endpoint="/v1/strands")  # fmt: skip
+
+
+async def growth_of(client) -> dict:
+    cx, cy, size = await centre_of_map(client)
+    return hairline_and_crown(cx, cy, size)
+
+
+@pytest.mark.anyio
+async def test_strands_start_at_the_sites_along_their_directions_and_keep_their_lengths(client):
+    growth = await growth_of(client)
+    asked = {"density_per_cm2": 3, "seed": 4, "growth": growth}
+    placed = (await sites(client, asked)).json()
+    response = await strands_of(client, asked | {"length_mm": 50, "points": 12})
+    assert response.status_code == 200, response.text
+    answer = response.json()
+    points = np.asarray(answer["points"])
+    assert points.shape == (placed["count"], 12, 3) and answer["count"] == placed["count"]
+    assert answer["root_site"] == list(range(placed["count"]))
+    np.testing.assert_allclose(points[:, 0], placed["sites"]["position"], rtol=0, atol=1e-9)
+    first = points[:, 1] - points[:, 0]
+    angles = np.degrees(np.arccos(np.clip(np.einsum(
+        "pd,pd->p", first / np.linalg.norm(first, axis=1)[:, None],
+        placed["sites"]["direction"]), -1, 1)))  # fmt: skip
+    assert angles.max() < 1.0
+    arcs = np.linalg.norm(np.diff(points, axis=1), axis=2).sum(axis=1)
+    np.testing.assert_allclose(arcs, 50.0, rtol=0.01)
+    np.testing.assert_allclose(answer["length_mm"], 50.0)
+    vertices, faces = (np.array(a) for a in load_sample(NAME))
+    sample = points[:, 1:].reshape(-1, 3)[::5]
+    assert np.abs(winding_numbers(sample, vertices, faces)).max() < 0.5
+    again = (await strands_of(client, asked | {"length_mm": 50, "points": 12})).json()
+    assert again["points"] == answer["points"]  # same seed, same strands
+
+
+@pytest.mark.anyio
+async def test_zones_and_a_length_map_give_the_lengths_asked(client):
+    growth = await growth_of(client)
+    cx, cy, size = await centre_of_map(client)
+    zones = [
+        {"name": "front", "outer": {"x": [cx - size, cx + size, cx + size, cx - size],
+                                    "y": [cy - size, cy - size, cy, cy]},
+         "density_per_cm2": 2, "length_mm": 30},
+        {"name": "back", "outer": {"x": [cx - size, cx + size, cx + size, cx - size],
+                                   "y": [cy, cy, cy + size, cy + size]},
+         "density_per_cm2": 2, "length_mm": 70},
+    ]  # fmt: skip
+    answer = (await strands_of(client, {"zones": zones, "growth": growth})).json()
+    plain = [{k: v for k, v in zone.items() if k != "length_mm"} for zone in zones]
+    placed = (await sites(client, {"zones": plain, "growth": growth})).json()
+    front = np.asarray(placed["sites"]["y"]) < cy
+    expected = np.where(front, 30.0, 70.0)
+    np.testing.assert_allclose(answer["length_mm"], expected)
+    arcs = np.linalg.norm(np.diff(np.asarray(answer["points"]), axis=1), axis=2).sum(axis=1)
+    np.testing.assert_allclose(arcs, expected, rtol=0.01)
+    grey = Image.new("L", (1200, 800), 128)  # the PNG answer's default size
+    png = io.BytesIO()
+    grey.save(png, format="PNG")
+    files = {
+        "mesh": (NAME, SAMPLES[NAME].path.read_bytes()),
+        "length_map": ("l.png", png.getvalue()),
+    }
+    params = {**SITES_PARAMS, "density_per_cm2": 2, "growth": growth, "length_range": [20, 60]}
+    mapped = await client.post("/v1/strands", files=files, data={"params": json.dumps(params)})
+    assert mapped.status_code == 200, mapped.text
+    np.testing.assert_allclose(mapped.json()["length_mm"], 20 + 40 * 128 / 255)
+
+
+@pytest.mark.anyio
+async def test_strands_are_the_same_turned_for_the_head_moved_and_turned(client):
+    _, params = posed(Rotation.identity(), 1.0, np.zeros(3), "mm")
+    plain = (await sites(client, params | {"density_per_cm2": 5})).json()["sites"]
+    x, y = np.asarray(plain["x"]), np.asarray(plain["y"])
+    growth = hairline_and_crown((x.min() + x.max()) / 2, (y.min() + y.max()) / 2,
+                                max(np.ptp(x), np.ptp(y)))  # fmt: skip
+    asked = {"density_per_cm2": 2, "seed": 3, "growth": growth, "length_mm": 40}
+    here = (await strands_of(client, params | asked)).json()
+    rng = np.random.default_rng(43)
+    turn, shift = Rotation.random(random_state=rng), rng.normal(size=3) * 300
+    moved, params = posed(turn, 1.0, shift, "mm")
+    there = (await strands_of(client, params | asked, data=moved, name="moved.obj")).json()
+    expected = turn.apply(np.asarray(here["points"]).reshape(-1, 3)) + shift
+    np.testing.assert_allclose(np.asarray(there["points"]).reshape(-1, 3), expected, atol=1e-6)
+
+
+@pytest.mark.anyio
+async def test_strands_need_growth_and_a_length(client):
+    growth = await growth_of(client)
+    problem(await strands_of(client, {"density_per_cm2": 1, "length_mm": 40}), 422,
+            "params.growth")  # fmt: skip
+    body = problem(await strands_of(client, {"density_per_cm2": 1, "growth": growth}), 422)
+    assert body["detail"].startswith("params: length_mm: the strands' length")
+
+
+@pytest.mark.anyio
+async def test_the_ply_and_the_glb_hold_every_strand(client):
+    growth = await growth_of(client)
+    asked = {"density_per_cm2": 2, "growth": growth, "length_mm": 40, "points": 8}
+    answer = (await strands_of(client, asked)).json()
+    count = answer["count"]
+    data = (await strands_of(client, asked | {"output": "ply"})).content
+    header, _, body = data.partition(b"end_header\n")
+    assert f"element vertex {count * 8}\n".encode() in header
+    assert f"element edge {count * 7}\n".encode() in header
+    points = np.frombuffer(body[: count * 8 * 24], dtype="<f8").reshape(count, 8, 3)
+    np.testing.assert_allclose(points, answer["points"])
+    document, binary = glb_parts((await strands_of(client, asked | {"output": "glb"})).content)
+    (node,) = [mesh for mesh in document["meshes"] if mesh["name"] == "strands"]
+    ends = accessor(document, binary, node["primitives"][0]["attributes"]["POSITION"])
+    assert node["primitives"][0]["mode"] == 1 and ends.shape == (count * 7 * 2, 3)
+    np.testing.assert_allclose(ends[0::2].reshape(count, 7, 3), points[:, :-1], atol=1e-3)

@@ -11,11 +11,22 @@ context a use-case runs in (:mod:`.context`).
 
 from __future__ import annotations
 
-from . import fit, flatten, locate, measure, points, register, sites, transfer, validate
+from . import (
+    fit,
+    flatten,
+    locate,
+    measure,
+    points,
+    register,
+    sites,
+    strands,
+    transfer,
+    validate,
+)
 from .rows import Capability, JsonCapability, MeshCapability
 
 #: The capability modules, in the order of the API's reference.
-MODULES = (flatten, validate, fit, locate, measure, sites, register, transfer, points)
+MODULES = (flatten, validate, fit, locate, measure, sites, strands, register, transfer, points)
 
 #: Every row of the table.
 CAPABILITIES: tuple[Capability, ...] = tuple(row for module in MODULES for row in module.ROWS)

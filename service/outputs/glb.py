@@ -61,6 +61,7 @@ def region_glb(
     sites: tuple[np.ndarray, np.ndarray] | None = None,
     colours: np.ndarray | None = None,
     lines: tuple[np.ndarray, np.ndarray] | None = None,
+    lines_name: str = "growth",
 ) -> bytes:
     """A GLB of one triangle mesh, of sites on it as a POINTS primitive, and of line
     segments over it as a LINES primitive.
@@ -78,7 +79,7 @@ def region_glb(
         (``sites``: ``POSITION`` and ``NORMAL``, mode POINTS) of a second node
     colours : (k, 3) float or None, ``COLOR_0`` of the region's vertices
     lines : ((2 s, 3), (2 s, 3)) float or None: segments' ends (each pair one segment) and
-        their colours in [0, 1], a third mesh (``growth``: ``POSITION`` and ``COLOR_0``,
+        their colours in [0, 1], a third mesh (``lines_name``: ``POSITION`` and ``COLOR_0``,
         mode LINES) of a third node
 
     Returns
@@ -144,7 +145,8 @@ def region_glb(
     for name, mode, attributes in _OVERLAYS:
         if attributes["POSITION"] in accessor_of:
             found = {key: accessor_of[blob] for key, blob in attributes.items()}
-            _add_node(document, name, {"attributes": found, "mode": mode})
+            shown = lines_name if mode == _LINES else name
+            _add_node(document, shown, {"attributes": found, "mode": mode})
     json_chunk = orjson.dumps(document, option=orjson.OPT_SERIALIZE_NUMPY)
     json_chunk += b" " * (-len(json_chunk) % 4)
     binary = b"".join(chunks)

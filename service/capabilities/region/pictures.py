@@ -36,10 +36,11 @@ def glb(
     params: MeshParams,
     sites: tuple[np.ndarray, np.ndarray] | None = None,
     lines: tuple[np.ndarray, np.ndarray] | None = None,
+    lines_name: str = "growth",
 ) -> bytes:
     """The region as a GLB with ``TEXCOORD_0`` from the layout (and ``sites``, (n, 3) points
     and normals, as a POINTS primitive, ``lines``, segments' ends and colours, as a LINES
-    one: :func:`service.outputs.glb.region_glb`).
+    one of a node named ``lines_name``: :func:`service.outputs.glb.region_glb`).
 
     Raises
     ------
@@ -90,7 +91,16 @@ def glb(
             "p95": bar.p95,
         }
     return region_glb(
-        positions, uv, flat.vertex_ids, flat.faces, region.faces, extras, sites, colours, lines
+        positions,
+        uv,
+        flat.vertex_ids,
+        flat.faces,
+        region.faces,
+        extras,
+        sites,
+        colours,
+        lines,
+        lines_name,
     )
 
 

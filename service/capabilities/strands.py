@@ -1,0 +1,305 @@
+"""``POST /v1/strands``: guide hairs grown from the plan's sites along the growth field, kept
+out of the head (:mod:`transforms.strands`, docs/math.md, section 20)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated
+
+import numpy as np
+from pydantic import ConfigDict, Field, model_validator
+
+from transforms import Framing
+from transforms.sites import vertex_normals
+from transforms.strands import Roots, StrandShape, SurfaceGuard, grow_strands
+
+from ..errors import InvalidInput
+from ..outputs import Output
+from .context import Context
+from .fields import output_choice
+from .inputs import PngFile, PngPart
+from .region.answers import ResolvedParams
+from .region.params import MESH_PARAMS_EXAMPLE
+from .region.pictures import glb, map_renderers
+from .rows import MeshCapability
+from .sites import (
+    DENSITY_MAP,
+    Placed,
+    SitesInput,
+    SitesParams,
+    SiteZone,
+    place,
+)
+from .units import Units
+from .warnings import WarnedAnswer
+
+#: A strand's length, millimetres: a tenth of a millimetre to a metre.
+LengthMm = Annotated[float, Field(allow_inf_nan=False, gt=0.1, le=1000.0)]
+#: The arc length from the root within which a strand may lie nearer the scalp than half
+#: its clearance (it leaves the skin there), millimetres.
+FREE_MM = 2.0
+#: What a strand point takes: its coordinates, its checks against the surface (candidate
+#: triangles and their closest points), its JSON; measured in the strands benchmark.
+STRAND_POINT_BYTES = 2_500
+
+
+class StrandZone(SiteZone):
+    """A zone drawn on the map, its density of sites, and the length of their strands."""
+
+    length_mm: LengthMm | None = Field(
+        None, description="The length of this zone's strands (default: params.length_mm)."
+    )
+
+
+class StrandsParams(SitesParams):
+    """The JSON of the ``params`` field of /v1/strands: everything /v1/sites takes (growth
+    required), the strands' length, points, clearance and width."""
+
+    zones: Annotated[list[StrandZone], Field(max_length=256)] = Field(
+        [],
+        description="Zones drawn on the map (as for /v1/sites), each with its density and "
+        "optionally its strands' length_mm.",
+    )
+    length_mm: LengthMm | None = Field(
+        None,
+        description="The strands' length (arc length), mm; or per zone, or a length_map.",
+    )
+    length_range: Annotated[list[LengthMm], Field(min_length=2, max_length=2)] | None = Field(
+        None,
+        description="With a length_map part: the lengths, mm, its grey values 0 and 255 stand "
+        "for, [lo, hi] (linear between).",
+    )
+    points: int = Field(16, ge=2, le=256, description="Points a strand (2 to 256).")
+    clearance_mm: float = Field(
+        1.0,
+        gt=0,
+        le=100,
+        allow_inf_nan=False,
+        description="How far above the scalp a strand lies once it has bent over, mm.",
+    )
+    width_mm: float = Field(
+        0.08, gt=0, le=10, allow_inf_nan=False, description="A strand's width, mm."
+    )
+    output: output_choice(
+        (Output.JSON, Output.PLY, Output.GLB, Output.SVG, Output.PNG),
+        "json (application/json); ply (application/ply: the strands' points and their "
+        "segments as edges); glb (model/gltf-binary: the region mesh with its UVs and a "
+        "strands node, a LINES primitive); svg (image/svg+xml) or png (image/png): the map "
+        "with the roots and their directions.",
+    ) = None
+
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    **MESH_PARAMS_EXAMPLE,
+                    "density_per_cm2": 3,
+                    "units": "cm",
+                    "seed": 7,
+                    "growth": {"whorls": [{"x": -1.55, "y": 1.55, "turn": "clockwise"}]},
+                    "length_mm": 40,
+                    "points": 8,
+                }
+            ]
+        }
+    )
+
+    @model_validator(mode="after")
+    def _a_length_for_each(self) -> StrandsParams:
+        if self.length_range is not None:
+            low, high = self.length_range
+            if low > high or self.length_mm is not None:
+                raise ValueError(
+                    "length_range: [lo, hi] with lo <= hi, for a length_map part, without length_mm"
+                )
+            return self
+        if self.length_mm is not None:
+            return self
+        missing = [i for i, zone in enumerate(self.zones) if zone.length_mm is None]
+        if not self.zones or missing:
+            where = f"zones.{missing[0]} gives none: " if missing else ""
+            raise ValueError(
+                f"length_mm: the strands' length, mm ({where}give length_mm, or each zone's, "
+                "or with a length_map part length_range)"
+            )
+        return self
+
+
+@dataclass(frozen=True)
+class StrandsInput(SitesInput):
+    """A strands request: the sites' inputs and the ``length_map`` part."""
+
+    length_map: PngFile | None = None
+
+
+@dataclass(frozen=True)
+class Strands:
+    """Strands grown from placed sites: ``points`` (n, m, 3), each strand's ``length``
+    (n,), mesh units; the ``placed`` sites their roots; their ``width_mm``."""
+
+    placed: Placed
+    points: np.ndarray
+    length: np.ndarray
+    width_mm: float
+
+
+def strands(given: StrandsInput, ctx: Context) -> Strands:
+    """The sites of ``params`` (:func:`service.capabilities.sites.place`, their growth
+    required) and a strand from each (:func:`transforms.strands.grow_strands`)."""
+    params = given.params
+    if params.growth is None:
+        raise InvalidInput("growth", "strands grow along the hair's direction: give growth "
+                           "(flow, whorls, or the head's landmarks)")  # fmt: skip
+    if (params.length_range is None) != (given.length_map is None):
+        raise InvalidInput("length_map", "a length map and params.length_range go together")
+    placed = place(given, ctx)
+    scale = placed.mm_per_unit
+    count = len(placed.sites.triangles)
+    ctx.charge(STRAND_POINT_BYTES * count * params.points)
+    lengths = _lengths(params, given.length_map, placed, ctx) / scale
+    grown = placed.grown
+    triangles = placed.triangles
+    normals = vertex_normals(triangles.surface_points, triangles.faces)
+    outward = _outward(triangles, placed.region.frame.center)
+    mesh = placed.region.mesh
+    roots = Roots(placed.sites.points, grown.direction, placed.normals, placed.sites.triangles,
+                  placed.map_points)  # fmt: skip
+    clearance = params.clearance_mm / scale
+    shape = StrandShape(params.points, clearance, 2.0 * clearance, FREE_MM / scale)
+    guard = SurfaceGuard(mesh.vertices, mesh.faces, outward)
+    points = grow_strands(triangles, grown.field, outward * normals, roots, lengths, shape, guard)
+    return Strands(placed, points, lengths, params.width_mm)
+
+
+def _outward(triangles, centre) -> int:
+    """+1 when the region's winding normals point away from ``centre`` on the whole (its
+    sites' normals do, §13), else -1: the whole mesh's are turned alike."""
+    corners = triangles.surface_points[triangles.faces]
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    return 1 if np.einsum("md,md->", cross, corners.mean(axis=1) - np.asarray(centre)) >= 0 else -1
+
+
+def _lengths(params: StrandsParams, length_map: PngFile | None, placed: Placed, ctx) -> np.ndarray:
+    """(n,) float, mm: each site's strand length: its zone's, the top-level one, or the
+    length map's pixel under its map point."""
+    part = placed.sites.part
+    if params.length_range is not None:
+        image = length_map.read(params, ctx).values
+        height, width = image.shape
+        x, y = placed.region.layout
+        framing = Framing.of(x, y, placed.region.flat.layout, width, height)
+        column, row = np.floor(framing.pixels(placed.map_points)).astype(np.int64).T
+        values = image[np.clip(row, 0, height - 1), np.clip(column, 0, width - 1)]
+        low, high = params.length_range
+        return low + (high - low) * values
+    if not params.zones:
+        return np.full(len(part), params.length_mm, dtype=np.float64)
+    by_zone = [params.length_mm if z.length_mm is None else z.length_mm for z in params.zones]
+    return np.asarray(by_zone, dtype=np.float64)[part]
+
+
+class StrandsResponse(WarnedAnswer):
+    params: ResolvedParams
+    units: Units = Field(description="The scale used.")
+    count: int = Field(description="Strands (one a site).")
+    points: list[list[list[float]]] = Field(
+        description="Each strand's points [x, y, z], root first: shape (count, "
+        "params.points, 3), mesh units."
+    )
+    root_site: list[int] = Field(
+        description="Each strand's site: its position in /v1/sites' answer for the same params "
+        "and seed (the strands' order)."
+    )
+    length: list[float] = Field(description="Each strand's arc length, mesh units.")
+    length_mm: list[float] = Field(description="The same in mm.")
+    width_mm: float = Field(description="The strands' width, mm.")
+
+    @classmethod
+    def of(cls, grown: Strands) -> StrandsResponse:
+        placed = grown.placed
+        return cls.build(
+            params=ResolvedParams.of_region(placed.region),
+            units=Units.build(mm_per_unit=placed.mm_per_unit),
+            count=len(grown.points),
+            points=grown.points,
+            root_site=np.arange(len(grown.points)),
+            length=grown.length,
+            length_mm=grown.length * placed.mm_per_unit,
+            width_mm=grown.width_mm,
+        )
+
+
+def strands_ply(grown: Strands, params: StrandsParams, ctx: Context) -> bytes:
+    """The strands as a binary PLY: every point (``x y z``, double) and every segment as an
+    edge (``vertex1 vertex2``, int), strand after strand."""
+    n, m, _ = grown.points.shape
+    vertices = np.ascontiguousarray(grown.points.reshape(-1, 3), dtype="<f8")
+    first = (np.arange(n)[:, None] * m + np.arange(m - 1)[None, :]).ravel()
+    edges = np.column_stack([first, first + 1]).astype("<i4")
+    header = (
+        "ply\nformat binary_little_endian 1.0\ncomment meshflat strands\n"
+        f"element vertex {len(vertices)}\nproperty double x\nproperty double y\n"
+        f"property double z\nelement edge {len(edges)}\nproperty int vertex1\n"
+        "property int vertex2\nend_header\n"
+    )
+    return header.encode("ascii") + vertices.tobytes() + edges.tobytes()
+
+
+def strands_glb(grown: Strands, params: StrandsParams, ctx: Context) -> bytes:
+    """The region as /v1/flatten's GLB, with a node of the strands: their segments as a LINES
+    primitive, coloured from root (dark) to tip (light)."""
+    n, m, _ = grown.points.shape
+    if n == 0:
+        return glb(grown.placed.region, params)
+    ends = np.stack([grown.points[:, :-1], grown.points[:, 1:]], axis=2).reshape(-1, 3)
+    shade = np.linspace(0.25, 0.85, m)
+    along = np.stack([shade[:-1], shade[1:]], axis=1)
+    tint = np.broadcast_to(along[None], (n, m - 1, 2)).reshape(-1)
+    colours = np.column_stack([tint, 0.6 * tint, 0.3 * tint])
+    return glb(grown.placed.region, params, None, (ends, colours), lines_name="strands")
+
+
+LENGTH_MAP = PngPart(
+    "length_map",
+    "A grey PNG (8 bits) in the framing of the PNG answer: each strand takes the length of "
+    "the pixel under its root on the map, params.length_range mapping grey 0-255 to mm.",
+    framed=True,
+    grey_only=True,
+)
+
+#: The forms of strands besides JSON, by :class:`Output`.
+RENDERERS = {
+    Output.PLY: strands_ply,
+    Output.GLB: strands_glb,
+    # The map with the roots and their directions (as /v1/sites' picture with growth).
+    **map_renderers(
+        lambda grown: grown.placed.region,
+        lambda grown: (),
+        lambda grown: grown.placed.map_points,
+        lambda grown: grown.placed.grown.map_direction,
+    ),
+}
+
+ROWS = (
+    MeshCapability(
+        name="strands",
+        path="/v1/strands",
+        summary="Grow strands (guide hairs) from the plan's sites",
+        description="Multipart like /v1/sites, whose params it takes (growth required), with "
+        "the strands' `length_mm` (one, per zone, or a `length_map` part with "
+        "`length_range`), `points` a strand (2-256, default 16), `clearance_mm` (default 1) "
+        "and `width_mm` (default 0.08). A strand starts at its site, leaves along the site's "
+        "direction (the exit angle), bends over towards the field's tangent and runs on at "
+        "the clearance above the scalp, following the field, until its arc length is the "
+        "length; no point of it lies inside the head (docs/math.md, section 20). Answers "
+        "each strand's points, its site and its length; or, by the Accept header or "
+        "params.output, a PLY of points and edges, the region's GLB with a strands node of "
+        "LINES, or the map with the roots and their directions (SVG or PNG).",
+        params=StrandsParams,
+        extra_parts=(DENSITY_MAP, LENGTH_MAP),
+        input=StrandsInput,
+        operation=strands,
+        response=StrandsResponse,
+        renderers=RENDERERS,
+    ),
+)

@@ -422,25 +422,27 @@ def test_a_rectangles_numbers_do_not_depend_on_how_far_off_the_map_its_sides_lie
     reaches=st.lists(far_exponents, min_size=1, max_size=4),
 )
 def test_a_polygons_numbers_do_not_depend_on_far_off_vertices_added_beyond_the_map(seed, reaches):
-    """A random convex polygon over the map, some of its corners off the map each moved up
-    to 1e15 away along one of their edges' lines (the edge keeps its line and its part of
-    the map, and the polygon gains a triangle off the map, beside the next edge): the
-    polygon's numbers (checked against shapely)."""
+    """A random convex polygon over the map, some of its corners off the map (no two
+    neighbours) each moved up to 1e15 away along one of their edges' lines (the edge keeps
+    its line and its part of the map, and the polygon gains a triangle off the map, beside
+    the next edge): the polygon's numbers (checked against shapely)."""
     triangles = jittered_mesh(n=12)
     rng = np.random.default_rng(seed)
     near = shapely.get_coordinates(shapely.MultiPoint(rng.uniform(-0.5, 1.5, (8, 2))).convex_hull)
     near = near[:-1]
     square = shapely.box(0.0, 0.0, 1.0, 1.0)
-    ring, moved = near.copy(), 0
+    ring, moved, taken = near.copy(), 0, np.zeros(len(near), dtype=bool)
     for k, corner in enumerate(near):
         # Along the edge from the corner before (or after) it; the triangle gained lies
-        # between the new corner and the corner after (or before) it.
+        # between the new corner and the corner after (or before) it. Never two neighbours:
+        # the edge between two corners moved far away could cross the map anywhere.
         along, other = (near[k - 1], near[(k + 1) % len(near)])[:: rng.choice([1, -1])]
         out = (corner - along) / np.linalg.norm(corner - along)
         strip = shapely.Polygon([corner, other, other + 100.0 * out, corner + 100.0 * out])
-        if moved < len(reaches) and not strip.intersects(square):
+        beside = taken[k - 1] or taken[(k + 1) % len(near)]
+        if moved < len(reaches) and not beside and not strip.intersects(square):
             ring[k] = corner + 10.0 ** reaches[moved] * out
-            moved += 1
+            moved, taken[k] = moved + 1, True
     assume(moved > 0 and shapely.Polygon(ring).is_valid)
     assert_same_cover(
         triangles, cover_zone(triangles, [ring]), assert_like_shapely(triangles, [near])

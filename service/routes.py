@@ -165,7 +165,7 @@ def answer_mesh(
     if len(capability.outputs) > 1:
         headers["Vary"] = "Accept"
     if output is not Output.JSON:
-        headers["Content-Disposition"] = f'inline; filename="region.{output.value}"'
+        headers["Content-Disposition"] = f'inline; filename="region{output.suffix}"'
     return Response(data, media_type=output.media_type, headers=headers)
 
 

@@ -248,3 +248,39 @@ async def test_the_ply_and_the_glb_hold_every_strand(client):
     ends = accessor(document, binary, node["primitives"][0]["attributes"]["POSITION"])
     assert node["primitives"][0]["mode"] == 1 and ends.shape == (count * 7 * 2, 3)
     np.testing.assert_allclose(ends[0::2].reshape(count, 7, 3), points[:, :-1], atol=1e-3)
+
+
+@pytest.mark.anyio
+async def test_the_usd_stage_opens_with_usd_core_and_holds_the_strands(client, tmp_path):
+    """The .usda answer, opened with Pixar's usd-core: one BasisCurves of as many curves as
+    strands, each of ``points`` points, its width and each root's st and face id; a Mesh whose
+    st is the GLB's UVs."""
+    usd = pytest.importorskip("pxr.Usd", reason="usd-core (the test extra) opens the stage")
+    geom = pytest.importorskip("pxr.UsdGeom")
+    growth = await growth_of(client)
+    asked = {"density_per_cm2": 2, "growth": growth, "length_mm": 40, "points": 8}
+    answer = (await strands_of(client, asked)).json()
+    placed = (await sites(client, {"density_per_cm2": 2, "growth": growth})).json()
+    response = await strands_of(client, asked | {"output": "usd"})
+    assert response.headers["content-type"] == "model/vnd.usda"
+    path = tmp_path / "hair.usda"
+    path.write_bytes(response.content)
+    stage = usd.Stage.Open(str(path))
+    curves = [prim for prim in stage.Traverse() if prim.GetTypeName() == "BasisCurves"]
+    assert len(curves) == 1
+    strands = geom.BasisCurves(curves[0])
+    assert strands.GetTypeAttr().Get() == "linear"
+    assert list(strands.GetCurveVertexCountsAttr().Get()) == [8] * answer["count"]
+    points = np.asarray(strands.GetPointsAttr().Get())
+    np.testing.assert_allclose(points, np.asarray(answer["points"]).reshape(-1, 3), atol=1e-4)
+    assert strands.GetWidthsAttr().Get()[0] == pytest.approx(0.08, rel=1e-6)  # mm units
+    api = geom.PrimvarsAPI(curves[0])
+    assert list(api.GetPrimvar("faceId").Get()) == placed["sites"]["face"]
+    root_st = np.asarray(api.GetPrimvar("st").Get())
+    assert root_st.shape == (answer["count"], 2) and (root_st >= 0).all() and (root_st <= 1).all()
+    mesh = geom.Mesh(stage.GetPrimAtPath("/meshflat/region"))
+    st = np.asarray(geom.PrimvarsAPI(mesh).GetPrimvar("st").Get(), dtype=np.float32)
+    document, binary = glb_parts((await strands_of(client, asked | {"output": "glb"})).content)
+    region = next(m for m in document["meshes"] if m["name"] == "region")
+    uv = accessor(document, binary, region["primitives"][0]["attributes"]["TEXCOORD_0"])
+    np.testing.assert_array_equal(st, uv)

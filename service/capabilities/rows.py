@@ -129,9 +129,9 @@ class MeshCapability(Capability):
             Another extension (naming ``field`` and this route's extensions).
         """
         suffix = PurePath(name).suffix.lower()
-        found = next((o for o in self.outputs if suffix == f".{o.value}"), None)
+        found = next((o for o in self.outputs if suffix == o.suffix), None)
         if found is None:
-            *most, last = (f".{output.value}" for output in self.outputs)
+            *most, last = (output.suffix for output in self.outputs)
             choices = f"{', '.join(most)} or {last}" if most else last
             raise InvalidInput(field, f"{name!r}: use {choices}")
         return found

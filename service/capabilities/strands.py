@@ -15,6 +15,8 @@ from transforms.strands import Roots, StrandShape, SurfaceGuard, grow_strands
 
 from ..errors import InvalidInput
 from ..outputs import Output
+from ..outputs.glb import layout_uv
+from ..outputs.usd import strands_usda
 from .context import Context
 from .fields import output_choice
 from .inputs import PngFile, PngPart
@@ -81,8 +83,10 @@ class StrandsParams(SitesParams):
         0.08, gt=0, le=10, allow_inf_nan=False, description="A strand's width, mm."
     )
     output: output_choice(
-        (Output.JSON, Output.PLY, Output.GLB, Output.SVG, Output.PNG),
-        "json (application/json); ply (application/ply: the strands' points and their "
+        (Output.JSON, Output.USD, Output.PLY, Output.GLB, Output.SVG, Output.PNG),
+        "json (application/json); usd (model/vnd.usda: a USD text stage, the region as a Mesh "
+        "with its map as primvars:st and the strands as one linear BasisCurves with widths, "
+        "each root's st and face id); ply (application/ply: the strands' points and their "
         "segments as edges); glb (model/gltf-binary: the region mesh with its UVs and a "
         "strands node, a LINES primitive); svg (image/svg+xml) or png (image/png): the map "
         "with the roots and their directions.",
@@ -259,6 +263,27 @@ def strands_glb(grown: Strands, params: StrandsParams, ctx: Context) -> bytes:
     return glb(grown.placed.region, params, None, (ends, colours), lines_name="strands")
 
 
+def strands_usd(grown: Strands, params: StrandsParams, ctx: Context) -> bytes:
+    """A USD text stage (:func:`service.outputs.usd.strands_usda`): the region as a Mesh,
+    its map as ``st`` (the GLB's UVs), and the strands as one linear BasisCurves with each
+    root's ``st`` and face id."""
+    placed = grown.placed
+    region, scale = placed.region, placed.mm_per_unit
+    flat = region.flat
+    x, y = region.layout  # repaired when untangled
+    s_sign = float(flat.layout.s_sign)
+    st, affine = layout_uv(x, s_sign * y)
+    roots = placed.map_points
+    root_st = np.column_stack(
+        [roots[:, 0] - affine["x_min"], s_sign * roots[:, 1] - affine["s_min"]]
+    )
+    root_st = np.clip(root_st * affine["scale"], 0.0, 1.0)
+    return strands_usda(
+        region.mesh.vertices[flat.vertex_ids], flat.faces, st, region.faces, grown.points,
+        root_st, region.faces[placed.sites.triangles], params.width_mm / scale, scale / 1000.0,
+    )  # fmt: skip
+
+
 LENGTH_MAP = PngPart(
     "length_map",
     "A grey PNG (8 bits) in the framing of the PNG answer: each strand takes the length of "
@@ -269,6 +294,7 @@ LENGTH_MAP = PngPart(
 
 #: The forms of strands besides JSON, by :class:`Output`.
 RENDERERS = {
+    Output.USD: strands_usd,
     Output.PLY: strands_ply,
     Output.GLB: strands_glb,
     # The map with the roots and their directions (as /v1/sites' picture with growth).
@@ -293,8 +319,8 @@ ROWS = (
         "the clearance above the scalp, following the field, until its arc length is the "
         "length; no point of it lies inside the head (docs/math.md, section 20). Answers "
         "each strand's points, its site and its length; or, by the Accept header or "
-        "params.output, a PLY of points and edges, the region's GLB with a strands node of "
-        "LINES, or the map with the roots and their directions (SVG or PNG).",
+        "params.output, a USD text stage, a PLY of points and edges, the region's GLB with a "
+        "strands node of LINES, or the map with the roots and their directions (SVG or PNG).",
         params=StrandsParams,
         extra_parts=(DENSITY_MAP, LENGTH_MAP),
         input=StrandsInput,

@@ -16,12 +16,18 @@ class Output(StrEnum):
     SVG = "svg"
     PNG = "png"
     PLY = "ply"
+    USD = "usd"
     FACE_IDS = "face_ids"
     BARYCENTRIC = "barycentric"
 
     @property
     def media_type(self) -> str:
         return _MEDIA_TYPES[self]
+
+    @property
+    def suffix(self) -> str:
+        """The file name's extension of the form (``.usda`` for the USD text stage)."""
+        return ".usda" if self is Output.USD else f".{self.value}"
 
     @property
     def binary(self) -> bool:
@@ -36,6 +42,8 @@ _MEDIA_TYPES = {
     Output.PNG: "image/png",
     # No PLY media type is registered; this is the one in common use.
     Output.PLY: "application/ply",
+    # USD's text form (Pixar's registration with IANA).
+    Output.USD: "model/vnd.usda",
     # Look-up images: a little-endian array behind a 16-byte header (service.outputs.lookup).
     Output.FACE_IDS: "application/octet-stream",
     Output.BARYCENTRIC: "application/octet-stream",

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import json
+import subprocess
 from functools import cache
 
 import numpy as np
@@ -32,6 +33,7 @@ from .test_api import flatten, problem
 from .test_growth import accessor, centre_of_map, glb_parts, hairline_and_crown
 from .test_sites import PARAMS as SITES_PARAMS
 from .test_sites import posed, sites
+from .tools import node_tool
 
 NAME = "fsaverage-head.ply"
 
@@ -284,3 +286,21 @@ async def test_the_usd_stage_opens_with_usd_core_and_holds_the_strands(client, t
     region = next(m for m in document["meshes"] if m["name"] == "region")
     uv = accessor(document, binary, region["primitives"][0]["attributes"]["TEXCOORD_0"])
     np.testing.assert_array_equal(st, uv)
+
+
+@pytest.mark.anyio
+@pytest.mark.parametrize("route", ["/v1/strands", "/v1/sites"])
+async def test_the_strands_and_growth_glbs_pass_the_khronos_validator(client, tmp_path, route):
+    growth = await growth_of(client)
+    asked = {"density_per_cm2": 2, "growth": growth, "output": "glb"}
+    if route == "/v1/strands":
+        asked |= {"length_mm": 40, "points": 8}
+    response = await flatten(client, NAME, {**SITES_PARAMS, **asked}, endpoint=route)
+    assert response.status_code == 200, response.text
+    path = tmp_path / "answer.glb"
+    path.write_bytes(response.content)
+    run = subprocess.run([*node_tool("validate-gltf.mjs"), str(path)], capture_output=True,
+                         text=True, check=True)  # fmt: skip
+    (report,) = json.loads(run.stdout)
+    assert report["issues"]["numErrors"] == 0, report
+    assert report["issues"]["numWarnings"] == 0, report

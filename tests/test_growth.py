@@ -390,10 +390,9 @@ async def test_the_command_line_takes_the_flow_from_a_file(client, tmp_path):
     assert json.loads(out.read_bytes())["growth"]["whorls"] == []
 
 
-@real_servers
-def test_a_real_server_places_sites_with_their_directions():
-    """``meshflat serve`` (the command `make serve` runs), over HTTP: the map, then sites
-    with a hairline and a crown whorl, each with its unit direction."""
+def served_with_growth(route: str, params: dict) -> httpx.Response:
+    """A real ``meshflat serve``'s answer to ``route`` for the bundled head with ``params``
+    and a hairline and a crown whorl drawn on the map it answers first."""
     head = SAMPLES[NAME].path.read_bytes()
     with running() as server, httpx.Client(base_url=server.url, timeout=60) as client:
         mapped = client.post("/v1/flatten", files={"mesh": (NAME, head)},
@@ -401,9 +400,16 @@ def test_a_real_server_places_sites_with_their_directions():
         x, y = np.asarray(mapped["x"]), np.asarray(mapped["y"])
         growth = hairline_and_crown((x.min() + x.max()) / 2, (y.min() + y.max()) / 2,
                                     max(np.ptp(x), np.ptp(y)))  # fmt: skip
-        params = SCALP | {"units": "mm", "density_per_cm2": 5, "growth": growth}
-        response = client.post("/v1/sites", files={"mesh": (NAME, head)},
-                               data={"params": json.dumps(params)})  # fmt: skip
+        return client.post(route, files={"mesh": (NAME, head)},
+                           data={"params": json.dumps(params | {"growth": growth})})  # fmt: skip
+
+
+@real_servers
+def test_a_real_server_places_sites_with_their_directions():
+    """``meshflat serve`` (the command `make serve` runs), over HTTP: the map, then sites
+    with a hairline and a crown whorl, each with its unit direction."""
+    params = SCALP | {"units": "mm", "density_per_cm2": 5}
+    response = served_with_growth("/v1/sites", params)
     assert response.status_code == 200, response.text
     found = response.json()["sites"]
     assert len(found["direction"]) == response.json()["count"] > 100

@@ -11,7 +11,6 @@ import json
 import subprocess
 from functools import cache
 
-import httpx
 import numpy as np
 import pytest
 from PIL import Image
@@ -31,10 +30,15 @@ from transforms.strands import (
 
 from .conftest import load_sample, real_servers
 from .test_api import flatten, problem
-from .test_growth import accessor, centre_of_map, glb_parts, hairline_and_crown
-from .test_serve import running
+from .test_growth import (
+    accessor,
+    centre_of_map,
+    glb_parts,
+    hairline_and_crown,
+    served_with_growth,
+)
 from .test_sites import PARAMS as SITES_PARAMS
-from .test_sites import SCALP, posed, sites
+from .test_sites import posed, sites
 from .tools import node_tool
 
 NAME = "fsaverage-head.ply"
@@ -312,16 +316,8 @@ async def test_the_strands_and_growth_glbs_pass_the_khronos_validator(client, tm
 def test_a_real_server_grows_strands():
     """``meshflat serve`` (the command `make serve` runs), over HTTP: strands of the bundled
     head's sites about a crown whorl."""
-    head = SAMPLES[NAME].path.read_bytes()
-    with running() as server, httpx.Client(base_url=server.url, timeout=60) as client:
-        mapped = client.post("/v1/flatten", files={"mesh": (NAME, head)},
-                             data={"params": json.dumps(SCALP)}).json()["vertices"]  # fmt: skip
-        x, y = np.asarray(mapped["x"]), np.asarray(mapped["y"])
-        growth = hairline_and_crown((x.min() + x.max()) / 2, (y.min() + y.max()) / 2,
-                                    max(np.ptp(x), np.ptp(y)))  # fmt: skip
-        params = {**SITES_PARAMS, "density_per_cm2": 2, "growth": growth, "length_mm": 30}
-        response = client.post("/v1/strands", files={"mesh": (NAME, head)},
-                               data={"params": json.dumps(params)})  # fmt: skip
+    params = {**SITES_PARAMS, "density_per_cm2": 2, "length_mm": 30}
+    response = served_with_growth("/v1/strands", params)
     assert response.status_code == 200, response.text
     points = np.asarray(response.json()["points"])
     assert points.shape == (response.json()["count"], 16, 3) and len(points) > 100

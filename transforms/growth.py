@@ -305,6 +305,18 @@ def _check_strength(field: GrowthField, triangles: MapTriangles, pieces: _Pieces
     raise FlowsDisagree(min(first, second), max(first, second), where)
 
 
+def triangle_edges(triangles: MapTriangles, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``E2`` (p, 2, 2) and ``E3`` (p, 3, 2): the edges from the first corner of ``faces``
+    ((p,) int) on the map and on the surface, as columns (the linear map ``J = E3 E2^-1``)."""
+    corners = triangles.faces[faces]
+    on_map, on_surface = triangles.map_points[corners], triangles.surface_points[corners]
+    e2 = np.stack([on_map[:, 1] - on_map[:, 0], on_map[:, 2] - on_map[:, 0]], axis=2)
+    e3 = np.stack(
+        [on_surface[:, 1] - on_surface[:, 0], on_surface[:, 2] - on_surface[:, 0]], axis=2
+    )
+    return e2, e3
+
+
 def pushed_forward(
     triangles: MapTriangles, faces: np.ndarray, directions: np.ndarray, normals: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -321,10 +333,7 @@ def pushed_forward(
     tangent : (p, 3) float, unit, orthogonal to the normal
     map_direction : (p, 2) float, unit: the tangent's direction on the map (``E2 E3^+``)
     """
-    corners3 = triangles.surface_points[triangles.faces[faces]]
-    corners2 = triangles.map_points[triangles.faces[faces]]
-    e3 = np.stack([corners3[:, 1] - corners3[:, 0], corners3[:, 2] - corners3[:, 0]], axis=2)
-    e2 = np.stack([corners2[:, 1] - corners2[:, 0], corners2[:, 2] - corners2[:, 0]], axis=2)
+    e2, e3 = triangle_edges(triangles, faces)
     along = solve_2x2(e2, directions)
     tangent = np.einsum("pij,pj->pi", e3, along)
     tangent -= np.einsum("pi,pi->p", tangent, normals)[:, None] * normals

@@ -341,12 +341,17 @@ def site_normals(points: np.ndarray, faces: np.ndarray, sites: Sites, center) ->
     ``center`` ((3,) float): all turned over when the faces wind inwards (their normals'
     sum, weighted by area, points towards it)."""
     cross = face_cross(points, faces)
-    normals = vertex_normals(points, faces, cross)
-    centroids = points[faces].mean(axis=1)
-    if np.einsum("md,md->", cross, centroids - np.asarray(center)) < 0:
-        normals = -normals
+    normals = outward_sign(points, faces, center, cross) * vertex_normals(points, faces, cross)
     unit, _ = unit_rows(combine(normals, faces, sites.triangles, sites.weights))
     return unit
+
+
+def outward_sign(points: np.ndarray, faces: np.ndarray, center, cross=None) -> int:
+    """+1 when the winding normals of ``faces`` point away from ``center`` ((3,)) on the
+    whole (their area-weighted sum), else -1: the sign that turns them outwards."""
+    cross = face_cross(points, faces) if cross is None else cross
+    centroids = points[faces].mean(axis=1)
+    return 1 if np.einsum("md,md->", cross, centroids - np.asarray(center)) >= 0 else -1
 
 
 def minimum_distance(points: np.ndarray) -> float:

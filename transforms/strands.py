@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from .arrays import combine, face_cross, solve_2x2, unit_rows
 from .checkpoints import checkpoint
-from .growth import GrowthField
+from .growth import GrowthField, triangle_edges
 from .mapping import MapTriangles
 
 #: Candidate triangles for a point's nearest: those of the nearest centroids.
@@ -197,10 +197,7 @@ def _marched(triangles: MapTriangles, field: GrowthField, points, faces, distanc
     triangle: the map's linear piece there is carried on)."""
     directions = field.map_directions(points, faces)
     # The surface length of a unit map step along d: |J d|, J = E3 E2^-1 the triangle's.
-    corners2 = triangles.map_points[triangles.faces[faces]]
-    corners3 = triangles.surface_points[triangles.faces[faces]]
-    e2 = np.stack([corners2[:, 1] - corners2[:, 0], corners2[:, 2] - corners2[:, 0]], axis=2)
-    e3 = np.stack([corners3[:, 1] - corners3[:, 0], corners3[:, 2] - corners3[:, 0]], axis=2)
+    e2, e3 = triangle_edges(triangles, faces)
     stretch = np.linalg.norm(np.einsum("pij,pj->pi", e3, solve_2x2(e2, directions)), axis=1)
     stretch = np.where(np.isfinite(stretch) & (stretch > 0), stretch, 1.0)
     moved = points + (distances / stretch)[:, None] * directions

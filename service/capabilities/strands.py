@@ -10,7 +10,7 @@ import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
 from transforms import Framing
-from transforms.sites import vertex_normals
+from transforms.sites import outward_sign, vertex_normals
 from transforms.strands import Roots, StrandShape, SurfaceGuard, grow_strands
 
 from ..errors import InvalidInput
@@ -164,7 +164,7 @@ def strands(given: StrandsInput, ctx: Context) -> Strands:
     grown = placed.grown
     triangles = placed.triangles
     normals = vertex_normals(triangles.surface_points, triangles.faces)
-    outward = _outward(triangles, placed.region.frame.center)
+    outward = outward_sign(triangles.surface_points, triangles.faces, placed.region.frame.center)
     mesh = placed.region.mesh
     roots = Roots(placed.sites.points, grown.direction, placed.normals, placed.sites.triangles,
                   placed.map_points)  # fmt: skip
@@ -173,14 +173,6 @@ def strands(given: StrandsInput, ctx: Context) -> Strands:
     guard = SurfaceGuard(mesh.vertices, mesh.faces, outward)
     points = grow_strands(triangles, grown.field, outward * normals, roots, lengths, shape, guard)
     return Strands(placed, points, lengths, params.width_mm)
-
-
-def _outward(triangles, centre) -> int:
-    """+1 when the region's winding normals point away from ``centre`` on the whole (its
-    sites' normals do, §13), else -1: the whole mesh's are turned alike."""
-    corners = triangles.surface_points[triangles.faces]
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    return 1 if np.einsum("md,md->", cross, corners.mean(axis=1) - np.asarray(centre)) >= 0 else -1
 
 
 def _lengths(params: StrandsParams, length_map: PngFile | None, placed: Placed, ctx) -> np.ndarray:

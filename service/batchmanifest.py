@@ -195,8 +195,10 @@ def _check_servable(command: str, params, outputs: tuple[tuple[str, Output], ...
     needs = None
     if region is not None and getattr(region, "texture_mask", None) is not None:
         needs = ("params.region.texture_mask", "mask")
-    elif command == "sites" and params.density_range is not None:
+    elif getattr(params, "density_range", None) is not None:  # sites, strands
         needs = ("params.density_range", "density_map")
+    elif getattr(params, "length_range", None) is not None:  # strands
+        needs = ("params.length_range", "length_map")
     elif command == "transfer" and params.values is None:
         needs = ("params.values", "image")
     if needs is not None:

@@ -12,6 +12,7 @@ import sys
 from multiprocessing import get_context
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from service import batch as batch_module
@@ -87,6 +88,24 @@ async def test_outputs_are_the_api_answers_byte_for_byte(client, tmp_path):
     assert sorted(p.name for p in (tmp_path / "out" / "s").iterdir()) == sorted(
         [*forms, DIGEST_FILE]
     )
+
+
+async def test_strands_in_a_batch_are_the_api_answers_byte_for_byte(client, tmp_path):
+    mapped = (await flatten(client, NAME, PARAMS)).json()["vertices"]
+    x, y = (np.array(mapped[axis]) for axis in "xy")
+    whorl = {"x": float(x.mean()), "y": float(y.mean()), "turn": "clockwise"}
+    params = {**PARAMS, "units": "mm", "density_per_cm2": 0.5, "seed": 3, "length_mm": 30,
+              "growth": {"whorls": [whorl]}}  # fmt: skip
+    forms = ["hair.usda", "hair.json", "hair.ply", "hair.glb"]
+    line = {"mesh": str(SAMPLES[NAME].path), "command": "strands", "params": params}
+    manifest = write_manifest(tmp_path, [{**line, "outputs": forms, "name": "s"}])
+    assert batch(manifest, tmp_path / "out", "--processes", 1) == 0
+    for name in forms:
+        output = "usd" if name.endswith(".usda") else Path(name).suffix[1:]
+        response = await flatten(client, NAME, {**params, "output": output},
+                                 endpoint="/v1/strands")  # fmt: skip
+        assert response.status_code == 200, response.text
+        assert (tmp_path / "out" / "s" / name).read_bytes() == response.content, name
 
 
 def test_a_rerun_skips_what_is_done_and_redoes_what_changed(tmp_path, capsys):
@@ -482,6 +501,8 @@ def test_a_worker_that_dies_fails_its_own_scan_alone_after_one_retry(tmp_path, c
          ["params.region.texture_mask", "measure"]),
         ({**LINE, "command": "sites", "params": {"density_range": [10, 40]}},
          ["params.density_range", "density_map", "--density-map"]),
+        ({**LINE, "command": "strands", "params": {"density_per_cm2": 1, "length_range": [10, 40]}},
+         ["params.length_range", "length_map", "--length-map"]),
         ({**LINE, "command": "transfer"}, ["params.values", "image", "--image"]),
         ({**LINE, "command": "transfer", "params": {"values": "x"}, "outputs": ["ids.face_ids"]},
          ["outputs", "'ids.face_ids'", "look-up"]),

@@ -8,3 +8,6 @@ import os
 # and made validation a fifth slower on two threads. Read when numpy loads, so set here, before
 # any module of the service imports numpy.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# libigl (the strands' surface guard) splits a large query over every core likewise, read when
+# it first runs.
+os.environ.setdefault("IGL_NUM_THREADS", "1")

@@ -21,10 +21,10 @@ from transforms import MapTriangles, fit_region, lift_curve
 from transforms.growth import growth_field, pushed_forward
 from transforms.sites import SitePart, place_sites, site_normals, vertex_normals
 from transforms.strands import (
+    Curl,
     Roots,
     StrandShape,
     SurfaceGuard,
-    _closest_on_triangles,
     grow_strands,
 )
 
@@ -79,10 +79,11 @@ def _outwards(vertices, faces, centre) -> int:
     return 1 if np.einsum("md,md->", cross, vertices[faces].mean(axis=1) - centre) > 0 else -1
 
 
-def grown(length: float = 60.0, points: int = 16, clearance: float = 1.0) -> np.ndarray:
+def grown(length=60.0, points=16, clearance=1.0, curl=None, bend=None) -> np.ndarray:
     _, _, triangles, field, normals, roots, guard = scalp()
     lengths = np.full(len(roots.points), length)
-    shape = StrandShape(points, clearance, 2.0 * clearance, free=2.0)
+    bend = 2.0 * clearance if bend is None else bend
+    shape = StrandShape(points, clearance, bend, free=2.0, curl=curl)
     return grow_strands(triangles, field, normals, roots, lengths, shape, guard)
 
 
@@ -108,10 +109,54 @@ def distances_to_surface(points: np.ndarray, vertices, faces) -> np.ndarray:
     for start in range(0, len(faces), 256):
         corners = vertices[faces[start : start + 256]]
         repeated = np.repeat(points, len(corners), axis=0)
-        nearest = _closest_on_triangles(repeated, np.tile(corners, (len(points), 1, 1)))
+        nearest = closest_on_triangles(repeated, np.tile(corners, (len(points), 1, 1)))
         gaps = np.linalg.norm(nearest - repeated, axis=1).reshape(len(points), len(corners))
         best = np.minimum(best, gaps.min(axis=1))
     return best
+
+
+def closest_on_triangles(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(p, 3): the closest point of each triangle (p, 3, 3) to each point (p, 3), by its
+    barycentric region (Ericson, Real-Time Collision Detection, 5.1.5), vectorised: the
+    brute force the service's guard (libigl's tree) is checked against."""
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    ab, ac, ap = b - a, c - a, points - a
+    d1, d2 = dot(ab, ap), dot(ac, ap)
+    bp = points - b
+    d3, d4 = dot(ab, bp), dot(ac, bp)
+    cp = points - c
+    d5, d6 = dot(ab, cp), dot(ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        total = va + vb + vc
+        v, w = vb / total, vc / total
+        inside = a + v[:, None] * ab + w[:, None] * ac
+        t_ab = d1 / (d1 - d3)
+        t_ac = d2 / (d2 - d6)
+        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+    # Ericson's tests in reverse, so that the first of his that holds is the one kept.
+    out = inside
+    out = where_chosen(
+        out, (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), b + t_bc[:, None] * (c - b)
+    )
+    out = where_chosen(out, (vb <= 0) & (d2 >= 0) & (d6 <= 0), a + t_ac[:, None] * ac)
+    out = where_chosen(out, (d6 >= 0) & (d5 <= d6), c)
+    out = where_chosen(out, (vc <= 0) & (d1 >= 0) & (d3 <= 0), a + t_ab[:, None] * ab)
+    out = where_chosen(out, (d3 >= 0) & (d4 <= d3), b)
+    out = where_chosen(out, (d1 <= 0) & (d2 <= 0), a)
+    bad = ~np.isfinite(out).all(axis=1)  # a triangle of no area: its nearest corner
+    if bad.any():
+        gaps = np.linalg.norm(corners[bad] - points[bad, None, :], axis=2)
+        out[bad] = corners[bad][np.arange(bad.sum()), np.argmin(gaps, axis=1)]
+    return out
+
+
+def dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.einsum("pd,pd->p", u, v)
+
+
+def where_chosen(current: np.ndarray, chosen: np.ndarray, value: np.ndarray) -> np.ndarray:
+    return np.where(chosen[:, None], value, current)
 
 
 def test_a_strand_leaves_along_its_sites_direction_and_keeps_its_length():
@@ -138,6 +183,43 @@ def test_no_strand_point_is_inside_the_head_or_near_its_surface_past_2_mm(cleara
     gaps = distances_to_surface(points[sample], vertices, faces)
     assert gaps[arc[sample] > 2.0 + 1e-9].min() >= 0.5 * clearance - 1e-9
     assert gaps.min() > 0.0
+
+
+def distances_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
+    """(p,) float: each point's distance to the nearest segment of ``polyline`` ((k, 3))."""
+    a, b = polyline[:-1], polyline[1:]
+    ab = b - a
+    t = np.einsum("pkd,kd->pk", points[:, None, :] - a[None], ab) / np.einsum("kd,kd->k", ab, ab)
+    nearest = a[None] + np.clip(t, 0.0, 1.0)[..., None] * ab[None]
+    return np.linalg.norm(nearest - points[:, None, :], axis=2).min(axis=1)
+
+
+@pytest.mark.parametrize(
+    ("points", "radius", "period", "spread"),
+    # Fewer points, a coarser axis: a point's distance to its chords strays further.
+    [(64, 1.0, 10.0, 0.1), (24, 2.0, 20.0, 0.2)],
+)
+def test_a_curled_strand_turns_at_its_radius_about_its_path_and_keeps_its_length(
+    points, radius, period, spread
+):
+    vertices, faces, *_ = scalp()
+    curled = grown(length=60.0, points=points, curl=Curl(radius, period))
+    # The helix's axis: the strand grown without curl a radius higher (the same bend).
+    axis = grown(length=60.0, points=points, clearance=1.0 + radius, bend=2.0)
+    np.testing.assert_array_equal(curled[:, :2], axis[:, :2])  # the same first segment
+    steps = np.linalg.norm(np.diff(curled, axis=1), axis=2)
+    np.testing.assert_allclose(steps.sum(axis=1), 60.0, rtol=0.01)
+    arc = np.cumsum(steps, axis=1)
+    rows = np.arange(0, len(curled), 25)
+    # Past the bend (the radius grows as 1 - exp(-s / 2)), each point is a radius off the axis.
+    off = np.concatenate([distances_to_polyline(curled[i, 1:][arc[i] > 14.0], axis[i])
+                          for i in rows])  # fmt: skip
+    assert np.percentile(off, 50) == pytest.approx(radius, rel=0.02)
+    assert np.percentile(off, 5) > (1 - spread) * radius and off.max() < (1 + spread) * radius
+    sample = curled[:, 1:].reshape(-1, 3)
+    assert np.abs(winding_numbers(sample[::5], vertices, faces)).max() < 0.5
+    gaps = distances_to_surface(sample[::11], vertices, faces)
+    assert gaps[arc.reshape(-1)[::11] > 2.0 + 1e-9].min() >= 0.5 - 1e-9
 
 
 # -- through the API ------------------------------------------------------------------------
@@ -237,6 +319,25 @@ async def test_strands_need_growth_and_a_length(client):
             "params.growth")  # fmt: skip
     body = problem(await strands_of(client, {"density_per_cm2": 1, "growth": growth}), 422)
     assert body["detail"].startswith("params: length_mm: the strands' length")
+
+
+@pytest.mark.anyio
+async def test_curled_strands_keep_their_length_and_too_few_points_a_turn_are_refused(client):
+    growth = await growth_of(client)
+    asked = {"density_per_cm2": 2, "seed": 5, "growth": growth, "length_mm": 40}
+    curl = {"radius_mm": 1.5, "period_mm": 8}
+    straight = (await strands_of(client, asked | {"points": 48})).json()
+    response = await strands_of(client, asked | {"points": 48, "curl": curl})
+    assert response.status_code == 200, response.text
+    points = np.asarray(response.json()["points"])
+    arcs = np.linalg.norm(np.diff(points, axis=1), axis=2).sum(axis=1)
+    np.testing.assert_allclose(arcs, 40.0, rtol=0.01)
+    np.testing.assert_allclose(points[:, :2], np.asarray(straight["points"])[:, :2])
+    vertices, faces = (np.array(a) for a in load_sample(NAME))
+    assert np.abs(winding_numbers(points[:, 1:].reshape(-1, 3)[::7], vertices, faces)).max() < 0.5
+    # 40 mm of 8 mm turns is 5 turns: 16 points are 14 past the first segment, under 4 a turn.
+    body = problem(await strands_of(client, asked | {"curl": curl}), 422, "params.curl.period_mm")
+    assert "give points >= 22" in body["detail"]
 
 
 @pytest.mark.anyio

@@ -11,14 +11,14 @@ from pydantic import ConfigDict, Field, model_validator
 
 from transforms import Framing
 from transforms.sites import outward_sign, vertex_normals
-from transforms.strands import Roots, StrandShape, SurfaceGuard, grow_strands
+from transforms.strands import Curl, Roots, StrandShape, SurfaceGuard, grow_strands
 
 from ..errors import InvalidInput
 from ..outputs import Output
 from ..outputs.glb import layout_uv
 from ..outputs.usd import strands_usda
 from .context import Context
-from .fields import output_choice
+from .fields import Strict, output_choice
 from .inputs import PngFile, PngPart
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE
@@ -43,6 +43,24 @@ FREE_MM = 2.0
 #: What a strand point takes: its coordinates, its checks against the surface (candidate
 #: triangles and their closest points), its JSON; measured in the strands benchmark.
 STRAND_POINT_BYTES = 2_500
+
+
+#: Points a turn of curl at least: fewer draw a zigzag, not a helix.
+POINTS_A_TURN = 4
+
+
+class CurlParams(Strict):
+    """A helix about the strand's path (docs/math.md, section 20)."""
+
+    radius_mm: float = Field(
+        gt=0, le=50, allow_inf_nan=False, description="The helix's radius, mm."
+    )
+    period_mm: float = Field(
+        gt=0,
+        le=1000,
+        allow_inf_nan=False,
+        description="The length of path a turn takes, mm.",
+    )
 
 
 class StrandZone(SiteZone):
@@ -81,6 +99,12 @@ class StrandsParams(SitesParams):
     )
     width_mm: float = Field(
         0.08, gt=0, le=10, allow_inf_nan=False, description="A strand's width, mm."
+    )
+    curl: CurlParams | None = Field(
+        None,
+        description="A helix about each strand's path, which then runs radius_mm higher so "
+        "that the curls keep the clearance; the arc length stays length_mm. At least "
+        f"{POINTS_A_TURN} points a turn.",
     )
     output: output_choice(
         (Output.JSON, Output.USD, Output.PLY, Output.GLB, Output.SVG, Output.PNG),
@@ -169,10 +193,29 @@ def strands(given: StrandsInput, ctx: Context) -> Strands:
     roots = Roots(placed.sites.points, grown.direction, placed.normals, placed.sites.triangles,
                   placed.map_points)  # fmt: skip
     clearance = params.clearance_mm / scale
-    shape = StrandShape(params.points, clearance, 2.0 * clearance, FREE_MM / scale)
+    shape = StrandShape(params.points, clearance, 2.0 * clearance, FREE_MM / scale,
+                        _curl(params, lengths * scale, scale))  # fmt: skip
     guard = SurfaceGuard(mesh.vertices, mesh.faces, outward)
     points = grow_strands(triangles, grown.field, outward * normals, roots, lengths, shape, guard)
     return Strands(placed, points, lengths, params.width_mm)
+
+
+def _curl(params: StrandsParams, lengths_mm: np.ndarray, scale: float) -> Curl | None:
+    """The curl in mesh units (``scale`` mm each), refused when the longest strand's points
+    past its first segment are fewer than ``POINTS_A_TURN`` a turn."""
+    curl = params.curl
+    if curl is None or not len(lengths_mm) or params.points <= 2:
+        return None
+    turns = float(lengths_mm.max()) / curl.period_mm
+    if params.points - 2 < POINTS_A_TURN * turns:
+        needed = int(np.ceil(POINTS_A_TURN * turns)) + 2
+        raise InvalidInput(
+            "curl.period_mm",
+            f"a strand of {lengths_mm.max():g} mm makes {turns:.3g} turns of "
+            f"{curl.period_mm:g} mm: {params.points} points draw fewer than {POINTS_A_TURN} "
+            f"a turn; give points >= {needed} (at most 256) or a longer period",
+        )
+    return Curl(curl.radius_mm / scale, curl.period_mm / scale)
 
 
 def _lengths(params: StrandsParams, length_map: PngFile | None, placed: Placed, ctx) -> np.ndarray:
@@ -306,7 +349,8 @@ ROWS = (
         description="Multipart like /v1/sites, whose params it takes (growth required), with "
         "the strands' `length_mm` (one, per zone, or a `length_map` part with "
         "`length_range`), `points` a strand (2-256, default 16), `clearance_mm` (default 1) "
-        "and `width_mm` (default 0.08). A strand starts at its site, leaves along the site's "
+        "and `width_mm` (default 0.08), and an optional `curl` (a helix about the path: "
+        "`radius_mm`, `period_mm`). A strand starts at its site, leaves along the site's "
         "direction (the exit angle), bends over towards the field's tangent and runs on at "
         "the clearance above the scalp, following the field, until its arc length is the "
         "length; no point of it lies inside the head (docs/math.md, section 20). Answers "

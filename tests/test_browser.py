@@ -593,6 +593,104 @@ def test_a_flow_or_whorl_the_service_refuses_is_named_and_marked_on_the_map(serv
     assert [p for p in problems if "422" not in p] == [], problems
 
 
+def grow_hair(page, sent: list[dict]) -> tuple[dict, dict]:
+    """Press Grow hair, wait until the page shows the strands or the problem, and answer the
+    params it posted (``sent``: :func:`posted`) and the answer it received."""
+    before = len(sent)
+    with page.expect_response("**/v1/strands") as received:
+        page.click("#grow-hair")
+    page.wait_for_selector("#hair-status:is([data-state=grown], [data-state=error])",
+                           timeout=60_000)  # fmt: skip
+    assert len(sent) == before + 1, sent
+    return sent[-1], received.value.json()
+
+
+def strands_drawn(page, points: int) -> np.ndarray:
+    """(n, points, 3): the strands the 3D view draws, read back from its line segments (each
+    strand's segments in turn, each one starting where the one before it ends)."""
+    ends = page.evaluate("window.meshflatDemo.positions('strands')")
+    segments = np.array(ends).reshape(-1, points - 1, 2, 3)
+    assert np.array_equal(segments[:, 1:, 0], segments[:, :-1, 1])
+    return np.concatenate([segments[:, :, 0], segments[:, -1:, 1]], axis=1)
+
+
+def assert_grown(drawn: np.ndarray, sites: dict, length: float) -> np.ndarray:
+    """Checks that each strand ``drawn`` is rooted at its site of the /v1/sites answer, leaves
+    along its direction (the exit angle) and is ``length`` long (the sample's units are
+    millimetres). Answers how far each one's tip is from its root."""
+    assert np.abs(drawn[:, 0] - np.asarray(sites["sites"]["position"])).max() < 1e-3
+    first = drawn[:, 1] - drawn[:, 0]
+    first /= np.linalg.norm(first, axis=1, keepdims=True)
+    leaving = (first * np.asarray(sites["sites"]["direction"])).sum(axis=1)
+    assert np.degrees(np.arccos(np.clip(leaving, -1, 1))).max() < 1
+    arc = np.linalg.norm(np.diff(drawn, axis=1), axis=2).sum(axis=1)
+    assert np.allclose(arc, length, rtol=1e-3), (arc.min(), arc.max())
+    return np.linalg.norm(drawn[:, -1] - drawn[:, 0], axis=1)
+
+
+def test_grow_hair_draws_the_strands_of_the_grafts_on_the_head(server):
+    """A zone and a whorl drawn, exit angle 25°, Place grafts, then Grow hair at 30 mm and at
+    60 mm: the page posts the grafts' params with the length and 16 points a strand, and the
+    head shows one strand a graft, 16 points each, rooted at its site and leaving along its
+    direction, its arc length the length given. Without growth the service's 422 shows in the
+    hair's status."""
+    flat = post(server, "/v1/flatten", PARAMS)
+    (whorl,) = about_the_middle(flat, [(0.0, -0.06)])
+    problems: list[str] = []
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        sites_sent = posted(page, "/v1/sites")
+        strands_sent = posted(page, "/v1/strands")
+        flatten_sample(page)
+        draw(page, flat, pentagon(flat, 0.2))
+        place_whorl(page, flat, whorl, "clockwise")
+        page.fill("#exit-angle", "25")
+        assert page.locator("#grow-hair").is_disabled()  # no grafts yet
+        placed = place_grafts(page, lambda: page.click("#place-sites"), sites_sent)
+        sites = post(server, "/v1/sites", placed)
+        count = int(page.locator("#sites-status").get_attribute("data-count"))
+        assert count == sites["count"] > 50
+        status = page.locator("#hair-status")
+
+        tips = {}
+        for length in (30, 60):
+            page.fill("#hair-length", str(length))
+            page.wait_for_timeout(500)
+            page.evaluate(CHANGED_PIXELS, True)
+            params, answer = grow_hair(page, strands_sent)
+            assert params == {**placed, "length_mm": length, "points": 16, "output": "json"}
+            assert params["growth"]["exit_angle_deg"] == 25
+            assert status.get_attribute("data-state") == "grown", status.inner_text()
+            assert status.inner_text() == f"{count:,} strands of {length} mm"
+            assert status.get_attribute("data-count") == str(count)
+            # One strand a graft, each of 16 points, as the page received them.
+            drawn = strands_drawn(page, 16)
+            assert drawn.shape == (count, 16, 3)
+            assert np.allclose(drawn, answer["points"], atol=1e-3)
+            tips[length] = assert_grown(drawn, sites, length)
+            assert np.allclose(answer["length_mm"], length)
+            page.wait_for_timeout(500)
+            assert page.evaluate(CHANGED_PIXELS, False) > 50  # the new strands on the head
+        assert np.median(tips[60] / tips[30]) > 1.5  # longer hair reaches further
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "demo-hair.png"), full_page=True)
+
+        # The growth cleared takes the grafts and their strands; grafts placed without it
+        # grow none: the service's 422 shows.
+        page.click("#clear-growth")
+        assert page.evaluate("window.meshflatDemo.positions('strands')") == []
+        assert page.locator("#grow-hair").is_disabled()
+        assert status.get_attribute("data-state") == "none"
+        place_grafts(page, lambda: page.click("#place-sites"), sites_sent)
+        params, _ = grow_hair(page, strands_sent)
+        assert "growth" not in params
+        assert status.get_attribute("data-state") == "error"
+        text = status.inner_text()
+        assert text.startswith("422: params.growth: strands grow along the hair's"), text
+    # The 422, as the browser logs a failed fetch.
+    assert [p for p in problems if "422" not in p] == [], problems
+
+
 #: Which side of the head each landmark is clicked from.
 VIEWS = {
     "nasion": "front",

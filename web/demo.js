@@ -5,8 +5,9 @@
 // Grafts placed by /v1/sites (in the zone, or over the region) show on the map and the head,
 // with a table of each zone's area, density and grafts. Flows and whorls drawn on the map
 // give the grafts their growth (params.growth): each shows as a short stroke on the map and
-// the head. The units are the sample's (from /v1/samples), and what an answer warns of
-// (units, a zone off the map) is listed.
+// the head. Grow hair grows a strand from each graft (/v1/strands, the length and exit angle
+// given) and draws them on the head. The units are the sample's (from /v1/samples), and
+// what an answer warns of (units, a zone off the map) is listed.
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
@@ -218,10 +219,12 @@ function toPicture([x, y]) {
   return [b.left + ((u + PAD) / b.uSpan) * b.width, b.top + ((v + PAD) / b.vSpan) * b.height];
 }
 
-function zoneStatus(text, state) {
-  $('zone-area').textContent = text;
-  $('zone-area').className = state === 'error' ? 'error' : '';
-  $('zone-area').dataset.state = state;
+// A status line (the zone's, the grafts', the hair's): its text, shown as an error or not,
+// and its state for the tests.
+function showStatus(id, text, state) {
+  $(id).textContent = text;
+  $(id).className = state === 'error' ? 'error' : '';
+  $(id).dataset.state = state;
 }
 
 function drawZone() {
@@ -254,7 +257,7 @@ function clearZone() {
   mapSvg()?.querySelector('g.zone-drawing')?.remove();
   $('map').classList.toggle('drawing', growth.mode !== null);
   removeOutline();
-  zoneStatus('', 'none');
+  showStatus('zone-area', '', 'none');
   delete $('zone-area').dataset.ring;
   delete $('zone-area').dataset.segments;
   clearSites();
@@ -272,6 +275,7 @@ const STROKE_TIP = new THREE.Color(0x8c510a);
 const STROKE_PIXELS = 8;
 const STROKE_OF_SIZE = 1 / 20;
 let grafts = null; // the sites in the 3D view
+let placed = null; // the params they were placed with
 let strokes = null; // their growth directions in the 3D view
 let sitesTicket = 0;
 
@@ -289,12 +293,13 @@ function clearSites() {
   grafts = null;
   strokes = null;
   $('sites-table').replaceChildren();
-  $('sites-status').textContent = '';
-  $('sites-status').className = '';
-  $('sites-status').dataset.state = 'none';
+  showStatus('sites-status', '', 'none');
   delete $('sites-status').dataset.count;
   delete $('sites-status').dataset.strokes;
   showWarnings(null);
+  placed = null;
+  $('grow-hair').disabled = true;
+  clearHair();
 }
 
 // Each site's map direction as a stroke from the site, in the picture's pixels: the layout's
@@ -371,9 +376,8 @@ function showSites(answer) {
   // Fewer than two grafts have no distance apart (null).
   const apart = answer.min_distance_mm === null ? '' : `, at least ${answer.min_distance_mm.toFixed(2)} mm apart`;
   const angle = grown ? `, ${answer.growth.exit_angle_deg}° off the scalp` : '';
-  $('sites-status').textContent = `${answer.count.toLocaleString('en')} grafts${apart}${angle}`;
+  showStatus('sites-status', `${answer.count.toLocaleString('en')} grafts${apart}${angle}`, 'placed');
   $('sites-status').dataset.count = String(answer.count);
-  $('sites-status').dataset.state = 'placed';
 }
 
 // Grafts in the zone drawn (closed), else over the whole region, at the density asked.
@@ -390,19 +394,18 @@ async function placeSites() {
   if (grows) p.growth = grows;
   growth.error = null;
   drawGrowth();
-  $('sites-status').textContent = 'placing…';
-  $('sites-status').dataset.state = 'placing';
+  showStatus('sites-status', 'placing…', 'placing');
   try {
     const response = await post('/v1/sites', map.mesh, p, 'application/json');
     const answer = await response.json();
     if (ticket !== sitesTicket) return;
     showWarnings(answer);
     showSites(answer);
+    placed = p;
+    $('grow-hair').disabled = false;
   } catch (error) {
     if (ticket !== sitesTicket) return;
-    $('sites-status').textContent = error.message;
-    $('sites-status').className = 'error';
-    $('sites-status').dataset.state = 'error';
+    showStatus('sites-status', error.message, 'error');
     // A flow or whorl the service refused (params.growth.flow.1): marked on the map.
     const named = /^params\.growth\.(flow|whorls)\.(\d+)/.exec(error.field ?? '');
     growth.error = named ? { kind: named[1], index: Number(named[2]) } : null;
@@ -415,7 +418,7 @@ function startZone() {
   clearZone();
   zone.drawing = true;
   $('map').classList.add('drawing');
-  zoneStatus('Click points on the map; double-click to close the outline.', 'drawing');
+  showStatus('zone-area', 'Click points on the map; double-click to close the outline.', 'drawing');
 }
 
 // The outline lifted onto the surface, one segment per piece on it: none where it runs off
@@ -437,7 +440,7 @@ async function measure() {
   const outer = { x: ring.map((p) => p[0]), y: ring.map((p) => p[1]) };
   const p = { ...map.params, zones: [{ name: 'zone', outer }], units: $('units').value };
   $('zone-area').dataset.ring = JSON.stringify(outer);
-  zoneStatus('measuring…', 'measuring');
+  showStatus('zone-area', 'measuring…', 'measuring');
   try {
     const response = await post('/v1/measure', map.mesh, p, 'application/json');
     const answer = await response.json();
@@ -446,9 +449,9 @@ async function measure() {
     showWarnings(answer);
     removeOutline();
     showOutline(measured.outline[0]);
-    zoneStatus(`Zone: ${measured.area_cm2.toFixed(2)} cm²`, 'measured');
+    showStatus('zone-area', `Zone: ${measured.area_cm2.toFixed(2)} cm²`, 'measured');
   } catch (error) {
-    if (ticket === zone.ticket) zoneStatus(error.message, 'error');
+    if (ticket === zone.ticket) showStatus('zone-area', error.message, 'error');
   }
 }
 
@@ -615,6 +618,65 @@ function growthParams() {
   return grows;
 }
 
+// -- strands grown from the grafts by /v1/strands -------------------------------------------
+
+// Points a strand (the service's default).
+const HAIR_POINTS = 16;
+let hair = null; // the strands in the 3D view
+let hairTicket = 0;
+
+function clearHair() {
+  hairTicket += 1;
+  if (hair) dispose(hair);
+  hair = null;
+  showStatus('hair-status', '', 'none');
+  delete $('hair-status').dataset.count;
+}
+
+// The strands on the head: each one's segments (point j to j + 1), shaded from the root (dark)
+// to the tip (hair brown) as the grafts' strokes are.
+function showHair(answer) {
+  const shade = (j, points) => STROKE_ROOT.clone().lerp(STROKE_TIP, j / (points - 1)).toArray();
+  const ends = [];
+  const colours = [];
+  for (const strand of answer.points) {
+    for (let j = 1; j < strand.length; j += 1) {
+      ends.push(...strand[j - 1], ...strand[j]);
+      colours.push(...shade(j - 1, strand.length), ...shade(j, strand.length));
+    }
+  }
+  const geometry = new THREE.BufferGeometry();
+  geometry.setAttribute('position', new THREE.Float32BufferAttribute(ends, 3));
+  geometry.setAttribute('color', new THREE.Float32BufferAttribute(colours, 3));
+  hair = new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ vertexColors: true }));
+  hair.name = 'strands';
+  scene.add(hair);
+  const lengths = answer.length_mm.map(Math.round);
+  const [shortest, longest] = [Math.min(...lengths), Math.max(...lengths)];
+  const length = shortest === longest ? `${shortest}` : `${shortest}-${longest}`;
+  showStatus('hair-status', `${answer.count.toLocaleString('en')} strands of ${length} mm`, 'grown');
+  $('hair-status').dataset.count = String(answer.count);
+}
+
+// A strand from each graft shown: the params they were placed with (their growth, with the
+// exit angle given) and the length given. Grafts placed without growth grow none: the
+// service says so.
+async function growHair() {
+  clearHair();
+  const ticket = hairTicket;
+  const p = { ...placed, length_mm: Number($('hair-length').value), points: HAIR_POINTS, output: 'json' };
+  showStatus('hair-status', 'growing…', 'growing');
+  try {
+    const response = await post('/v1/strands', map.mesh, p, 'application/json');
+    const answer = await response.json();
+    if (ticket !== hairTicket) return; // the grafts went, or grown again, meanwhile
+    showWarnings(answer);
+    showHair(answer);
+  } catch (error) {
+    if (ticket === hairTicket) showStatus('hair-status', error.message, 'error');
+  }
+}
+
 // -- landmarks placed on the whole head -----------------------------------------------------
 
 const LANDMARKS = ['nasion', 'inion', 'left_tragus', 'right_tragus', 'vertex'];
@@ -712,6 +774,10 @@ window.meshflatDemo = {
     const box = renderer.domElement.getBoundingClientRect();
     const ndc = new THREE.Vector3(...point).project(camera);
     return [box.left + ((ndc.x + 1) / 2) * box.width, box.top + ((1 - ndc.y) / 2) * box.height];
+  },
+  // The vertices of a line object of the 3D view by its name ('strands'), x y z after x y z.
+  positions(name) {
+    return Array.from(scene.getObjectByName(name)?.geometry.attributes.position.array ?? []);
   },
 };
 
@@ -843,6 +909,7 @@ $('map').addEventListener('click', clickGrowth);
 $('map').addEventListener('dblclick', endFlow);
 // Another exit angle: grafts placed with growth are placed again, with it.
 $('exit-angle').addEventListener('change', () => strokes && placeSites());
+$('grow-hair').addEventListener('click', growHair);
 animate();
 loadSamples().then(() => {
   document.body.dataset.state = 'ready';

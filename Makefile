@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-locate bench-measure bench-sites bench-growth bench-transfer bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-locate bench-measure bench-sites bench-growth bench-strands bench-transfer bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -70,6 +70,11 @@ bench-sites: $(VENV)/.installed-bench $(VENV)/.installed-sites-peers
 # potpourri3d's vector heat method (one thread, timed alternately; its runs take a minute each).
 bench-growth: $(VENV)/.installed-bench $(VENV)/.installed-growth-peers
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m benchmarks.growth_bench $(BENCH_ARGS)
+
+# Guide hairs of 16 points from 10,000 and 100,000 sites on a 100k-face scalp, kept out of
+# the whole head (targets 1 s and 5 s on one thread); peak memory; each answer's size.
+bench-strands: $(VENV)/.installed-bench
+	IGL_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m benchmarks.strands_bench $(BENCH_ARGS)
 
 # Values between the map and the mesh on a million-face scalp (4096² image to the faces,
 # the vertices' values to a 2048² image), against Pillow's ImageDraw a triangle at a time.

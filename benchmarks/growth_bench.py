@@ -121,10 +121,11 @@ class Scalp:
     flagged: int
 
     @classmethod
-    def fitted(cls) -> Scalp:
-        vertices, faces = subdivided("fsaverage-head.ply", SUBDIVISIONS)
+    def fitted(cls, subdivisions: int = SUBDIVISIONS, half_angle_deg: float = HALF_ANGLE_DEG):
+        """The cone's region of the bundled head subdivided ``subdivisions`` times, fitted."""
+        vertices, faces = subdivided("fsaverage-head.ply", subdivisions)
         apex = bbox_center(vertices, faces)
-        chosen = cone_faces(vertices, faces, apex, CONE_AXIS, HALF_ANGLE_DEG)
+        chosen = cone_faces(vertices, faces, apex, CONE_AXIS, half_angle_deg)
         vertices, faces = compact(vertices, faces[chosen])
         fit = default_choice(
             vertices, faces, FitFixed(center=named_center(vertices, faces, "bbox_center"))

@@ -192,6 +192,8 @@ def _paths(triangles, field, normals, roots: Roots, lengths, shape: StrandShape,
 
 #: Rounds of the search for the length of path whose helix has the strand's length.
 CURL_ROUNDS = 12
+#: The search stops once every helix's arc is this near its length (relative).
+CURL_TOLERANCE = 1e-6
 
 
 def _curled(paths: np.ndarray, ups: np.ndarray, lengths, shape: StrandShape, guard):
@@ -229,6 +231,8 @@ def _helix_of_length(paths, ups, lengths, shape: StrandShape) -> np.ndarray:
         nearer = np.abs(arc - rest) < miss
         best = helix if best is None else np.where(nearer[:, None, None], helix, best)
         miss = np.where(nearer, np.abs(arc - rest), miss)
+        if np.all(miss <= CURL_TOLERANCE * lengths):
+            break
         short = arc < rest
         low, high = np.where(short, axis, low), np.where(short, high, axis)
         guess = axis * rest / np.where(arc > 0, arc, rest)

@@ -40,9 +40,10 @@ LengthMm = Annotated[float, Field(allow_inf_nan=False, gt=0.1, le=1000.0)]
 #: The arc length from the root within which a strand may lie nearer the scalp than half
 #: its clearance (it leaves the skin there), millimetres.
 FREE_MM = 2.0
-#: What a strand point takes: its coordinates, its checks against the surface (candidate
-#: triangles and their closest points), its JSON; measured in the strands benchmark.
-STRAND_POINT_BYTES = 2_500
+#: What a strand point takes beside the mesh and the sites: its coordinates, the march's and
+#: the guard's temporaries, its answer. `make bench-strands` measured the peak of a whole
+#: request of 100,000 strands at 99 to 301 bytes a point, by form (mesh and fit included).
+STRAND_POINT_BYTES = 400
 
 
 #: Points a turn of curl at least: fewer draw a zigzag, not a helix.

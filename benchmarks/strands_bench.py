@@ -20,7 +20,8 @@ Timed (median of several runs, one thread: ``IGL_NUM_THREADS``, ``OPENBLAS_NUM_T
   over every point, and the walk of those it puts back);
 * peak memory: the growth of 100,000 strands in a fresh process, its peak resident memory
   (``VmHWM``) above what it held before, by strand point, beside the budget the service
-  charges for one (``STRAND_POINT_BYTES``);
+  charges for one (``STRAND_POINT_BYTES``, and ``CURL_POINT_BYTES`` more for a curled one),
+  straight and curled;
 * the answers: ``/v1/strands`` on the head's PLY through the service's own use-case and
   encoders in this process (the upload parsed, the fit, the sites, the strands, the form), its
   seconds and the size of each form for 100,000 strands, and the peak memory of the whole
@@ -54,7 +55,7 @@ from fixtures.meshes import subdivided
 from service.capabilities import MESH_COMMANDS
 from service.capabilities.context import Context
 from service.capabilities.inputs import Upload, parse_params
-from service.capabilities.strands import STRAND_POINT_BYTES
+from service.capabilities.strands import CURL_POINT_BYTES, STRAND_POINT_BYTES
 from service.outputs import Output
 from service.server.allocator import keep_large_blocks
 from service.settings import Settings
@@ -138,9 +139,8 @@ def timed(setting: Setting, runs: int) -> list[tuple[str, int, int, list[dict]]]
     """A warm-up, then ``runs`` growths of each case: (name, strands, points, runs)."""
     cases = [
         *((f"{count:,} strands", count, plain_shape()) for count in TARGETS),
-        ("10,000 strands, curled", 10_000, StrandShape(CURL_POINTS, CLEARANCE_MM,
-                                                        2.0 * CLEARANCE_MM, 2.0, CURL)),
-    ]  # fmt: skip
+        ("10,000 strands, curled", 10_000, curled_shape()),
+    ]
     out = []
     for name, count, shape in cases:
         progress(f"placing {count:,} sites")
@@ -187,16 +187,21 @@ def timing_rows(cases) -> list[str]:
 # -- peak memory: a fresh process ------------------------------------------------------------
 
 
-def child(count: int) -> dict:
+def curled_shape() -> StrandShape:
+    return StrandShape(CURL_POINTS, CLEARANCE_MM, 2.0 * CLEARANCE_MM, 2.0, CURL)
+
+
+def child(count: int, curled: bool) -> dict:
     """Peak memory of one growth of ``count`` strands (the guard built, the strands grown),
     above what the process held before it (after a warm-up on 1,000)."""
     keep_large_blocks()
     setting = Setting()
-    setting.grow(setting.roots(1_000), plain_shape())
+    shape = curled_shape() if curled else plain_shape()
+    setting.grow(setting.roots(1_000), shape)
     roots = setting.roots(count)
     Path("/proc/self/clear_refs").write_text("5")  # VmHWM back to VmRSS
     before = status_bytes("VmRSS")
-    setting.grow(roots, plain_shape())
+    setting.grow(roots, shape)
     return {"peak": status_bytes("VmHWM") - before, "strands": len(roots.points)}
 
 
@@ -208,16 +213,23 @@ def child_run(arguments: list[str]) -> dict:
     return json.loads(done.stdout.splitlines()[-1])
 
 
-def peak_row(count: int) -> list[str]:
-    measured = child_run(["--child", str(count)])
-    per_point = measured["peak"] / (measured["strands"] * POINTS)
-    return [
+def peak_rows(count: int) -> list[str]:
+    rows = [
         "| strands | points | peak above the start (MiB) | per strand point (B) | "
         "charged per point (B) |",
         "|---|---:|---:|---:|---:|",
-        f"| {measured['strands']:,} | {POINTS} | {measured['peak'] / 2**20:,.1f} | "
-        f"{per_point:,.0f} | {STRAND_POINT_BYTES:,} |",
     ]
+    for curled, points, charged in (
+        (False, POINTS, STRAND_POINT_BYTES),
+        (True, CURL_POINTS, STRAND_POINT_BYTES + CURL_POINT_BYTES),
+    ):
+        measured = child_run(["--child", str(count), *(["--curled"] if curled else [])])
+        per_point = measured["peak"] / (measured["strands"] * points)
+        rows.append(
+            f"| {measured['strands']:,}{', curled' if curled else ''} | {points} | "
+            f"{measured['peak'] / 2**20:,.1f} | {per_point:,.0f} | {charged:,} |"
+        )  # fmt: skip
+    return rows
 
 
 # -- the answers: the service's use-case and encoders ------------------------------------------
@@ -286,7 +298,7 @@ def measure(runs: int) -> str:
     setting = Setting()
     cases = timed(setting, runs)
     progress("peak memory (a fresh process)")
-    peak = peak_row(100_000)
+    peak = peak_rows(100_000)
     progress("the answers through the service's use-case")
     answers = answer_rows(setting, 100_000)
     lines = [
@@ -298,7 +310,7 @@ def measure(runs: int) -> str:
         "",
         *timing_rows(cases),
         "",
-        "Peak memory of the growth of 100,000 strands, in a fresh process:",
+        "Peak memory of the growth of 100,000 strands, in a fresh process each:",
         "",
         *peak,
         "",
@@ -316,10 +328,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=3, help="timed runs of each (median)")
     parser.add_argument("--write-docs", action="store_true", help="record in docs/benchmarks.md")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--curled", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--answer-child", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
-        print(json.dumps(child(args.child)))
+        print(json.dumps(child(args.child, args.curled)))
         return 0
     if args.answer_child:
         output, count = args.answer_child

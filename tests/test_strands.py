@@ -204,8 +204,8 @@ def test_a_curled_strand_turns_at_its_radius_about_its_path_and_keeps_its_length
 ):
     vertices, faces, *_ = scalp()
     curled = grown(length=60.0, points=points, curl=Curl(radius, period))
-    # The helix's axis: the strand grown without curl a radius higher (the same bend).
-    axis = grown(length=60.0, points=points, clearance=1.0 + radius, bend=2.0)
+    # The helix's axis: the strand grown without curl a radius higher, its bend as much longer.
+    axis = grown(length=60.0, points=points, clearance=1.0 + radius, bend=2.0 * (1.0 + radius))
     np.testing.assert_array_equal(curled[:, :2], axis[:, :2])  # the same first segment
     steps = np.linalg.norm(np.diff(curled, axis=1), axis=2)
     np.testing.assert_allclose(steps.sum(axis=1), 60.0, rtol=0.01)
@@ -220,6 +220,59 @@ def test_a_curled_strand_turns_at_its_radius_about_its_path_and_keeps_its_length
     assert np.abs(winding_numbers(sample[::5], vertices, faces)).max() < 0.5
     gaps = distances_to_surface(sample[::11], vertices, faces)
     assert gaps[arc.reshape(-1)[::11] > 2.0 + 1e-9].min() >= 0.5 - 1e-9
+
+
+def some_roots(rows) -> Roots:
+    _, _, _, _, _, roots, _ = scalp()
+    return Roots(*(getattr(roots, name)[rows] for name in
+                   ("points", "directions", "normals", "triangles", "map_points")))  # fmt: skip
+
+
+@pytest.mark.parametrize(("points", "radius", "period"), [(100, 50.0, 50.0), (64, 10.0, 20.0)])
+def test_a_wide_curl_whose_axis_rises_steeply_still_keeps_its_length(points, radius, period):
+    vertices, faces, triangles, field, normals, _, guard = scalp()
+    roots = some_roots(slice(0, 1500, 10))
+    shape = StrandShape(points, 1.0, 2.0, 2.0, Curl(radius, period))
+    strands = grow_strands(triangles, field, normals, roots, np.full(150, 40.0), shape, guard)
+    arcs = np.linalg.norm(np.diff(strands, axis=1), axis=2).sum(axis=1)
+    np.testing.assert_allclose(arcs, 40.0, rtol=0.01)
+    inside = winding_numbers(strands[:, 1:].reshape(-1, 3)[::4], vertices, faces)
+    assert np.abs(inside).max() < 0.5
+
+
+def test_a_curled_strand_is_the_same_grown_alone_or_with_others():
+    _, _, triangles, field, normals, _, guard = scalp()
+    shape = StrandShape(48, 1.0, 2.0, 2.0, Curl(1.5, 10.0))
+    together = grow_strands(triangles, field, normals, some_roots(slice(0, 200)),
+                            np.full(200, 50.0), shape, guard)  # fmt: skip
+    alone = grow_strands(triangles, field, normals, some_roots(slice(7, 8)), np.full(1, 50.0),
+                         shape, guard)  # fmt: skip
+    np.testing.assert_array_equal(alone[0], together[7])
+    empty = grow_strands(triangles, field, normals, some_roots(slice(0, 0)), np.zeros(0), shape,
+                         guard)  # fmt: skip
+    assert empty.shape == (0, 48, 3)
+
+
+def test_the_guard_tells_the_side_behind_a_crease_sharper_than_a_right_angle():
+    # A valley z = 2 |x| (its walls 53 degrees apart), outside above: a face's normal alone
+    # calls the points under the crease outside of the other wall.
+    corners = np.array([[0, -2, 0], [2, -2, 4], [2, 2, 4], [0, 2, 0], [-2, -2, 4], [-2, 2, 4]],
+                       dtype=float)  # fmt: skip
+    guard = SurfaceGuard(corners, np.array([[0, 1, 2], [0, 2, 3], [0, 3, 5], [0, 5, 4]]), +1)
+    rng = np.random.default_rng(5)
+    points = rng.uniform([-1.5, -1.5, -1.5], [1.5, 1.5, 2.5], (4000, 3))
+    _, _, height = guard.nearest(points)
+    below = points[:, 2] < 2 * np.abs(points[:, 0])
+    np.testing.assert_array_equal(height < 0, below)
+    # Its magnitude is the distance to the nearer wall: in the xz plane, each wall is the
+    # segment from the crease (0, 0) to (+-2, 4).
+    xz = points[:, [0, 2]]
+    gaps = []
+    for way in (np.array([1.0, 2.0]), np.array([-1.0, 2.0])):
+        way /= np.linalg.norm(way)
+        along = np.clip(xz @ way, 0.0, 2.0 * np.sqrt(5.0))
+        gaps.append(np.linalg.norm(xz - along[:, None] * way, axis=1))
+    np.testing.assert_allclose(np.abs(height), np.minimum(*gaps), atol=1e-9)
 
 
 # -- through the API ------------------------------------------------------------------------
@@ -335,9 +388,11 @@ async def test_curled_strands_keep_their_length_and_too_few_points_a_turn_are_re
     np.testing.assert_allclose(points[:, :2], np.asarray(straight["points"])[:, :2])
     vertices, faces = (np.array(a) for a in load_sample(NAME))
     assert np.abs(winding_numbers(points[:, 1:].reshape(-1, 3)[::7], vertices, faces)).max() < 0.5
-    # 40 mm of 8 mm turns is 5 turns: 16 points are 14 past the first segment, under 4 a turn.
-    body = problem(await strands_of(client, asked | {"curl": curl}), 422, "params.curl.period_mm")
-    assert "give points >= 22" in body["detail"]
+    # 40 mm of helix of radius 1.5 mm winds 40 / hypot(1, 2 pi 1.5 / 5) = 18.7 mm of its path:
+    # 3.75 turns of 5 mm, which 14 points past the first segment draw at under 4 a turn.
+    tight = {"radius_mm": 1.5, "period_mm": 5}
+    body = problem(await strands_of(client, asked | {"curl": tight}), 422, "params.curl.period_mm")
+    assert "give points >= 17" in body["detail"]
 
 
 @pytest.mark.anyio

@@ -22,6 +22,8 @@ from .errors import TransformInputError
 SIZE_SAMPLE = 4096
 #: A point this close to a triangle's edge, in its barycentric weights, is in the triangle.
 BARYCENTRIC_SLACK = 1e-12
+#: Slack around a triangle's box, in typical sizes, beyond what its weights' slack reaches.
+BOX_SLACK = 1e-9
 
 
 @dataclass(frozen=True)
@@ -125,13 +127,15 @@ class MapTriangles:
     def barycentric(self, triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
         """(p, 3) float: the weights of map ``points`` ((p, 2)) in ``triangles`` ((p,) int);
         rows of triangles of no area on the map are NaN."""
-        c = self.corners(triangles)
-        e1, e2, d = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0], points - c[:, 0]
-        det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        x, y = self.corner_x[:, triangles], self.corner_y[:, triangles]
+        e1x, e1y, e2x, e2y = x[1] - x[0], y[1] - y[0], x[2] - x[0], y[2] - y[0]
+        dx, dy = points[:, 0] - x[0], points[:, 1] - y[0]
+        det = e1x * e2y - e1y * e2x
+        weights = np.empty((len(triangles), 3))
         with np.errstate(divide="ignore", invalid="ignore"):
-            w1 = (d[:, 0] * e2[:, 1] - d[:, 1] * e2[:, 0]) / det
-            w2 = (e1[:, 0] * d[:, 1] - e1[:, 1] * d[:, 0]) / det
-        weights = np.column_stack([1.0 - w1 - w2, w1, w2])
+            np.divide(dx * e2y - dy * e2x, det, out=weights[:, 1])
+            np.divide(e1x * dy - e1y * dx, det, out=weights[:, 2])
+        weights[:, 0] = 1.0 - weights[:, 1] - weights[:, 2]
         weights[det == 0] = np.nan
         return weights
 
@@ -159,10 +163,8 @@ class MapTriangles:
         weights : (p, 3) float, barycentric weights of the triangle's corners (NaN for -1)
         """
         points = as_points(points, "points", dims=2)
-        found = np.full(len(points), -1, dtype=np.int64)
-        weights = np.full((len(points), 3), np.nan)
         if len(points) == 0:
-            return found, weights
+            return np.full(0, -1, dtype=np.int64), np.full((0, 3), np.nan)
         low, high = points.min(0), points.max(0)
         grid = CellGrid.covering(low, high, self.typical_size)
         x, y = points[:, 0], points[:, 1]
@@ -172,16 +174,69 @@ class MapTriangles:
         held = index.any_in(boxes)
         near, boxes = near[held], boxes.take(np.flatnonzero(held))
         owner, point = index.pairs(boxes)
-        triangle = near[owner]
+        return self._holding(points, near[owner], point)
+
+    def cell_index(self) -> TriangleCells:
+        """The triangles filed by the cells of a grid over the map (:class:`TriangleCells`):
+        for locating batch after batch of points in the same triangles, as a march does."""
+        return TriangleCells.of(self)
+
+    def _holding(self, points: np.ndarray, triangle: np.ndarray, point: np.ndarray):
+        """:meth:`locate`'s answer from candidate pairs (``triangle``, ``point``), (c,) int
+        each: of the triangles that hold a point, the front-facing one first, then the
+        first in face order."""
+        found = np.full(len(points), -1, dtype=np.int64)
+        weights = np.full((len(points), 3), np.nan)
         w = self.barycentric(triangle, points[point])
         inside = np.all(w >= -BARYCENTRIC_SLACK, axis=1)
         triangle, point, w = triangle[inside], point[inside], w[inside]
         if len(point) == 0:
             return found, weights
-        back = np.sign(self.signed_map_area[triangle]) != self.front
-        order = np.lexsort((triangle, back, point))
-        first = order[np.r_[True, point[order][1:] != point[order][:-1]]]
+        # A point held by one triangle needs no choosing; those on edges or folds do.
+        shared = np.bincount(point, minlength=len(points))[point] > 1
+        first = np.flatnonzero(~shared)
+        if shared.any():
+            chosen = np.flatnonzero(shared)
+            back = np.sign(self.signed_map_area[triangle[chosen]]) != self.front
+            order = chosen[np.lexsort((triangle[chosen], back, point[chosen]))]
+            first = np.concatenate(
+                [first, order[np.r_[True, point[order][1:] != point[order][:-1]]]]
+            )
         found[point[first]] = triangle[first]
         kept = np.clip(w[first], 0.0, 1.0)
         weights[point[first]] = kept / kept.sum(axis=1, keepdims=True)
         return found, weights
+
+
+@dataclass(frozen=True)
+class TriangleCells:
+    """A region's map triangles filed by every cell of a grid over the map that their boxes
+    meet (:class:`~transforms.cellgrid.CellIndex`; cells half the triangles' typical size,
+    which leaves a point's cell the fewest candidates for the entries filed), built once:
+    a point's triangles are among its cell's. :meth:`MapTriangles.locate` builds its grid
+    over each call's points instead, which costs a pass over the triangles a call."""
+
+    triangles: MapTriangles
+    index: CellIndex
+
+    @classmethod
+    def of(cls, triangles: MapTriangles) -> TriangleCells:
+        low, high = triangles.map_points.min(axis=0), triangles.map_points.max(axis=0)
+        grid = CellGrid.covering(low, high, 0.5 * triangles.typical_size)
+        boxes = triangles.cell_boxes(grid, np.arange(len(triangles)))
+        return cls(triangles, CellIndex.of(grid, boxes))
+
+    def locate(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`MapTriangles.locate`: each map point's triangle ((p,) int, -1 where
+        none) and its weights there ((p, 3), NaN for -1)."""
+        points = as_points(points, "points", dims=2)
+        grid = self.index.grid
+        cell = grid.rows(points[:, 1]) * grid.n_columns + grid.columns(points[:, 0])
+        point, triangle, _ = self.index.entries_between(cell, cell + 1)
+        # Most of a cell's triangles do not reach the point: their boxes say so for less.
+        xmin, xmax, ymin, ymax = self.triangles.bounds
+        pad = BOX_SLACK * self.triangles.typical_size
+        x, y = points[point, 0], points[point, 1]
+        near = (xmin[triangle] - pad <= x) & (x <= xmax[triangle] + pad)
+        near &= (ymin[triangle] - pad <= y) & (y <= ymax[triangle] + pad)
+        return self.triangles._holding(points, triangle[near], point[near])

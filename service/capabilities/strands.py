@@ -3,6 +3,7 @@ out of the head (:mod:`transforms.strands`, docs/math.md, section 20)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -42,8 +43,12 @@ LengthMm = Annotated[float, Field(allow_inf_nan=False, gt=0.1, le=1000.0)]
 FREE_MM = 2.0
 #: What a strand point takes beside the mesh and the sites: its coordinates, the march's and
 #: the guard's temporaries, its answer. `make bench-strands` measured the peak of a whole
-#: request of 100,000 strands at 99 to 301 bytes a point, by form (mesh and fit included).
+#: request of 100,000 strands at 93 to 283 bytes a point, by form (mesh and fit included).
 STRAND_POINT_BYTES = 400
+#: What a curled strand point takes besides: the search for its helix's length (its path,
+#: tangents, frames and a round's temporaries); the same benchmark measured the growth of
+#: 100,000 curled strands of 32 points at 472 bytes a point in all.
+CURL_POINT_BYTES = 800
 
 
 #: Points a turn of curl at least: fewer draw a zigzag, not a helix.
@@ -184,8 +189,11 @@ def strands(given: StrandsInput, ctx: Context) -> Strands:
     placed = place(given, ctx)
     scale = placed.mm_per_unit
     count = len(placed.sites.triangles)
-    ctx.charge(STRAND_POINT_BYTES * count * params.points)
-    lengths = _lengths(params, given.length_map, placed, ctx) / scale
+    per_point = STRAND_POINT_BYTES + (CURL_POINT_BYTES if params.curl is not None else 0)
+    ctx.charge(per_point * count * params.points)
+    lengths_mm = _lengths(params, given.length_map, placed, ctx)
+    curl = _curl(params, lengths_mm, scale)
+    lengths = lengths_mm / scale
     grown = placed.grown
     triangles = placed.triangles
     normals = vertex_normals(triangles.surface_points, triangles.faces)
@@ -194,8 +202,7 @@ def strands(given: StrandsInput, ctx: Context) -> Strands:
     roots = Roots(placed.sites.points, grown.direction, placed.normals, placed.sites.triangles,
                   placed.map_points)  # fmt: skip
     clearance = params.clearance_mm / scale
-    shape = StrandShape(params.points, clearance, 2.0 * clearance, FREE_MM / scale,
-                        _curl(params, lengths * scale, scale))  # fmt: skip
+    shape = StrandShape(params.points, clearance, 2.0 * clearance, FREE_MM / scale, curl)
     guard = SurfaceGuard(mesh.vertices, mesh.faces, outward)
     points = grow_strands(triangles, grown.field, outward * normals, roots, lengths, shape, guard)
     return Strands(placed, points, lengths, params.width_mm)
@@ -203,18 +210,21 @@ def strands(given: StrandsInput, ctx: Context) -> Strands:
 
 def _curl(params: StrandsParams, lengths_mm: np.ndarray, scale: float) -> Curl | None:
     """The curl in mesh units (``scale`` mm each), refused when the longest strand's points
-    past its first segment are fewer than ``POINTS_A_TURN`` a turn."""
+    past its first segment are fewer than ``POINTS_A_TURN`` a turn of its helix."""
     curl = params.curl
     if curl is None or not len(lengths_mm) or params.points <= 2:
         return None
-    turns = float(lengths_mm.max()) / curl.period_mm
+    longest = float(lengths_mm.max())
+    # A helix of length L winds about L / sqrt(1 + (2 pi r / p)^2) of its axis.
+    turns = longest / math.hypot(1.0, 2.0 * math.pi * curl.radius_mm / curl.period_mm)
+    turns /= curl.period_mm
     if params.points - 2 < POINTS_A_TURN * turns:
-        needed = int(np.ceil(POINTS_A_TURN * turns)) + 2
+        needed = math.ceil(POINTS_A_TURN * turns) + 2
         raise InvalidInput(
             "curl.period_mm",
-            f"a strand of {lengths_mm.max():g} mm makes {turns:.3g} turns of "
-            f"{curl.period_mm:g} mm: {params.points} points draw fewer than {POINTS_A_TURN} "
-            f"a turn; give points >= {needed} (at most 256) or a longer period",
+            f"a strand of {longest:g} mm turns about {turns:.3g} times about its path at "
+            f"{curl.period_mm:g} mm a turn: {params.points} points draw fewer than "
+            f"{POINTS_A_TURN} a turn; give points >= {needed} (at most 256) or a longer period",
         )
     return Curl(curl.radius_mm / scale, curl.period_mm / scale)
 

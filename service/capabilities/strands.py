@@ -222,7 +222,7 @@ def _curl(params: StrandsParams, lengths_mm: np.ndarray, scale: float) -> Curl |
         needed = math.ceil(POINTS_A_TURN * turns) + 2
         raise InvalidInput(
             "curl.period_mm",
-            f"a strand of {longest:g} mm turns about {turns:.3g} times about its path at "
+            f"a strand of {longest:g} mm winds {turns:.3g} times about its path at "
             f"{curl.period_mm:g} mm a turn: {params.points} points draw fewer than "
             f"{POINTS_A_TURN} a turn; give points >= {needed} (at most 256) or a longer period",
         )

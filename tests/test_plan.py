@@ -9,12 +9,15 @@ import json
 import math
 import xml.etree.ElementTree as ET
 
+import httpx
 import numpy as np
 import pytest
 from PIL import Image
 
+from service.app import create_app
 from service.cli import main
 from service.samples import SAMPLES
+from service.settings import Settings
 from transforms.plan import balance, graft_demand, graft_supply, mix_means, pooled_mean
 
 from .test_api import flatten, problem
@@ -224,6 +227,27 @@ async def test_a_name_given_twice_across_the_lists_is_a_422(client):
         await plan(client, {"recipient": recipient, "donor": [{**donor[0], "name": "crown"}]}), 422
     )
     assert "donor.0: the name 'crown' is that of recipient.1" in body["detail"]
+
+
+@pytest.mark.parametrize(
+    ("points", "field"), [((11, 3), "params.recipient"), ((4, 8), "params.donor")]
+)
+async def test_too_many_drawn_points_is_a_413_naming_the_list_that_has_them(points, field):
+    """The limit counts the points of both lists: the recipient zones alone over it name
+    them, else the donor zones are named."""
+    app = create_app(Settings(max_drawn_points=10))
+    async with app.router.lifespan_context(app):
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(transport=transport, base_url="http://meshflat") as client:
+            zones = []
+            for kind, count, x in zip(("recipient", "donor"), points, (-1.0, 1.0), strict=True):
+                t = np.linspace(0, 6, count, endpoint=False)
+                zone = {"name": kind, "outer": {"x": (x + 0.5 * np.cos(t)).tolist(),
+                                                "y": (0.5 * np.sin(t)).tolist()}}  # fmt: skip
+                zones.append({**zone, "density_per_cm2": 40, "hairs_per_graft": 2.0})
+            body = problem(await plan(client, {"recipient": zones[:1], "donor": zones[1:]}), 413)
+            assert body["field"] == field
+            assert "the limit is 10 (MESHFLAT_MAX_DRAWN_POINTS)" in body["detail"]
 
 
 @pytest.mark.parametrize("output", ["svg", "png"])

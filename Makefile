@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-locate bench-measure bench-sites bench-growth bench-strands bench-transfer bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-locate bench-measure bench-plan bench-sites bench-growth bench-strands bench-transfer bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -60,6 +60,11 @@ bench-locate: $(VENV)/.installed-bench
 # shapely 2 clipping the triangles (one thread, timed alternately in one process).
 bench-measure: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.measure_bench $(BENCH_ARGS)
+
+# A transplant plan of 10 zones on a 1M-face scalp: zones checked, areas, arithmetic (one
+# thread).
+bench-plan: $(VENV)/.installed-bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.plan_bench $(BENCH_ARGS)
 
 # Sites at a density on the bundled scalp and on it subdivided (100k faces), against
 # point-cloud-utils', Open3D's and trimesh's samplers (one thread, timed alternately).

@@ -10,6 +10,8 @@
     meshflat fit MESH ... [--out FILE.json]
     meshflat locate MESH ... --params '{"theta": [...], "phi": [...]}'
     meshflat measure MESH ... --zones zones.json [--units mm] [--out FILE.json|.svg|.png]
+    meshflat plan MESH ... --units mm --params '{"recipient": [...], "donor": [...]}'
+                     [--out FILE.json|.svg|.png]
     meshflat sites MESH ... [--density 40] [--zones zones.json] [--units mm] [--out sites.ply]
                       [--flow flow.json]
     meshflat register BASE FOLLOW_UP ... [--units mm] [--params JSON] --out frame.json

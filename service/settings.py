@@ -27,8 +27,8 @@ class Settings:
     max_vertices, max_faces : MESHFLAT_MAX_VERTICES, MESHFLAT_MAX_FACES, per mesh
     max_points : MESHFLAT_MAX_POINTS, per /v1/points or /v1/locate request
     max_drawn_points : MESHFLAT_MAX_DRAWN_POINTS, the points of all the zones' rings and the
-        curves of a /v1/measure request, and of the zones of a /v1/sites or /v1/register
-        request (an outline a surgeon draws has hundreds)
+        curves of a /v1/measure request, and of the zones of a /v1/sites, /v1/plan or
+        /v1/register request (an outline a surgeon draws has hundreds)
     max_curve_crossings : MESHFLAT_MAX_CURVE_CROSSINGS, the triangle edges all the curves of
         a /v1/measure request may cross (counted from their lengths on the map before they
         are lifted: a point of the answer and under 1 KB of memory each)

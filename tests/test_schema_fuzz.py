@@ -40,7 +40,8 @@ app = create_app(Settings(api_keys=(KEY,), max_sites=20_000))
 # routes below also answer 422 to conditions a JSON schema cannot state: a mesh file's
 # content (the schema says "binary"), a point at the centre (no direction), theta, phi and r
 # of different lengths, "sigma or pole_angle_deg, not both" across a nested object, a ring
-# drawn on the map that crosses itself or a hole outside its zone. Their 422
+# drawn on the map that crosses itself or a hole outside its zone (and for /v1/plan, zones
+# that overlap, a mix of hairs whose shares do not sum to 1). Their 422
 # is still checked to be a documented problem that conforms to its schema. /v1/sites (and
 # /v1/strands, which takes its params and needs a growth field and a length) also
 # answers 422 to zones that overlap, a density without units or a spacing the sites do not
@@ -53,7 +54,8 @@ CONFIG = SchemathesisConfig.from_dict(
         "operations": [
             {
                 "include-path-regex": (
-                    "^/v1/(flatten|validate|fit|locate|measure|register|transfer|points|points/inverse)$"
+                    "^/v1/(flatten|validate|fit|locate|measure|plan|register|transfer|points"
+                    "|points/inverse)$"
                 ),
                 "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx", "422"]}},
             },

@@ -16,6 +16,7 @@ from . import (
     flatten,
     locate,
     measure,
+    plan,
     points,
     register,
     sites,
@@ -26,7 +27,19 @@ from . import (
 from .rows import Capability, JsonCapability, MeshCapability
 
 #: The capability modules, in the order of the API's reference.
-MODULES = (flatten, validate, fit, locate, measure, sites, strands, register, transfer, points)
+MODULES = (
+    flatten,
+    validate,
+    fit,
+    locate,
+    measure,
+    plan,
+    sites,
+    strands,
+    register,
+    transfer,
+    points,
+)
 
 #: Every row of the table.
 CAPABILITIES: tuple[Capability, ...] = tuple(row for module in MODULES for row in module.ROWS)

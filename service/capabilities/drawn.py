@@ -92,10 +92,11 @@ def check_drawn(
     curves: Sequence[Curve] = (),
     cover: bool = True,
     curves_field: str = "curves",
+    zones_field: str = "zones",
 ) -> None:
     """Refuse more points in ``zones`` and ``curves`` than MESHFLAT_MAX_DRAWN_POINTS (named
-    ``zones``, or ``curves_field`` when the zones alone are within it), and, for zones that
-    will be covered (``cover``), charge their points' cost before a ring is checked.
+    ``zones_field``, or ``curves_field`` when the zones alone are within it), and, for zones
+    that will be covered (``cover``), charge their points' cost before a ring is checked.
 
     Raises
     ------
@@ -104,7 +105,8 @@ def check_drawn(
     """
     zoned = zone_points(zones)
     drawn = zoned + sum(len(curve.x) for curve in curves)
-    field = "zones" if zoned > ctx.settings.max_drawn_points or not curves else curves_field
+    within = zoned <= ctx.settings.max_drawn_points and curves
+    field = curves_field if within else zones_field
     check_count(drawn, ctx.settings.max_drawn_points, field, "MESHFLAT_MAX_DRAWN_POINTS")
     if cover:
         ctx.charge(ZONE_BYTES_PER_POINT * zoned)
@@ -142,16 +144,16 @@ class Outline:
     polygon: shapely.Polygon
 
 
-def checked_zone(zone: Zone, number: int) -> Outline:
-    """The zone's rings, checked.
+def checked_zone(zone: Zone, number: int, kind: str = "zones") -> Outline:
+    """The zone's rings, checked; ``kind``, the list of params it is in.
 
     Raises
     ------
     InvalidInput
         A ring of fewer than three distinct points, a ring that crosses or touches itself, a
-        hole outside the outer ring, holes that cross or nest (named ``zones.{number}...``).
+        hole outside the outer ring, holes that cross or nest (named ``{kind}.{number}...``).
     """
-    field = f"zones.{number}"
+    field = f"{kind}.{number}"
     rings = [_ring(zone.outer, f"{field}.outer", (field, zone.name, ", outer ring"))]
     rings += [
         _ring(hole, f"{field}.holes.{k}", (field, zone.name, f", hole {k}"))

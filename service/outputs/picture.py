@@ -67,12 +67,14 @@ class Drawn:
     closed : bool, a zone (filled) rather than a curve
     name : str, written on it
     measure : str, its area or length, for the legend
+    colour : str or None, its colour (``#rrggbb``); None: the next of ``OVERLAY_COLOURS``
     """
 
     rings: tuple[np.ndarray, ...]
     closed: bool
     name: str
     measure: str
+    colour: str | None = None
 
 
 @dataclass(frozen=True)
@@ -230,9 +232,11 @@ def describe(
     colouring: tuple[np.ndarray, ColourBar] | None = None,
     grid: np.ndarray | None = None,
     directions: np.ndarray | None = None,
+    headline: str | None = None,
 ) -> Picture:
     """The picture of a flattened region, with zones, curves and sites over it (and, with
-    ``directions``, a stroke from each site along its direction).
+    ``directions``, a stroke from each site along its direction; with ``headline``, that
+    first in the caption, in place of the method's line).
 
     Parameters
     ----------
@@ -246,6 +250,9 @@ def describe(
         measure
     grid : (s, 2, 2) float or None, segments of the layout: a reference grid
     directions : (n, 2) float or None, unit layout directions at the ``sites``
+    headline : str or None, the caption's first line (the picture's title) instead of the
+        method (which the JSON answer's params give), the layout and the triangles (which
+        the axes and the legend give)
     """
     framing = Framing.of(flat.x, flat.y, flat.layout, width, height)
     x, s, plot = flat.x, framing.s_sign * flat.y, framing.plot
@@ -316,7 +323,7 @@ def describe(
         x_title=AXIS_TITLES[flat.layout][0],
         y_title=AXIS_TITLES[flat.layout][1],
         legend=tuple(legend),
-        caption=_caption(flat, params, face_count),
+        caption=_caption(flat, params, face_count, headline),
         overlays=tuple(overlays),
         sites=dots,
         face_colours=None if colouring is None else colouring[0],
@@ -333,7 +340,7 @@ def _overlays(drawn: tuple[Drawn, ...], sites, canvas, plot, legend: list):
     overlays = []
     for k, item in enumerate(drawn):
         rings = tuple(canvas(ring) for ring in item.rings)
-        colour = OVERLAY_COLOURS[k % len(OVERLAY_COLOURS)]
+        colour = item.colour or OVERLAY_COLOURS[k % len(OVERLAY_COLOURS)]
         anchor = rings[0].mean(axis=0) if item.closed else rings[0][0]
         anchor = np.clip(anchor, [plot[0] + 30, plot[1] + 10], [plot[2] - 30, plot[3] - 10])
         overlays.append(Overlay(rings, item.closed, item.name, colour, tuple(anchor.tolist())))
@@ -374,7 +381,7 @@ def _ticks(low: float, high: float, to_pixel) -> tuple[tuple[float, str], ...]:
     return tuple((float(to_pixel(v)), f"{round(float(v), 12) + 0.0:g}") for v in values)
 
 
-def _caption(flat: FlatRegion, params: dict, face_count: int) -> tuple[str, ...]:
+def _caption(flat: FlatRegion, params: dict, face_count: int, headline=None) -> tuple[str, ...]:
     v = flat.validation
     method = params["method"]
     if params.get("sigma") is not None:
@@ -388,7 +395,7 @@ def _caption(flat: FlatRegion, params: dict, face_count: int) -> tuple[str, ...]
         f"south {v.margin_deg_south:.1f} deg"
     )
     return (
-        f"meshflat: {method}; layout {flat.layout.value}; {face_count:,} triangles",
+        headline or f"meshflat: {method}; layout {flat.layout.value}; {face_count:,} triangles",
         f"{', '.join(status)}; {margins}",
         energy_text(flat),
     )

@@ -105,7 +105,7 @@ def glb(
 
 
 def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...] = (), sites=None,
-             directions=None):  # fmt: skip
+             directions=None, headline=None):  # fmt: skip
     resolved = plain(ResolvedParams.of_region(region))
     x, y = region.layout  # repaired when untangled
     flat = replace(region.flat, x=x, y=y)
@@ -113,7 +113,7 @@ def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...]
     coloured = face_colouring(region, params.colour_by)
     grid = reference_grid(region, params.grid_lines)
     return describe(flat, resolved, len(region.faces), *size, drawn, sites, coloured, grid,
-                    directions)  # fmt: skip
+                    directions, headline)  # fmt: skip
 
 
 def reference_grid(region: MeshRegion, count: int) -> np.ndarray | None:
@@ -151,16 +151,21 @@ Renderer = Callable[..., bytes]
 
 
 def map_renderers(
-    region_of, drawn_of, sites_of=lambda result: None, directions_of=lambda result: None
+    region_of,
+    drawn_of,
+    sites_of=lambda result: None,
+    directions_of=lambda result: None,
+    headline_of=lambda result: None,
 ) -> dict[Output, Renderer]:
     """The SVG and PNG renderers of a result's region's map (``region_of(result)``) with
     ``drawn_of(result)`` (zones, curves: :class:`~service.outputs.picture.Drawn`),
     ``sites_of(result)`` ((n, 2) layout points or None) and ``directions_of(result)`` ((n, 2)
-    unit layout directions at them, or None) over it; the PNG's raster charged first."""
+    unit layout directions at them, or None) over it, and ``headline_of(result)`` (None, or
+    the caption's first line); the PNG's raster charged first."""
 
     def drawn(result, params: PictureParams):
         return _picture(region_of(result), params, drawn_of(result), sites_of(result),
-                        directions_of(result))  # fmt: skip
+                        directions_of(result), headline_of(result))  # fmt: skip
 
     def as_svg(result, params: PictureParams, ctx: Context) -> bytes:
         return to_svg(drawn(result, params))

@@ -206,8 +206,6 @@ ORDER_CELLS = 64
 def _spatial_order(points: np.ndarray) -> np.ndarray:
     """(n,) int: an order of ``points`` ((n, 3)) by the cells of a grid over their box,
     cell row after cell row."""
-    if not len(points):
-        return np.arange(0)
     low, high = points.min(axis=0), points.max(axis=0)
     size = max(float(np.max(high - low)) / ORDER_CELLS, 1e-300)
     cells = np.floor((points - low) / size).astype(np.int64)
@@ -266,7 +264,7 @@ def _curled(paths: np.ndarray, normals, lengths, shape: StrandShape, bend: float
     along = _Along.of(paths, normals)
     helix, miss = _helix_of_length(along, lengths, shape.curl, bend)
     n, m, _ = helix.shape
-    floor = _floor(np.cumsum(np.linalg.norm(np.diff(helix, axis=1), axis=2), axis=1), shape)
+    floor = _floor(np.cumsum(_segments(helix), axis=1), shape)
     kept = _kept_out(guard, helix[:, 2:].reshape(-1, 3), floor[:, 1:].reshape(-1))
     again = np.any(kept.reshape(n, m - 2, 3) != helix[:, 2:], axis=(1, 2))
     again |= miss > CURL_MISS * lengths
@@ -288,13 +286,13 @@ def _helix_of_length(along: _Along, lengths, curl: Curl, bend: float):
     # within a bracket that halves where the ratio would leave it.
     axis = rest / np.hypot(1.0, 2.0 * np.pi * curl.radius / curl.period)
     low, high = np.zeros_like(axis), np.full_like(axis, np.inf)
-    best = along.helix(first, axis, curl, bend)
+    best = np.full((*along.paths.shape[:2], 3), np.nan)  # every row set by the first round
     miss = np.full_like(axis, np.inf)
     rows = np.arange(len(axis))
     for _ in range(CURL_ROUNDS):
         checkpoint()
         helix = along.helix(first[rows], axis[rows], curl, bend, rows)
-        arc = np.linalg.norm(np.diff(helix[:, 1:], axis=1), axis=2).sum(axis=1)
+        arc = _segments(helix)[:, 1:].sum(axis=1)
         off = np.abs(arc - rest[rows])
         nearer = off < miss[rows]
         best[rows[nearer]], miss[rows[nearer]] = helix[nearer], off[nearer]
@@ -317,7 +315,7 @@ def _walked(guard: SurfaceGuard, strands: np.ndarray, floor: np.ndarray, lengths
     ``lengths`` ((n,)), and kept at its ``floor`` ((n, m - 1), the points past the root) as
     the paths' points are (:func:`_next_point`)."""
     out = strands.copy()
-    steps = np.linalg.norm(np.diff(strands, axis=1), axis=2)
+    steps = _segments(strands)
     past = steps[:, 1:].sum(axis=1)
     steps[:, 1:] *= ((lengths - steps[:, 0]) / np.where(past > 0, past, 1.0))[:, None]
     for k in range(2, strands.shape[1]):
@@ -325,6 +323,11 @@ def _walked(guard: SurfaceGuard, strands: np.ndarray, floor: np.ndarray, lengths
         out[:, k] = _next_point(guard, out[:, k - 1], strands[:, k], steps[:, k - 1],
                                 floor[:, k - 1])  # fmt: skip
     return out
+
+
+def _segments(strands: np.ndarray) -> np.ndarray:
+    """(n, m - 1): the lengths of the segments of ``strands`` (n, m, 3)."""
+    return np.linalg.norm(np.diff(strands, axis=1), axis=2)
 
 
 def _sampled(axis: np.ndarray, m: int) -> np.ndarray:

@@ -45,7 +45,7 @@ from .region.pictures import map_renderers
 from .region.resolve import MeshInput, MeshRegion, flatten, map_triangles
 from .rows import MeshCapability
 from .scalp import PLAUSIBLE_DENSITY_PER_CM2
-from .units import KnownDistance, LengthUnit, Units, mm_per_unit, warn_of_size
+from .units import KnownDistance, LengthUnit, Units, in_cm2, mm_per_unit, warn_of_size
 from .warnings import WarnedAnswer
 
 #: The share of a donor zone's grafts that can be taken without visible thinning, by default:
@@ -356,8 +356,7 @@ def plan(given: MeshInput[PlanParams], ctx: Context) -> Planned:
         if value == 0:
             field = _field(k, len(params.recipient))
             warn_outside(ctx, region, field, outline.name, outline.rings[0])
-    # As units.in_cm2 computes it, so that the areas are /v1/measure's to the last bit.
-    numbers = tally(params, area * scale**2 / 100.0)
+    numbers = tally(params, in_cm2(area, scale))  # /v1/measure's areas to the last bit
     return Planned(params, region, outlines, numbers, scale)
 
 

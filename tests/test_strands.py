@@ -393,6 +393,9 @@ async def test_curled_strands_keep_their_length_and_too_few_points_a_turn_are_re
     tight = {"radius_mm": 1.5, "period_mm": 5}
     body = problem(await strands_of(client, asked | {"curl": tight}), 422, "params.curl.period_mm")
     assert "give points >= 17" in body["detail"]
+    # A strand of two points is one segment: it cannot turn, and is not silently straight.
+    problem(await strands_of(client, asked | {"points": 2, "curl": curl}), 422,
+            "params.curl.period_mm")  # fmt: skip
 
 
 @pytest.mark.anyio

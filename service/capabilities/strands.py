@@ -212,7 +212,7 @@ def _curl(params: StrandsParams, lengths_mm: np.ndarray, scale: float) -> Curl |
     """The curl in mesh units (``scale`` mm each), refused when the longest strand's points
     past its first segment are fewer than ``POINTS_A_TURN`` a turn of its helix."""
     curl = params.curl
-    if curl is None or not len(lengths_mm) or params.points <= 2:
+    if curl is None or not len(lengths_mm):
         return None
     longest = float(lengths_mm.max())
     # A helix of length L winds about L / sqrt(1 + (2 pi r / p)^2) of its axis.

@@ -14,7 +14,8 @@ of the zone's rings, ``beyond_O(e)`` the points of the plane whose segment from 
 crosses ``e``, and ``s_e`` +1 when ``O`` lies on the right of ``e``. Each term is continuous
 in the outline, so outlines through vertices or along edges need no special case. A uniform
 grid (:mod:`.cellgrid`) finds the triangles an edge may meet; every other triangle is wholly
-in or out, read off the winding numbers of the cell centres.
+in or out, read off the winding numbers of the cell centres. The same sum of first moments
+about ``O`` gives the centroid of the zone's part of each cut triangle (eq. 12.3).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import numpy as np
 
 from .cellgrid import Boxes, CellGrid, CellIndex
 from .clipping import clip_ring, map_box
+from .fans import beyond, cross, part_centroids
 from .mapping import MapTriangles
 from .segments import Cut, blocks, cut_pieces, within_map
 
@@ -168,11 +170,6 @@ def counter_clockwise(corners: np.ndarray) -> np.ndarray:
     return ordered
 
 
-def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(p,) float: the z of ``u x v`` for (p, 2) arrays."""
-    return u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
-
-
 def clip_to_triangles(corners: np.ndarray, a: np.ndarray, b: np.ndarray):
     """The part of each segment ``a -> b`` inside its counter-clockwise triangle (the
     Liang-Barsky clip against the three edges' half-planes).
@@ -197,7 +194,7 @@ def clip_to_triangles(corners: np.ndarray, a: np.ndarray, b: np.ndarray):
     ceded = np.full(len(a), -1)
     for i in range(3):
         start, edge = corners[:, i], corners[:, (i + 1) % 3] - corners[:, i]
-        fa, fb = _cross(edge, a - start), _cross(edge, b - start)
+        fa, fb = cross(edge, a - start), cross(edge, b - start)
         along = fa == fb
         shifted = np.where(edge[:, 1] != 0, -edge[:, 1], edge[:, 0])
         t1[along & (fa < 0)] = -1.0
@@ -399,6 +396,7 @@ class ZoneCover:
     inside : (j,) int, the triangles (positions in the region's faces) wholly inside
     partial : (p,) int, the triangles the outline cuts
     share : (p,) float in (0, 1), the share of each one's area inside
+    partial_centroid : (p, 2) float, the map centroid of each one's part inside (eq. 12.3)
     map_area : float, the zone's area on the map
     covered_map_area : float, the zone's map area the triangles cover, front-facing ones
         counted positive and back-facing ones negative (its area for a fold-free map)
@@ -409,6 +407,7 @@ class ZoneCover:
     inside: np.ndarray
     partial: np.ndarray
     share: np.ndarray
+    partial_centroid: np.ndarray
     map_area: float
     covered_map_area: float
     outline: tuple[Polyline, ...]
@@ -438,6 +437,30 @@ class ZoneCover:
         return float(
             np.sum(per_triangle[self.inside]) + np.dot(per_triangle[self.partial], self.share)
         )
+
+    def parts(self, triangles: MapTriangles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The zone's part of each triangle it holds any of (docs/math.md, section 12,
+        eq. 12.3): the triangles wholly inside, then the cut ones.
+
+        A function linear on a triangle has, over a part of it, the mean of its value at
+        the part's centroid: the mean over the zone of a per-vertex quantity is the sum of
+        ``share * area * value(centroid)`` over the sum of ``share * area``.
+
+        Parameters
+        ----------
+        triangles : MapTriangles, those the cover was made of
+
+        Returns
+        -------
+        faces : (k,) int, positions in the region's faces: ``inside`` then ``partial``
+        share : (k,) float in (0, 1], the share of each one's area inside (1 when whole)
+        centroid : (k, 2) float, the map centroid of each one's part inside (the
+            triangle's own when whole)
+        """
+        faces = np.concatenate([self.inside, self.partial])
+        share = np.concatenate([np.ones(len(self.inside)), self.share])
+        whole = triangles.corners(self.inside).mean(axis=1)
+        return faces, share, np.concatenate([whole, self.partial_centroid])
 
     @property
     def perimeter(self) -> float:
@@ -469,24 +492,27 @@ def cover_zone(triangles: MapTriangles, rings) -> ZoneCover:
     kept = [k for k, r in enumerate(clipped) if len(r)]
     if not len(clipped[0]):
         missed = np.empty(0, dtype=np.int64)
-        return ZoneCover(missed, missed, np.empty(0), map_area, 0.0, (_NO_LINE,) * len(rings))
+        nothing = (missed, missed, np.empty(0), np.empty((0, 2)))
+        return ZoneCover(*nothing, map_area, 0.0, (_NO_LINE,) * len(rings))
     a, b, ring = ring_edges([clipped[k] for k in kept])
     trace = Trace.of(triangles, a, b)
     winding = _centre_windings(trace)
     # Far from the outline, a triangle is wholly in or out: its box's first cell says which.
     inside = winding[trace.boxes.r0, trace.boxes.c0] != 0
     near = trace.near_triangles
-    share = _shares(triangles, trace, near, winding)
+    share, centroid = _shares(triangles, trace, near, winding)
     whole = share >= 1.0 - SHARE_SLACK
     cut = (share > SHARE_SLACK) & ~whole
     inside[trace.near] = whole
     inside = trace.candidates[inside]
-    partial, share = near[cut], share[cut]
-    covered = ZoneCover(inside, partial, share, 0.0, 0.0, ()).total(triangles.front_map_area)
+    partial, share, centroid = near[cut], share[cut], centroid[cut]
+    covered = ZoneCover(inside, partial, share, centroid, 0.0, 0.0, ()).total(
+        triangles.front_map_area
+    )
     edges = np.arange(len(ring))
     lifted = {k: lift_polyline(triangles, trace, edges[ring == n]) for n, k in enumerate(kept)}
     outline = tuple(lifted.get(k, _NO_LINE) for k in range(len(rings)))
-    return ZoneCover(inside, partial, share, map_area, covered, outline, trace, winding)
+    return ZoneCover(inside, partial, share, centroid, map_area, covered, outline, trace, winding)
 
 
 def _centre_windings(trace: Trace) -> np.ndarray:
@@ -512,25 +538,36 @@ def _centre_windings(trace: Trace) -> np.ndarray:
 
 def _shares(
     triangles: MapTriangles, trace: Trace, near: np.ndarray, centre_windings: np.ndarray
-) -> np.ndarray:
-    """(q,) float: the share of each of the ``near`` triangles' map area inside the zone
-    (eq. 12.2)."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """The share ((q,) float) of each of the ``near`` triangles' map area inside the zone
+    (eq. 12.2), and the map centroid ((q, 2) float) of that part (the triangle's own where
+    the part has no area to speak of)."""
     if len(near) == 0:
-        return np.empty(0)
+        return np.empty(0), np.empty((0, 2))
     corners = counter_clockwise(triangles.corners(near))
     owner, piece = trace.owner, trace.piece
     a, b = trace.piece_a[piece], trace.piece_b[piece]
     reference = _reference_points(corners, owner, a, b)
     winding = _windings(trace, reference, centre_windings)
     t0, t1 = trace.t0, trace.t1
-    d = b - a
-    terms = _beyond(corners[owner], reference[owner], a + t0[:, None] * d, a + t1[:, None] * d)
-    terms[t1 <= t0] = 0.0
+    # Most pairs are a piece near a triangle, not in it: their terms are 0.
+    live = t1 > t0
+    start, d = a[live], b[live] - a[live]
+    ends = start + t0[live, None] * d, start + t1[live, None] * d
+    terms, moments = np.zeros(len(owner)), np.zeros((len(owner), 2))
+    terms[live], moments[live] = beyond(corners[owner[live]], reference[owner[live]], *ends)
     area = np.abs(triangles.signed_map_area[near])
     inside = winding * area + np.bincount(owner, terms, len(near))
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(area > 0, inside / area, winding != 0)
-    return np.clip(share, 0.0, 1.0)
+    # The same sum for the first moments about O: the whole triangle's is its area times
+    # its centroid's offset from O.
+    centre = corners.sum(axis=1) / 3.0
+    moment = (winding * area)[:, None] * (centre - reference)
+    moment[:, 0] += np.bincount(owner, moments[:, 0], len(near))
+    moment[:, 1] += np.bincount(owner, moments[:, 1], len(near))
+    centroid = part_centroids(corners, centre, reference, moment, inside, SHARE_SLACK * area)
+    return np.clip(share, 0.0, 1.0), centroid
 
 
 def _reference_points(corners, owner, a, b) -> np.ndarray:
@@ -539,7 +576,7 @@ def _reference_points(corners, owner, a, b) -> np.ndarray:
     furthest from those pieces."""
     points = corners.mean(axis=1)
     clearance = _clearance(points[owner][:, None, :], a, b)[:, 0]
-    size = np.abs(_cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+    size = np.abs(cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
     tight = np.zeros(len(corners), dtype=bool)
     tight[owner[clearance < REFERENCE_CLEARANCE**2 * size[owner]]] = True
     pairs = tight[owner]
@@ -587,38 +624,3 @@ def _windings(trace: Trace, points: np.ndarray, centre_windings: np.ndarray) -> 
     crossing &= (x > p[:, 0]) & (grid.columns(np.where(crossing, x, 0.0)) == cell_column)
     sign = np.where(upward, 1.0, -1.0) * crossing
     return centre_windings[row, free] + np.bincount(owner, sign, len(points))
-
-
-def _beyond(corners, reference, a, b) -> np.ndarray:
-    """(p,) float: ``s_e area(T & beyond_O(e))`` of eq. 12.2 for the counter-clockwise
-    triangles ``corners`` ((p, 3, 2)), the points ``reference`` (``O``, inside them) and the
-    edges' parts ``a -> b`` inside them ((p, 2) each)."""
-    u, v = a - reference, b - reference
-    turn = _cross(u, v)
-    swap = turn < 0
-    u, v = np.where(swap[:, None], v, u), np.where(swap[:, None], u, v)
-    fan = np.zeros(len(a))
-    for i in range(3):
-        p = corners[:, i] - reference
-        q = corners[:, (i + 1) % 3] - reference
-        fan += _sector_part(p, q, u, v)
-    return -np.sign(turn) * (fan - 0.5 * np.abs(turn))
-
-
-def _sector_part(p, q, u, v) -> np.ndarray:
-    """(n,) float: the area of the sector ``O, O + p, O + q`` (counter-clockwise, ``O`` the
-    origin) within the angle from ``u`` to ``v`` (counter-clockwise, below pi)."""
-    u_in = (_cross(p, u) >= 0) & (_cross(u, q) >= 0)
-    v_in = (_cross(p, v) >= 0) & (_cross(v, q) >= 0)
-    p_in = (_cross(u, p) >= 0) & (_cross(p, v) >= 0)
-    q_in = (_cross(u, q) >= 0) & (_cross(q, v) >= 0)
-    start = np.where(u_in[:, None], u, p)
-    stop = np.where(v_in[:, None], v, q)
-    meets = (u_in | p_in) & (v_in | q_in)
-    edge = q - p
-    reach = _cross(p, edge)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        start = start * (reach / _cross(start, edge))[:, None]
-        stop = stop * (reach / _cross(stop, edge))[:, None]
-        area = 0.5 * _cross(start, stop)
-    return np.where(meets, area, 0.0)

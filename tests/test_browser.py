@@ -2,7 +2,8 @@
 uvicorn that requires an API key, enters the key, flattens a bundled scan, then the default
 sample in automatic mode, and the test checks what the page shows; then draws a zone on the
 map, which the page measures (/v1/measure) and lifts onto the 3D view. The screenshots are
-kept in ``artifacts/demo.png``, ``artifacts/demo-auto.png`` and ``artifacts/demo-zone.png``."""
+kept in ``artifacts/demo.png``, ``artifacts/demo-auto.png`` and ``artifacts/demo-zone.png``
+(and the others' in ``artifacts/``); the plan's also in ``docs/figures/demo-plan.png``."""
 
 from __future__ import annotations
 
@@ -28,6 +29,7 @@ pytestmark = [slow, real_servers]
 
 CHROMIUM = os.environ.get("MESHFLAT_CHROMIUM", "/usr/bin/chromium")
 ARTIFACTS = Path(__file__).parent.parent / "artifacts"
+FIGURES = Path(__file__).parent.parent / "docs" / "figures"
 SAMPLE = "fsaverage-head.ply"
 KEY = "browser-test-key"
 #: What the page's preset for the sample sends (web/demo.js, PRESETS).
@@ -210,11 +212,15 @@ def on_screen(page, flat: dict, ring: list[tuple[float, float]]):
     return points, (1.0 + width / bounds["width"]) / scale
 
 
-def pentagon(flat: dict, size: float) -> list[tuple[float, float]]:
-    """A pentagon about the middle of the map, in the layout's coordinates, its corners
-    ``size`` times the map's width and height from the middle."""
+def pentagon(
+    flat: dict, size: float, at: tuple[float, float] = (0.0, 0.0)
+) -> list[tuple[float, float]]:
+    """A pentagon about the middle of the map (or ``at`` that offset from it, in shares of
+    the map's width and height), in the layout's coordinates, its corners ``size`` times the
+    map's width and height from its centre."""
     xs, ys = flat["vertices"]["x"], flat["vertices"]["y"]
-    mid_x, mid_y = (min(xs) + max(xs)) / 2, (min(ys) + max(ys)) / 2
+    mid_x = (min(xs) + max(xs)) / 2 + at[0] * (max(xs) - min(xs))
+    mid_y = (min(ys) + max(ys)) / 2 + at[1] * (max(ys) - min(ys))
     radius_x, radius_y = size * (max(xs) - min(xs)), size * (max(ys) - min(ys))
     angles = [math.pi / 2 + 2 * math.pi * k / 5 for k in range(5)]
     return [(mid_x + radius_x * math.cos(a), mid_y + radius_y * math.sin(a)) for a in angles]
@@ -687,6 +693,179 @@ def test_grow_hair_draws_the_strands_of_the_grafts_on_the_head(server):
         assert status.get_attribute("data-state") == "error"
         text = status.inner_text()
         assert text.startswith("422: params.growth: strands grow along the hair's"), text
+    # The 422, as the browser logs a failed fetch.
+    assert [p for p in problems if "422" not in p] == [], problems
+
+
+def draw_plan_zone(page, flat: dict, kind: str, ring: list[tuple[float, float]]) -> float:
+    """Draw ``ring`` as a ``kind`` zone of the plan (recipient or donor) as a user does: its
+    Draw button, a click at each point but the last, a double click at the last (which closes
+    it). Answers how closely the page can read a click, in layout units (:func:`on_screen`)."""
+    zones = page.locator("#plan-zones")
+    before = int(zones.get_attribute(f"data-{kind}"))
+    page.click(f"#draw-{kind}")
+    clicks, tolerance = on_screen(page, flat, ring)
+    for x, y in clicks[:-1]:
+        page.mouse.click(x, y)
+    drawing = page.locator(f"#map svg .plan-drawing .plan-zone.{kind}.drawing circle")
+    assert drawing.count() == len(clicks) - 1
+    page.mouse.dblclick(*clicks[-1])
+    assert page.locator("#map svg .plan-drawing .plan-zone.drawing").count() == 0
+    assert zones.get_attribute(f"data-{kind}") == str(before + 1)
+    return tolerance
+
+
+def make_plan(page, trigger, sent: list[dict]) -> dict:
+    """Run ``trigger`` (a click on Plan, a new number), wait until the page shows the plan or
+    the problem, and answer the params it posted (``sent``: :func:`posted`)."""
+    before = len(sent)
+    with page.expect_response("**/v1/plan"):
+        trigger()
+    page.wait_for_selector("#plan-status:is([data-state=planned], [data-state=error])",
+                           state="attached", timeout=30_000)  # fmt: skip
+    assert len(sent) == before + 1, sent
+    return sent[-1]
+
+
+def assert_rings(zones: list[dict], rings: list[list[tuple[float, float]]], tolerance: float):
+    """The zones as posted lie at the points of ``rings`` (layout units), to ``tolerance``."""
+    assert len(zones) == len(rings)
+    for zone, ring in zip(zones, rings, strict=True):
+        got = list(zip(zone["outer"]["x"], zone["outer"]["y"], strict=True))
+        assert len(got) == len(ring)
+        for (x, y), (got_x, got_y) in zip(ring, got, strict=True):
+            assert abs(got_x - x) < tolerance and abs(got_y - y) < tolerance, (got, ring)
+
+
+#: The table's cell for grafts available of a recipient zone, or needed of a donor zone.
+NOT_ITS_KIND = "\N{EN DASH}"
+
+
+def signed(value: float) -> str:
+    """A whole number with its sign, as the page gives the balance: +66, -14, 0."""
+    return f"{round(value):+,}" if round(value) else "0"
+
+
+def assert_plan_shown(page, answer: dict) -> None:
+    """The plan's table and balance, as the page shows them, hold the numbers of the
+    /v1/plan ``answer``; the balance is the shown available minus the shown needed, each
+    number red when short and only then."""
+    cells = page.locator("#plan-table td").all_inner_texts()
+    (recipient,), (donor,) = answer["recipient"], answer["donor"]
+    assert cells == [
+        "recipient 1", f"{recipient['area_cm2']:.2f}", f"{recipient['density_per_cm2']:.1f}",
+        f"{recipient['grafts_needed']:,}", NOT_ITS_KIND,
+        "donor 1", f"{donor['area_cm2']:.2f}", f"{donor['density_per_cm2']:.1f}", NOT_ITS_KIND,
+        f"{donor['grafts_available']:,}",
+        "total", "", "", f"{answer['grafts_needed']:,}", f"{answer['grafts_available']:,}",
+    ]  # fmt: skip
+    needed, available = (int(cells[k].replace(",", "")) for k in (13, 14))
+    grafts, hairs = page.locator("#plan-balance span").all()
+    shown = int(grafts.inner_text().removesuffix(" grafts").replace(",", ""))
+    assert shown == available - needed == answer["balance"]["grafts"]
+    assert grafts.inner_text() == f"{signed(answer['balance']['grafts'])} grafts"
+    assert hairs.inner_text() == f"{signed(answer['balance']['hairs'])} hairs"
+    sessions, balance = answer["sessions"], page.locator("#plan-balance").inner_text()
+    plural = "" if sessions == 1 else "s"
+    assert balance.endswith(f"; {sessions} session{plural} of at most 3,000 grafts"), balance
+    red = "rgb(176, 0, 32)"
+    for part, value in ((grafts, answer["balance"]["grafts"]), (hairs, answer["balance"]["hairs"])):
+        colour = part.evaluate("(e) => getComputedStyle(e).color")
+        assert (colour == red) == (round(value) < 0), (part.inner_text(), colour)
+
+
+def assert_overlap_refused(page, flat: dict, sent: list[dict]) -> None:
+    """A second donor zone drawn over the first recipient zone (the plan shown goes), then
+    Plan: the service's 422 shows in the plan's status, naming both zones, and the donor zone
+    is marked on the map."""
+    draw_plan_zone(page, flat, "donor", pentagon(flat, 0.08, (-0.15, 0.0)))
+    assert page.locator("#plan-table td").count() == 0
+    make_plan(page, lambda: page.click("#plan"), sent)
+    status = page.locator("#plan-status")
+    assert status.get_attribute("data-state") == "error"
+    text = status.inner_text()
+    assert text.startswith("422: ") and "params.donor.1" in text, text
+    assert "('donor 2')" in text and "overlaps params.recipient.0 ('recipient 1')" in text
+    marked = page.locator("#map svg .plan-drawing .plan-zone.error")
+    assert marked.count() == 1 and "donor" in marked.get_attribute("class")
+
+
+def tools_and_map(page) -> dict:
+    """The page's middle column from its tools to the map's bottom, in the page's pixels (a
+    full-page screenshot's clip)."""
+    return page.evaluate("""() => {
+        const top = document.querySelector('main > div').getBoundingClientRect();
+        const bottom = document.querySelector('#map svg').getBoundingClientRect();
+        return { x: top.x + scrollX, y: top.y + scrollY, width: top.width,
+                 height: bottom.bottom - top.y };
+    }""")
+
+
+def test_a_recipient_and_a_donor_zone_drawn_on_the_map_are_planned_with_the_balance(server):
+    """Draw recipient and Draw donor, each a pentagon clicked on the map (the last point a
+    double click), then Plan at the fields' densities (40 grafts per cm² aimed at, 80
+    measured, 2.2 hairs a graft): the page posts both zones at the clicked points of the
+    layout, and its table shows each zone's area and grafts needed or available, and the
+    balance (available minus needed, short in red) and the sessions, as a direct /v1/plan
+    request with those zones answers. Another target density plans again. A donor zone drawn
+    over the recipient zone: the service's 422 shows, naming both, and the zone is marked."""
+    flat = post(server, "/v1/flatten", PARAMS)
+    rings = {
+        "recipient": pentagon(flat, 0.12, (-0.2, 0.0)),
+        "donor": pentagon(flat, 0.12, (0.2, 0.0)),
+    }
+    problems: list[str] = []
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        assert page.locator("#draw-recipient").is_disabled()  # no map to draw on yet
+        sent = posted(page, "/v1/plan")
+        flatten_sample(page)
+        assert page.locator("#plan").is_disabled()  # no recipient zone yet
+        tolerance = draw_plan_zone(page, flat, "recipient", rings["recipient"])
+        draw_plan_zone(page, flat, "donor", rings["donor"])
+        assert page.locator("#plan-zones").inner_text() == "1 recipient zone, 1 donor zone"
+        assert page.locator("#map svg .plan-drawing .plan-zone polygon").count() == 2
+
+        params = make_plan(page, lambda: page.click("#plan"), sent)
+        status = page.locator("#plan-status")
+        assert status.get_attribute("data-state") == "planned", status.inner_text()
+        for kind in ("recipient", "donor"):
+            assert_rings(params[kind], [rings[kind]], tolerance)
+        # The same zones, asked directly: what the table must show.
+        recipient = {"name": "recipient 1", "outer": params["recipient"][0]["outer"]}
+        recipient["density_per_cm2"] = 40
+        donor = {"name": "donor 1", "outer": params["donor"][0]["outer"]}
+        donor |= {"density_per_cm2": 80, "hairs_per_graft": 2.2}
+        asked = {**PARAMS, "units": "mm", "recipient": [recipient], "donor": [donor]}
+        assert params["recipient"] == [recipient] and params["donor"] == [donor]
+        answer = post(server, "/v1/plan", asked)
+        assert answer["balance"]["grafts"] < 0  # these two zones: short, in red
+        assert_plan_shown(page, answer)
+        page.wait_for_timeout(300)
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "demo-plan.png"), full_page=True)
+        page.screenshot(
+            path=str(FIGURES / "demo-plan.png"), clip=tools_and_map(page), full_page=True
+        )
+
+        # A lower target: planned again with it, no longer short.
+        page.fill("#target-density", "20")
+        params = make_plan(page, lambda: page.locator("#target-density").blur(), sent)
+        assert params["recipient"][0]["density_per_cm2"] == 20
+        recipient["density_per_cm2"] = 20
+        answer = post(server, "/v1/plan", asked)
+        assert answer["balance"]["grafts"] > 0
+        assert_plan_shown(page, answer)
+
+        # A donor zone over the recipient zone: refused, both named, the donor marked.
+        assert_overlap_refused(page, flat, sent)
+        page.screenshot(path=str(ARTIFACTS / "demo-plan-refused.png"), full_page=True)
+
+        # Clear: the plan's zones and numbers go; Plan waits for a recipient zone.
+        page.click("#clear-plan")
+        assert page.locator("#map svg .plan-drawing > *").count() == 0
+        assert status.get_attribute("data-state") == "none"
+        assert page.locator("#plan").is_disabled()
     # The 422, as the browser logs a failed fetch.
     assert [p for p in problems if "422" not in p] == [], problems
 

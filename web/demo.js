@@ -6,8 +6,10 @@
 // with a table of each zone's area, density and grafts. Flows and whorls drawn on the map
 // give the grafts their growth (params.growth): each shows as a short stroke on the map and
 // the head. Grow hair grows a strand from each graft (/v1/strands, the length and exit angle
-// given) and draws them on the head. The units are the sample's (from /v1/samples), and
-// what an answer warns of (units, a zone off the map) is listed.
+// given) and draws them on the head. Recipient and donor zones drawn on the map are weighed
+// by /v1/plan: a table of each zone's area and grafts needed or available, the balance and
+// the sessions. The units are the sample's (from /v1/samples), and what an answer warns of
+// (units, a zone off the map) is listed.
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
@@ -219,6 +221,18 @@ function toPicture([x, y]) {
   return [b.left + ((u + PAD) / b.uSpan) * b.width, b.top + ((v + PAD) / b.vSpan) * b.height];
 }
 
+// An outline drawn on the map (the picture's pixels) as a zone's `outer`, in the layout's
+// coordinates.
+function layoutRing(points) {
+  const ring = points.map(toLayout);
+  return { x: ring.map((q) => q[0]), y: ring.map((q) => q[1]) };
+}
+
+// The crosshair while any drawing (the zone, a flow or whorl, a plan's zone) takes clicks.
+function markDrawing() {
+  $('map').classList.toggle('drawing', zone.drawing || growth.mode !== null || transplant.drawing !== null);
+}
+
 // A status line (the zone's, the grafts', the hair's): its text, shown as an error or not,
 // and its state for the tests.
 function showStatus(id, text, state) {
@@ -255,7 +269,7 @@ function removeOutline() {
 function clearZone() {
   Object.assign(zone, { points: [], drawing: false, closed: false, ticket: zone.ticket + 1 });
   mapSvg()?.querySelector('g.zone-drawing')?.remove();
-  $('map').classList.toggle('drawing', growth.mode !== null);
+  markDrawing();
   removeOutline();
   showStatus('zone-area', '', 'none');
   delete $('zone-area').dataset.ring;
@@ -386,10 +400,7 @@ async function placeSites() {
   const ticket = sitesTicket;
   const density = Number($('density').value);
   const p = { ...map.params, units: $('units').value, density_per_cm2: density, seed: 1 };
-  if (zone.closed) {
-    const ring = zone.points.map(toLayout);
-    p.zones = [{ name: 'zone', outer: { x: ring.map((q) => q[0]), y: ring.map((q) => q[1]) } }];
-  }
+  if (zone.closed) p.zones = [{ name: 'zone', outer: layoutRing(zone.points) }];
   const grows = growthParams();
   if (grows) p.growth = grows;
   growth.error = null;
@@ -415,9 +426,10 @@ async function placeSites() {
 
 function startZone() {
   setGrowthMode(null);
+  cancelPlanZone();
   clearZone();
   zone.drawing = true;
-  $('map').classList.add('drawing');
+  markDrawing();
   showStatus('zone-area', 'Click points on the map; double-click to close the outline.', 'drawing');
 }
 
@@ -436,8 +448,7 @@ function showOutline({ points, faces }) {
 async function measure() {
   clearSites();
   const ticket = ++zone.ticket;
-  const ring = zone.points.map(toLayout);
-  const outer = { x: ring.map((p) => p[0]), y: ring.map((p) => p[1]) };
+  const outer = layoutRing(zone.points);
   const p = { ...map.params, zones: [{ name: 'zone', outer }], units: $('units').value };
   $('zone-area').dataset.ring = JSON.stringify(outer);
   showStatus('zone-area', 'measuring…', 'measuring');
@@ -471,7 +482,7 @@ function addPoint(event) {
 function closeZone() {
   if (!zone.drawing || zone.points.length < 3) return;
   Object.assign(zone, { drawing: false, closed: true });
-  $('map').classList.remove('drawing');
+  markDrawing();
   drawZone();
   measure();
 }
@@ -558,13 +569,14 @@ function drawGrowth() {
 function setGrowthMode(mode) {
   growth.mode = mode;
   growth.drawing = mode === 'flow' ? [] : null;
-  $('map').classList.toggle('drawing', mode !== null || zone.drawing);
+  markDrawing();
   drawGrowth();
 }
 
 // A zone half drawn is given up: a click goes to one drawing at a time.
 function startGrowth(mode) {
   if (zone.drawing) clearZone();
+  cancelPlanZone();
   setGrowthMode(mode);
 }
 
@@ -616,6 +628,157 @@ function growthParams() {
   // Blank: the service's default exit angle.
   if ($('exit-angle').value.trim()) grows.exit_angle_deg = Number($('exit-angle').value);
   return grows;
+}
+
+// -- a transplant plan: recipient and donor zones weighed by /v1/plan ------------------------
+
+// The recipient and donor zones drawn (closed outlines in the picture's pixels, as the zone
+// is), the one being drawn ({ kind, points }) or null, the zone the last refusal named
+// ({ kind, index }) and the ticket of the planning that counts.
+const transplant = { recipient: [], donor: [], drawing: null, error: null, ticket: 0 };
+const planZoneName = (kind, index) => `${kind} ${index + 1}`;
+
+// A zone of the plan: its outline in its kind's colour (service/capabilities/plan.py), with
+// its points while drawn.
+function planZoneElement(kind, points, closed, refused) {
+  const group = svgElement('g', { class: `plan-zone ${kind}${closed ? '' : ' drawing'}${refused ? ' error' : ''}` });
+  group.append(svgElement(closed ? 'polygon' : 'polyline', { points: pointsText(points) }));
+  if (!closed) group.append(...points.map(([cx, cy]) => svgElement('circle', { cx, cy, r: 3 })));
+  return group;
+}
+
+function planZonesText() {
+  if (transplant.drawing) return `Click points on the map; double-click to close the ${transplant.drawing.kind} zone.`;
+  const count = (n, word) => `${n} ${word} zone${n === 1 ? '' : 's'}`;
+  if (!transplant.recipient.length && !transplant.donor.length) return '';
+  return `${count(transplant.recipient.length, 'recipient')}, ${count(transplant.donor.length, 'donor')}`;
+}
+
+function drawPlanZones() {
+  $('plan-zones').textContent = planZonesText();
+  $('plan-zones').dataset.recipient = String(transplant.recipient.length);
+  $('plan-zones').dataset.donor = String(transplant.donor.length);
+  // A plan needs a recipient zone; without donor zones the balance is what is needed.
+  $('plan').disabled = !map || !transplant.recipient.length;
+  const svg = mapSvg();
+  if (!svg) return;
+  let group = svg.querySelector('g.plan-drawing');
+  if (!group) {
+    group = svgElement('g', { class: 'plan-drawing' });
+    svg.append(group);
+  }
+  const { kind: refusedKind, index: refusedIndex } = transplant.error ?? {};
+  const closed = ['recipient', 'donor'].flatMap((kind) =>
+    transplant[kind].map((points, k) => planZoneElement(kind, points, true, kind === refusedKind && k === refusedIndex)),
+  );
+  const drawing = transplant.drawing ? [planZoneElement(transplant.drawing.kind, transplant.drawing.points, false, false)] : [];
+  group.replaceChildren(...closed, ...drawing);
+}
+
+// The plan shown no longer fits once its zones change: it goes.
+function clearPlanAnswer() {
+  transplant.ticket += 1;
+  $('plan-table').replaceChildren();
+  $('plan-balance').replaceChildren();
+  showStatus('plan-status', '', 'none');
+}
+
+function startPlanZone(kind) {
+  if (zone.drawing) clearZone();
+  setGrowthMode(null);
+  Object.assign(transplant, { drawing: { kind, points: [] }, error: null });
+  clearPlanAnswer();
+  markDrawing();
+  drawPlanZones();
+}
+
+// A plan's zone half drawn is given up when another drawing starts.
+function cancelPlanZone() {
+  if (!transplant.drawing) return;
+  transplant.drawing = null;
+  markDrawing();
+  drawPlanZones();
+}
+
+function clickPlanZone(event) {
+  if (!transplant.drawing || event.detail > 1) return;
+  transplant.drawing.points.push(pictureAt(event));
+  drawPlanZones();
+}
+
+function closePlanZone() {
+  const drawn = transplant.drawing;
+  if (!drawn || drawn.points.length < 3) return;
+  transplant[drawn.kind].push(drawn.points);
+  transplant.drawing = null;
+  markDrawing();
+  drawPlanZones();
+}
+
+function clearPlan() {
+  Object.assign(transplant, { recipient: [], donor: [], drawing: null, error: null });
+  clearPlanAnswer();
+  markDrawing();
+  drawPlanZones();
+}
+
+// A signed whole number, as the plan's caption gives the balance (+66, -14, 0).
+const signed = (value) => Math.round(value).toLocaleString('en', { signDisplay: 'exceptZero' });
+
+function showPlan(answer) {
+  const whole = (n) => n.toLocaleString('en');
+  const row = (kind, cells) => Object.assign(tableRow(cells, 'td'), { className: kind });
+  const rows = [
+    ...answer.recipient.map((z) => row('recipient', [z.name, z.area_cm2.toFixed(2), z.density_per_cm2.toFixed(1), whole(z.grafts_needed), '–'])),
+    ...answer.donor.map((z) => row('donor', [z.name, z.area_cm2.toFixed(2), z.density_per_cm2.toFixed(1), '–', whole(z.grafts_available)])),
+    row('total', ['total', '', '', whole(answer.grafts_needed), whole(answer.grafts_available)]),
+  ];
+  const names = ['zone', 'area (cm²)', 'grafts per cm²', 'grafts needed', 'grafts available'];
+  $('plan-table').replaceChildren(tableRow(names, 'th'), ...rows);
+  // Short (negative) is red; the numbers carry their sign.
+  const part = (value, unit) =>
+    Object.assign(document.createElement('span'), { textContent: `${signed(value)} ${unit}`, className: Math.round(value) < 0 ? 'short' : '' });
+  const { balance, sessions } = answer;
+  $('plan-balance').replaceChildren(
+    'Balance: ',
+    part(balance.grafts, 'grafts'),
+    ', ',
+    part(balance.hairs, 'hairs'),
+    ` (available minus needed); ${whole(sessions)} session${sessions === 1 ? '' : 's'} of at most ${whole(answer.max_grafts_per_session)} grafts`,
+  );
+}
+
+// The zones drawn, at the target density (recipient) and the density and hairs a graft
+// measured (donor), to /v1/plan with the map's params and the units. A recipient zone
+// takes the donor's hairs a graft (the service's pooled mean).
+async function runPlan() {
+  clearPlanAnswer();
+  const ticket = transplant.ticket;
+  const zones = (kind, numbers) => transplant[kind].map((points, k) => ({ name: planZoneName(kind, k), outer: layoutRing(points), ...numbers }));
+  const p = {
+    ...map.params,
+    units: $('units').value,
+    recipient: zones('recipient', { density_per_cm2: Number($('target-density').value) }),
+    donor: zones('donor', { density_per_cm2: Number($('donor-density').value), hairs_per_graft: Number($('hairs-per-graft').value) }),
+  };
+  transplant.error = null;
+  drawPlanZones();
+  showStatus('plan-status', 'planning…', 'planning');
+  try {
+    const response = await post('/v1/plan', map.mesh, p, 'application/json');
+    const answer = await response.json();
+    if (ticket !== transplant.ticket) return; // the zones changed, or planned again, meanwhile
+    showWarnings(answer);
+    showPlan(answer);
+    showStatus('plan-status', '', 'planned');
+  } catch (error) {
+    if (ticket !== transplant.ticket) return;
+    showStatus('plan-status', error.message, 'error');
+    // The zone the service refused (params.donor.0 overlaps ...): marked on the map.
+    const named = /^params\.(recipient|donor)\.(\d+)/.exec(error.field ?? '');
+    transplant.error = named ? { kind: named[1], index: Number(named[2]) } : null;
+    drawPlanZones();
+  }
 }
 
 // -- strands grown from the grafts by /v1/strands -------------------------------------------
@@ -830,15 +993,19 @@ async function flatten(event) {
   $('place-sites').disabled = true;
   $('draw-flow').disabled = true;
   $('place-whorl').disabled = true;
+  $('draw-recipient').disabled = true;
+  $('draw-donor').disabled = true;
   $('pick').disabled = true;
   if (landmarks.head) scene.remove(landmarks.head);
   landmarks.head = null;
   landmarks.picking = false;
   $('view').classList.remove('picking');
-  // The flows and whorls are drawn on the map that goes: they go with it, as the zone does.
+  // The flows and whorls, and the plan's zones, are drawn on the map that goes: they go
+  // with it, as the zone does.
   clearGrowth();
   clearZone();
   map = null;
+  clearPlan();
   document.body.dataset.state = 'flattening';
   setStatus('flattening…');
   const started = performance.now();
@@ -871,6 +1038,8 @@ async function flatten(event) {
     $('place-sites').disabled = false;
     $('draw-flow').disabled = false;
     $('place-whorl').disabled = false;
+    $('draw-recipient').disabled = false;
+    $('draw-donor').disabled = false;
     document.body.dataset.vertices = String(vertices);
     document.body.dataset.state = 'shown';
     setStatus(`done in ${Math.round(performance.now() - started)} ms`);
@@ -910,6 +1079,16 @@ $('map').addEventListener('dblclick', endFlow);
 // Another exit angle: grafts placed with growth are placed again, with it.
 $('exit-angle').addEventListener('change', () => strokes && placeSites());
 $('grow-hair').addEventListener('click', growHair);
+$('draw-recipient').addEventListener('click', () => startPlanZone('recipient'));
+$('draw-donor').addEventListener('click', () => startPlanZone('donor'));
+$('clear-plan').addEventListener('click', clearPlan);
+$('map').addEventListener('click', clickPlanZone);
+$('map').addEventListener('dblclick', closePlanZone);
+$('plan').addEventListener('click', runPlan);
+// Other units or numbers: a plan shown (or refused) is made again with them.
+for (const id of ['units', 'target-density', 'donor-density', 'hairs-per-graft']) {
+  $(id).addEventListener('change', () => $('plan-status').dataset.state !== 'none' && runPlan());
+}
 animate();
 loadSamples().then(() => {
   document.body.dataset.state = 'ready';

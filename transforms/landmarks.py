@@ -145,9 +145,13 @@ class Landmarks:
             Naming the landmark, its distance and the tolerance.
         """
         limit = OFF_SURFACE * self.width
+        low, high = triangle_boxes(vertices, faces, limit)
         for name, point in self.named().items():
-            distance = distance_to_triangles(point, vertices, faces)
+            # Only a triangle whose box reaches within the limit can be that near.
+            near = np.all((low <= point) & (point <= high), axis=1)
+            distance = distance_to_triangles(point, vertices, faces[near])
             if distance > limit:
+                distance = distance_to_triangles(point, vertices, faces)  # for the words
                 raise TransformInputError(
                     f"{self.field}.{name}",
                     f"lies {distance:.4g} from the surface; at most {limit:.4g} "
@@ -175,6 +179,13 @@ class Landmarks:
 
 def _unit(vector: np.ndarray) -> np.ndarray:
     return vector / np.linalg.norm(vector)
+
+
+def triangle_boxes(vertices: np.ndarray, faces: np.ndarray, pad: float = 0.0):
+    """(m, 3) float each: the least and the largest corner coordinates of the triangles
+    ``faces`` ((m, 3) int) of ``vertices`` ((k, 3) float), less and plus ``pad``."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return np.minimum(np.minimum(a, b), c) - pad, np.maximum(np.maximum(a, b), c) + pad
 
 
 def distance_to_triangles(point: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> float:

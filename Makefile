@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-locate bench-measure bench-plan bench-sites bench-growth bench-strands bench-transfer bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-locate bench-measure bench-plan bench-compare bench-sites bench-growth bench-strands bench-transfer bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -65,6 +65,10 @@ bench-measure: $(VENV)/.installed-bench
 # thread).
 bench-plan: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.plan_bench $(BENCH_ARGS)
+
+# Two visits compared: two 100k-face scans, 10 zones and 10 spots, with and without landmarks.
+bench-compare: $(VENV)/.installed-bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.compare_bench $(BENCH_ARGS)
 
 # Sites at a density on the bundled scalp and on it subdivided (100k faces), against
 # point-cloud-utils', Open3D's and trimesh's samplers (one thread, timed alternately).

@@ -14,8 +14,11 @@
                      [--out FILE.json|.svg|.png]
     meshflat sites MESH ... [--density 40] [--zones zones.json] [--units mm] [--out sites.ply]
                       [--flow flow.json]
-    meshflat register BASE FOLLOW_UP ... [--units mm] [--params JSON] --out frame.json
                       [--density-map map.png --params '{"density_range": [20, 60]}']
+    meshflat register BASE FOLLOW_UP ... [--units mm] [--params JSON] --out frame.json
+    meshflat compare BASE FOLLOW_UP ... --units mm --params '{"zones": [...], "spots": [...]}'
+                     [--baseline-values B.png] [--follow-up-values F.png]
+                     [--out FILE.json|.svg|.png]
     meshflat batch MANIFEST.jsonl --out DIR [--allow-root DIR] [--processes N]
         [--shard-count N [--shard-index I]]
 

@@ -54,7 +54,7 @@ CONFIG = SchemathesisConfig.from_dict(
         "operations": [
             {
                 "include-path-regex": (
-                    "^/v1/(flatten|validate|fit|locate|measure|plan|register|transfer|points"
+                    "^/v1/(flatten|validate|fit|locate|measure|plan|register|compare|transfer|points"
                     "|points/inverse)$"
                 ),
                 "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx", "422"]}},

@@ -12,6 +12,7 @@ context a use-case runs in (:mod:`.context`).
 from __future__ import annotations
 
 from . import (
+    compare,
     fit,
     flatten,
     locate,
@@ -37,6 +38,7 @@ MODULES = (
     sites,
     strands,
     register,
+    compare,
     transfer,
     points,
 )

@@ -456,22 +456,23 @@ RECIPIENT_COLOUR, DONOR_COLOUR = "#0072b2", "#009e73"
 
 
 def _drawn(planned: Planned) -> tuple[Drawn, ...]:
-    """Each zone in its kind's colour, labelled (in the legend, which the kinds' colours and
-    words tell apart) with its area and its grafts needed or available."""
+    """Each zone in its kind's colour, labelled on the map and in the legend with its area
+    and its grafts needed or available."""
     t, count = planned.tally, len(planned.params.recipient)
     area = [f"{value:.2f} cm²" for value in t.area_cm2.tolist()]  # as units.area_text
+    needed = [f"{area[k]}, {int(t.demand.grafts[k]):,} grafts needed" for k in range(count)]
+    given = [
+        f"{area[count + k]}, {int(t.supply.grafts[k]):,} grafts available"
+        for k in range(len(planned.outlines) - count)
+    ]
     recipient = tuple(
-        Drawn(outline.rings, True, outline.name,
-              f"{area[k]}, {int(t.demand.grafts[k]):,} grafts needed",
-              RECIPIENT_COLOUR)
-        for k, outline in enumerate(planned.outlines[:count])
-    )  # fmt: skip
+        Drawn(outline.rings, True, outline.name, words, RECIPIENT_COLOUR, words)
+        for outline, words in zip(planned.outlines[:count], needed, strict=True)
+    )
     donor = tuple(
-        Drawn(outline.rings, True, outline.name,
-              f"{area[count + k]}, {int(t.supply.grafts[k]):,} grafts available",
-              DONOR_COLOUR)
-        for k, outline in enumerate(planned.outlines[count:])
-    )  # fmt: skip
+        Drawn(outline.rings, True, outline.name, words, DONOR_COLOUR, words)
+        for outline, words in zip(planned.outlines[count:], given, strict=True)
+    )
     return recipient + donor
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import StrEnum
+from functools import cached_property
 from typing import Annotated, Literal
 
 import numpy as np
@@ -146,8 +147,9 @@ class Registered:
     region : MeshRegion, the baseline's region, flattened with its frame
     on : OnRegion, the transform, the follow-up's region and its residuals against the
         baseline's region (mesh units)
+    follow : Mesh, the follow-up as read
     follow_boundary : (k, 2, 2) float, the follow-up's region's boundary edges on the
-        baseline's map (mapped with ``frame``)
+        baseline's map (mapped with ``frame``), found when a picture asks for them
     zones : tuple of Outline, checked, to draw
     seeded_by : "landmarks" or "moments"
     overlap : float, the share of the follow-up's region's area within
@@ -168,8 +170,12 @@ class Registered:
     p95: float
     frame: Frame
     mm_per_unit: float | None
-    follow_boundary: np.ndarray
+    follow: Mesh
     zones: tuple[Outline, ...]
+
+    @cached_property
+    def follow_boundary(self) -> np.ndarray:
+        return _follow_boundary(self.follow, self.on.faces, self.frame, self.region)
 
 
 @dataclass(frozen=True)
@@ -233,11 +239,10 @@ def register_scans(given: RegisterInput, ctx: Context) -> Registered:
     center = turn.T @ (region.frame.center - shift) / found.scale
     frame = Frame.from_matrix(rotation, center)
     seeded = "landmarks" if pairs is not None else "moments"
-    boundary = _follow_boundary(follow, on.faces, frame, region)
     zones = tuple(checked_zone(zone, k) for k, zone in enumerate(params.zones))
     _warn(ctx, params, region, zones, scale)
     return Registered(
-        region, on, seeded, overlap, within, rms, p95, frame, scale, boundary, zones,
+        region, on, seeded, overlap, within, rms, p95, frame, scale, follow, zones,
     )  # fmt: skip
 
 

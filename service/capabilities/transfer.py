@@ -146,7 +146,7 @@ def transfer(given: TransferInput, ctx: Context) -> Transferred:
             "draw), or ask for params.output face_ids or barycentric (the look-up images)",
         )
     width, height = params.image_width, params.image_height
-    values = None if params.values is None else _vertex_values(mesh, params.values)
+    values = None if params.values is None else vertex_values(mesh, params.values)
     image = None if sent is None else sent.read(params, ctx)
     region = flatten(given, ctx)
     ctx.charge(TRANSFER_BYTES_PER_PIXEL * width * height)
@@ -159,8 +159,8 @@ def transfer(given: TransferInput, ctx: Context) -> Transferred:
     if image is not None:
         found = _image_to_mesh(region, image, at, drawn, faces, params, ctx)
     elif values is not None:
-        vertex_values = values[region.flat.vertex_ids]
-        found = _values_to_image(region, vertex_values, drawn, faces, at, params, ctx)
+        on_region = values[region.flat.vertex_ids]
+        found = _values_to_image(region, on_region, drawn, faces, at, params, ctx)
     if lookup:
         corners = at[faces]
         ids = pixels.face_ids(corners, height, width, ctx.threads)
@@ -207,15 +207,29 @@ def _image_to_mesh(region: MeshRegion, image: Png, at, drawn, faces, params, ctx
     return Transferred(region, width, height, (low, high), vertex_values, face_values, coverage)
 
 
+def image_at_vertices(flat, layout, image: Png, value_range, ctx: Context) -> np.ndarray:
+    """(k,) float: a picture on the grid of a region's PNG answer read at the region's
+    vertices (``flat``, its layout ``(x, y)``), bilinear as an image part of /v1/transfer is
+    (:func:`transforms.pixels.onto_mesh`), mapped to ``value_range`` (default [0, 1]); NaN
+    where the picture reaches neither the vertex nor its faces."""
+    x, y = layout
+    height, width = image.values.shape
+    at = Framing.of(x, y, flat.layout, width, height).pixels(np.column_stack([x, y]))
+    faces = flat.faces[flat.validation.drawn_faces(len(flat.faces))]
+    vertex, _, _ = pixels.onto_mesh(at, faces, image.values, image.alpha, ctx.threads)
+    low, high = value_range or (0.0, 1.0)
+    return low + (high - low) * vertex
+
+
 def _file_ids(region: MeshRegion, drawn: np.ndarray, ids: np.ndarray) -> np.ndarray:
     """The grid of positions in the ``drawn`` faces as the file's face ids (-1 stays)."""
     file_ids = region.faces[drawn].astype(np.int32)
     return np.where(ids >= 0, file_ids[np.maximum(ids, 0)], -1).astype(np.int32, copy=False)
 
 
-def _vertex_values(mesh: Mesh, values) -> np.ndarray:
-    """(n,) float: ``params.values``, one a vertex of the file, or the file's per-vertex
-    property of that name.
+def vertex_values(mesh: Mesh, values, field: str = "values") -> np.ndarray:
+    """(n,) float: values listed in params (the params' ``field``), one a vertex of the
+    file, or the file's per-vertex property of that name.
 
     Raises
     ------
@@ -227,25 +241,25 @@ def _vertex_values(mesh: Mesh, values) -> np.ndarray:
     if isinstance(values, str):
         found = mesh.attributes.vertex.get(values)
         if found is None:
-            raise lacking(mesh, "values", f"per-vertex property {values!r}")
+            raise lacking(mesh, field, f"per-vertex property {values!r}")
         array = np.asarray(found, dtype=np.float64)
     else:
         array = np.asarray(values, dtype=np.float64)
         if len(array) != len(mesh.vertices):
             raise TransformInputError(
-                "values",
+                field,
                 f"{len(array):,} values; the file has {len(mesh.vertices):,} vertices (one "
                 "value a vertex, in the file's order)",
             )
     bad = np.flatnonzero(~np.isfinite(array))
     if bad.size:
         raise TransformInputError(
-            "values", f"vertex {int(bad[0])}'s value is not a number", indices=bad
+            field, f"vertex {int(bad[0])}'s value is not a number", indices=bad
         )
     bad = np.flatnonzero(np.abs(array) > MAX_COORDINATE)
     if bad.size:
         raise TransformInputError(
-            "values",
+            field,
             f"vertex {int(bad[0])}'s value is {array[bad[0]]:.4g}; values must lie within "
             "+-1e15, as listed values",
             indices=bad,

@@ -31,6 +31,8 @@ class WarningCode(StrEnum):
     REGION_PIECES = "region_pieces"
     SEAM_ON_REGION = "seam_on_region"
     REGION_FOLDS = "region_folds"
+    VALUES_MISSING = "values_missing"
+    SPOT_OFF_SCAN = "spot_off_scan"
 
 
 #: What each code means: the table of docs/api.md (tests/test_warnings.py keeps them equal;
@@ -54,6 +56,13 @@ MEANINGS = {
     WarningCode.REGION_FOLDS: "Triangles of the region are folded in the map or face away "
     "from the centre, so the map overlaps itself there (validation.folded_faces, "
     "backfacing_faces). The message gives how many, and whether untangling was asked for.",
+    WarningCode.VALUES_MISSING: "Part of a /v1/compare zone has no values on a scan: a "
+    "follow-up cropped there, a zone beyond a scan's region, a picture transparent there. "
+    "The message gives each scan's share of the zone with values; the means are over those "
+    "parts alone (zones[].baseline_coverage, follow_up_coverage).",
+    WarningCode.SPOT_OFF_SCAN: "A /v1/compare spot lies on no triangle of the baseline's map, "
+    "or the follow-up has no surface within 2 mm of where the registration puts it: its "
+    "follow-up position is null.",
 }
 
 

@@ -22,6 +22,9 @@ from transforms.metrics import FaceDistortion, weighted_quantile
 
 #: The colour map, by its name in ``cmap``'s catalogue.
 COLOUR_MAP = "viridis"
+#: The colour map of a difference, about 0: Crameri's vik (blue below, red above, light at
+#: 0; perceptually uniform and read by colour-blind eyes).
+DIVERGING_MAP = "crameri:vik"
 #: Steps of the colour map: the picture's colours come from this many.
 STEPS = 256
 
@@ -47,20 +50,32 @@ class ColourBy(StrEnum):
 @dataclass(frozen=True)
 class ColourBar:
     """A measure's scale: ``low`` and ``high`` (the measure at the bar's ends), and its
-    ``p50`` and ``p95`` over the region's area, marked on the bar."""
+    ``p50`` and ``p95`` over the region's area, marked on the bar; on a log scale in
+    ``colour_map``'s colours, or, for a difference (``measure`` None, ``label`` its title),
+    on a linear one."""
 
-    measure: ColourBy
+    measure: ColourBy | None
     low: float
     high: float
     p50: float
     p95: float
+    label: str | None = None
+    colour_map: str = COLOUR_MAP
+
+    @property
+    def title(self) -> str:
+        """The bar's title: the measure's, or its label."""
+        return self.label if self.measure is None else self.measure.title
 
     def position(self, values: np.ndarray) -> np.ndarray:
-        """(n,) float in [0, 1]: where ``values`` sit on the bar (log scale)."""
+        """(n,) float in [0, 1]: where ``values`` sit on the bar (log scale for a measure)."""
+        values = np.asarray(values, dtype=np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
-            logs = np.log(np.asarray(values, dtype=np.float64))
-        span = np.log(self.high) - np.log(self.low)
-        t = (logs - np.log(self.low)) / span if span > 0 else np.zeros_like(logs)
+            if self.measure is None:
+                t = (values - self.low) / (self.high - self.low)
+            else:
+                span = np.log(self.high) - np.log(self.low)
+                t = (np.log(values) - np.log(self.low)) / span if span > 0 else 0.0 * values
         return np.clip(np.nan_to_num(t, nan=0.0), 0.0, 1.0)
 
     def steps(self, values: np.ndarray) -> np.ndarray:
@@ -69,9 +84,9 @@ class ColourBar:
 
 
 @cache
-def palette() -> np.ndarray:
+def palette(name: str = COLOUR_MAP) -> np.ndarray:
     """(STEPS, 3) uint8: the colour map's colours."""
-    table = Colormap(COLOUR_MAP).lut(STEPS)[:, :3]
+    table = Colormap(name).lut(STEPS)[:, :3]
     return np.rint(table * 255).astype(np.uint8)
 
 
@@ -81,9 +96,9 @@ def hex_of(rgb) -> str:
     return f"#{red:02x}{green:02x}{blue:02x}"
 
 
-def hex_colour(step: int) -> str:
-    """The colour map's colour at ``step``, as ``#rrggbb``."""
-    return hex_of(palette()[step])
+def hex_colour(step: int, name: str = COLOUR_MAP) -> str:
+    """The colour map ``name``'s colour at ``step``, as ``#rrggbb``."""
+    return hex_of(palette(name)[step])
 
 
 def factors(found: FaceDistortion, measure: ColourBy) -> np.ndarray:
@@ -127,4 +142,24 @@ def colouring(found: FaceDistortion, measure: ColourBy, count: int):
     bar = colour_bar(measured, found.weights, measure)
     colours = np.full((count, 3), 220, dtype=np.uint8)
     colours[found.faces] = palette()[bar.steps(measured)]
+    return colours, bar
+
+
+#: The share of the region's faces (by count) beyond a difference map's ends: the bar runs
+#: over the 99th percentile of the differences' size, so one outlier does not wash it out.
+DIFFERENCE_QUANTILE = 0.99
+
+
+def difference_colouring(values: np.ndarray, label: str = "follow-up minus baseline"):
+    """((m, 3) uint8 colours, the bar) of faces by a signed difference ((m,) float, NaN
+    where there is none: light grey), on a linear scale symmetric about 0."""
+    values = np.asarray(values, dtype=np.float64)
+    known = np.isfinite(values)
+    colours = np.full((len(values), 3), 220, dtype=np.uint8)
+    found = values[known]
+    reach = float(np.quantile(np.abs(found), DIFFERENCE_QUANTILE)) if len(found) else 0.0
+    reach = reach if reach > 0 else 1.0
+    p50, p95 = (float(np.quantile(found, q)) if len(found) else 0.0 for q in (0.5, 0.95))
+    bar = ColourBar(None, -reach, reach, p50, p95, label, DIVERGING_MAP)
+    colours[known] = palette(DIVERGING_MAP)[bar.steps(found)]
     return colours, bar

@@ -160,9 +160,25 @@ def _svg_overlays(p: Picture) -> list[str]:
             f'stroke-linejoin="round" d="{d}"/><text x="{x:.1f}" y="{y:.1f}" '
             f'text-anchor="middle" {_FONT} font-size="13" font-weight="bold" fill="{colour}" '
             f'stroke="#ffffff" stroke-width="3" paint-order="stroke">'
-            f"{escape(overlay.name)}</text></g>"
+            f"{escape(overlay.name)}</text>{_svg_label(overlay)}</g>"
         )
     return parts
+
+
+#: How far below a zone's name its label line goes, pixels.
+LABEL_DROP = 15
+
+
+def _svg_label(overlay) -> str:
+    """The line under an overlay's name, when it has one."""
+    if overlay.label is None:
+        return ""
+    x, y = overlay.anchor
+    return (
+        f'<text x="{x:.1f}" y="{y + LABEL_DROP:.1f}" text-anchor="middle" {_FONT} '
+        f'font-size="12" fill="{overlay.colour}" stroke="#ffffff" stroke-width="3" '
+        f'paint-order="stroke">{escape(overlay.label)}</text>'
+    )
 
 
 def _decimated_fill(p: Picture, include_boundary: bool) -> list[str]:
@@ -395,10 +411,10 @@ def _bar_ticks(p: Picture) -> list[tuple[float, str, bool]]:
 def _png_colour_bar(canvas: Image.Image, draw: ImageDraw.ImageDraw, p: Picture, font) -> None:
     left, top, right, bottom = _bar_box(p)
     steps = (np.arange(right - left) * STEPS // (right - left)).astype(np.int64)
-    strip = np.repeat(palette()[steps][None], bottom - top, axis=0)
+    strip = np.repeat(palette(p.colour_bar.colour_map)[steps][None], bottom - top, axis=0)
     canvas.paste(Image.fromarray(strip, "RGB"), (left, top))
     draw.rectangle((left, top, right, bottom), outline="#444444")
-    draw.text((left, top - 18), p.colour_bar.measure.title, fill="#222222", font=font, anchor="ls")
+    draw.text((left, top - 18), p.colour_bar.title, fill="#222222", font=font, anchor="ls")
     for x, words, below in _bar_ticks(p):
         if below:
             draw.text((x, bottom + 4), words, fill="#222222", font=font, anchor="mt")
@@ -411,14 +427,15 @@ def _svg_colour_bar(p: Picture) -> list[str]:
     left, top, right, bottom = _bar_box(p)
     text = f'{_FONT} font-size="12" fill="#222222"'
     stops = "".join(
-        f'<stop offset="{k / 16:.4f}" stop-color="{hex_colour(min(k * STEPS // 16, STEPS - 1))}"/>'
+        f'<stop offset="{k / 16:.4f}" '
+        f'stop-color="{hex_colour(min(k * STEPS // 16, STEPS - 1), p.colour_bar.colour_map)}"/>'
         for k in range(17)
     )
     parts = [
         f'<g class="colour-bar"><defs><linearGradient id="bar">{stops}</linearGradient></defs>',
         f'<rect x="{left}" y="{top}" width="{right - left}" height="{bottom - top}" '
         'fill="url(#bar)" stroke="#444444" stroke-width="0.5"/>',
-        f'<text x="{left}" y="{top - 18}" {text}>{escape(p.colour_bar.measure.title)}</text>',
+        f'<text x="{left}" y="{top - 18}" {text}>{escape(p.colour_bar.title)}</text>',
     ]
     for x, words, below in _bar_ticks(p):
         if below:
@@ -463,6 +480,17 @@ def _png_overlays(canvas: Image.Image, p: Picture, font) -> Image.Image:
             stroke_width=2,
             stroke_fill="#ffffff",
         )
+        if overlay.label is not None:
+            # The default font has no superscripts.
+            draw.text(
+                tuple(np.asarray(overlay.anchor) - origin + (0.0, LABEL_DROP)),
+                overlay.label.replace("²", "2"),
+                fill=overlay.colour,
+                font=font,
+                anchor="mm",
+                stroke_width=2,
+                stroke_fill="#ffffff",
+            )
     canvas = canvas.convert("RGBA")
     canvas.alpha_composite(layer, (left, top))
     return canvas.convert("RGB")

@@ -68,6 +68,7 @@ class Drawn:
     name : str, written on it
     measure : str, its area or length, for the legend
     colour : str or None, its colour (``#rrggbb``); None: the next of ``OVERLAY_COLOURS``
+    label : str or None, a line written on it under its name (a plan's grafts, a change)
     """
 
     rings: tuple[np.ndarray, ...]
@@ -75,6 +76,7 @@ class Drawn:
     name: str
     measure: str
     colour: str | None = None
+    label: str | None = None
 
 
 @dataclass(frozen=True)
@@ -87,6 +89,7 @@ class Overlay:
     name: str
     colour: str
     anchor: tuple[float, float]
+    label: str | None = None
 
 
 #: Legend keys of the zones (a filled swatch), the curves (a line), the sites (a dot) and
@@ -233,6 +236,7 @@ def describe(
     grid: np.ndarray | None = None,
     directions: np.ndarray | None = None,
     headline: str | None = None,
+    dots: str = "sites",
 ) -> Picture:
     """The picture of a flattened region, with zones, curves and sites over it (and, with
     ``directions``, a stroke from each site along its direction; with ``headline``, that
@@ -253,6 +257,7 @@ def describe(
     headline : str or None, the caption's first line (the picture's title) instead of the
         method (which the JSON answer's params give), the layout and the triangles (which
         the axes and the legend give)
+    dots : what the legend calls the ``sites`` ("spots" for /v1/compare's)
     """
     framing = Framing.of(flat.x, flat.y, flat.layout, width, height)
     x, s, plot = flat.x, framing.s_sign * flat.y, framing.plot
@@ -266,7 +271,7 @@ def describe(
     wrapping = np.zeros(len(flat.faces), dtype=bool)
     wrapping[validation.wrapping_faces] = True
     # Coloured by a measure, the region's swatch is in its colours (the bar's middle).
-    swatch = COLOURS[FILL] if colouring is None else hex_colour(STEPS // 2)
+    swatch = COLOURS[FILL] if colouring is None else hex_colour(STEPS // 2, colouring[1].colour_map)
     legend = [(FILL, swatch, f"region: {face_count:,} triangles")]
     # A triangle with several flags is drawn in the colour of the last (the most serious);
     # the legend counts it under each and says where the colours hide one.
@@ -291,7 +296,7 @@ def describe(
         if math.isfinite(value := _second_of(theta, flat.layout)) and in_s(value)
     )
 
-    overlays, dots = _overlays(drawn, sites, framing.pixels, plot, legend)
+    overlays, dots = _overlays(drawn, sites, framing.pixels, plot, legend, dots)
     lines = np.empty((0, 2, 2))
     if grid is not None and len(grid):
         lines = framing.pixels(grid.reshape(-1, 2)).reshape(-1, 2, 2)
@@ -333,22 +338,24 @@ def describe(
     )
 
 
-def _overlays(drawn: tuple[Drawn, ...], sites, canvas, plot, legend: list):
+def _overlays(drawn: tuple[Drawn, ...], sites, canvas, plot, legend: list, dots: str = "sites"):
     """The zones and curves in pixels (``canvas`` maps layout points), each in its colour
-    with its name kept inside the ``plot``, and the sites' dots ((n, 2) float); their legend
-    rows are added to ``legend``."""
+    with its name kept inside the ``plot``, and the sites' dots ((n, 2) float; ``dots``,
+    what the legend calls them); their legend rows are added to ``legend``."""
     overlays = []
     for k, item in enumerate(drawn):
         rings = tuple(canvas(ring) for ring in item.rings)
         colour = item.colour or OVERLAY_COLOURS[k % len(OVERLAY_COLOURS)]
         anchor = rings[0].mean(axis=0) if item.closed else rings[0][0]
         anchor = np.clip(anchor, [plot[0] + 30, plot[1] + 10], [plot[2] - 30, plot[3] - 10])
-        overlays.append(Overlay(rings, item.closed, item.name, colour, tuple(anchor.tolist())))
+        overlays.append(
+            Overlay(rings, item.closed, item.name, colour, tuple(anchor.tolist()), item.label)
+        )
         key = ZONE_KEY if item.closed else CURVE_KEY
         legend.append((key, colour, f"{item.name}: {item.measure}"))
     if sites is None:
         return tuple(overlays), np.empty((0, 2))
-    legend.append((SITES_KEY, SITES_COLOUR, f"sites: {len(sites):,}"))
+    legend.append((SITES_KEY, SITES_COLOUR, f"{dots}: {len(sites):,}"))
     return tuple(overlays), canvas(sites)
 
 

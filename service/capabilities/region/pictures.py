@@ -105,15 +105,16 @@ def glb(
 
 
 def _picture(region: MeshRegion, params: PictureParams, drawn: tuple[Drawn, ...] = (), sites=None,
-             directions=None, headline=None):  # fmt: skip
+             directions=None, headline=None, coloured=None, dots="sites"):  # fmt: skip
     resolved = plain(ResolvedParams.of_region(region))
     x, y = region.layout  # repaired when untangled
     flat = replace(region.flat, x=x, y=y)
     size = (params.image_width, params.image_height)
-    coloured = face_colouring(region, params.colour_by)
+    if coloured is None:
+        coloured = face_colouring(region, params.colour_by)
     grid = reference_grid(region, params.grid_lines)
     return describe(flat, resolved, len(region.faces), *size, drawn, sites, coloured, grid,
-                    directions, headline)  # fmt: skip
+                    directions, headline, dots)  # fmt: skip
 
 
 def reference_grid(region: MeshRegion, count: int) -> np.ndarray | None:
@@ -156,16 +157,21 @@ def map_renderers(
     sites_of=lambda result: None,
     directions_of=lambda result: None,
     headline_of=lambda result: None,
+    colouring_of=lambda result: None,
+    dots: str = "sites",
 ) -> dict[Output, Renderer]:
     """The SVG and PNG renderers of a result's region's map (``region_of(result)``) with
     ``drawn_of(result)`` (zones, curves: :class:`~service.outputs.picture.Drawn`),
     ``sites_of(result)`` ((n, 2) layout points or None) and ``directions_of(result)`` ((n, 2)
-    unit layout directions at them, or None) over it, and ``headline_of(result)`` (None, or
-    the caption's first line); the PNG's raster charged first."""
+    unit layout directions at them, or None) over it, ``headline_of(result)`` (None, or the
+    caption's first line) and ``colouring_of(result)`` (None, or the faces' colours and
+    their bar in place of params.colour_by's), the legend calling the sites ``dots``; the
+    PNG's raster charged first."""
 
     def drawn(result, params: PictureParams):
         return _picture(region_of(result), params, drawn_of(result), sites_of(result),
-                        directions_of(result), headline_of(result))  # fmt: skip
+                        directions_of(result), headline_of(result),
+                        colouring_of(result), dots)  # fmt: skip
 
     def as_svg(result, params: PictureParams, ctx: Context) -> bytes:
         return to_svg(drawn(result, params))

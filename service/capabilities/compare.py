@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import ConfigDict, Field, model_validator
@@ -39,12 +39,12 @@ from .drawn import (
 from .fields import Coordinate, choice, output_choice
 from .inputs import MeshPart, PngFile, PngPart
 from .region.answers import ResolvedParams
-from .region.params import MESH_PARAMS_EXAMPLE, Region
+from .region.params import Region
 from .region.pictures import map_renderers
 from .region.resolve import MeshInput, map_triangles, select_region
 from .register import (
-    _EXAMPLE_LANDMARKS,
     FOLLOW_UP,
+    REGISTER_EXAMPLE,
     Registered,
     RegisterInput,
     RegisterParams,
@@ -124,9 +124,7 @@ class CompareParams(RegisterParams):
         json_schema_extra={
             "examples": [
                 {
-                    **MESH_PARAMS_EXAMPLE,
-                    "units": "mm",
-                    "landmarks": {"baseline": _EXAMPLE_LANDMARKS, "follow_up": _EXAMPLE_LANDMARKS},
+                    **REGISTER_EXAMPLE,
                     "baseline_values": [float(k) for k in range(12)],
                     "follow_up_values": [1.2 * k for k in range(12)],
                     "spots": [{"name": "crown", "x": 0.0, "y": 0.5}],
@@ -389,7 +387,9 @@ class CompareRegistration(Answer):
         "baseline, as /v1/register's."
     )
     scale: float = Field(description="Its scale: 1 for rigid.")
-    seeded_by: str = Field(description="landmarks or moments, as /v1/register's.")
+    seeded_by: Literal["landmarks", "moments"] = Field(
+        description="What the registration started from, as /v1/register's."
+    )
     overlap: float = Field(description="As /v1/register's.")
     rms_mm: float = Field(description="As /v1/register's.")
     p95_mm: float = Field(description="As /v1/register's.")

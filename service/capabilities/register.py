@@ -61,6 +61,14 @@ _EXAMPLE_LANDMARKS = {
 }
 
 
+#: A registration of the examples' icosahedron to itself, by its landmarks.
+REGISTER_EXAMPLE = {
+    **MESH_PARAMS_EXAMPLE,
+    "units": "mm",
+    "landmarks": {"baseline": _EXAMPLE_LANDMARKS, "follow_up": _EXAMPLE_LANDMARKS},
+}
+
+
 class RegisterMode(StrEnum):
     """What a registration may change of the follow-up."""
 
@@ -110,17 +118,7 @@ class RegisterParams(MeshParams, PictureParams):
         check_names("zones", self.zones)
         return self
 
-    model_config = ConfigDict(
-        json_schema_extra={
-            "examples": [
-                {
-                    **MESH_PARAMS_EXAMPLE,
-                    "units": "mm",
-                    "landmarks": {"baseline": _EXAMPLE_LANDMARKS, "follow_up": _EXAMPLE_LANDMARKS},
-                }
-            ]
-        }
-    )
+    model_config = ConfigDict(json_schema_extra={"examples": [REGISTER_EXAMPLE]})
 
 
 #: A follow-up point lies on the baseline's region when within this distance of it (mm)...

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
 
 from transforms import Chart, Frame, PoleCap, TransformInputError, locate, world_to_angles
-from transforms.locate import DIRECT_QUERIES, LocateIndex
+from transforms.locate import DIRECT_QUERIES, FEW_QUERIES, LocateIndex
 
 from .conftest import scalp
 
@@ -232,3 +232,27 @@ def test_no_rays_and_no_triangles_give_empty_answers():
             ):
                 assert hits.faces.shape == (count,) and hits.points.shape == (count, 3)
                 assert (hits.faces >= 0).all() if len(region) else (hits.faces == -1).all()
+
+
+@given(seed=st.integers(0, 2**32 - 1), m=st.integers(1, 120), spread=st.floats(0.01, 3.0))
+def test_a_few_queries_alone_get_the_answers_of_a_batch(seed, m, spread):
+    """A click queries one ray (the scalar path, FEW_QUERIES or fewer); the same rays among
+    many take the vectorised path: the same triangles, weights and points, bit for bit."""
+    rng = np.random.default_rng(seed)
+    middles = rng.normal(size=(m, 1, 3)) * rng.uniform(0.2, 3.0, (m, 1, 1))
+    points = (middles + rng.normal(size=(m, 3, 3)) * spread).reshape(-1, 3)
+    faces = np.arange(3 * m).reshape(m, 3)
+    # Rays through the triangles' corners and edges' middles as well as anywhere.
+    corners = points[faces]
+    directions = np.concatenate(
+        [rng.normal(size=(40, 3)), corners[:, 0], (corners[:, 1] + corners[:, 2]) / 2]
+    )
+    index = LocateIndex.build(points, faces)
+    batch = index.query(directions)
+    assert len(directions) > FEW_QUERIES
+    for start in range(0, len(directions), FEW_QUERIES):
+        few = index.query(directions[start : start + FEW_QUERIES])
+        rows = slice(start, start + FEW_QUERIES)
+        np.testing.assert_array_equal(few.faces, batch.faces[rows])
+        np.testing.assert_array_equal(few.barycentric, batch.barycentric[rows])
+        np.testing.assert_array_equal(few.points, batch.points[rows])

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -56,6 +57,10 @@ _FIT = 1.0 - 1e-6
 #: build costs about as much as 15 to 18 direct passes on 100k and on 1.6M faces
 #: (docs/benchmarks.md, locate).
 DIRECT_QUERIES = 16
+#: Up to this many queries, :meth:`LocateIndex.query` looks each one up on its own in scalar
+#: arithmetic (a click on the map): for so few, a pass of array operations per step costs
+#: more than the step.
+FEW_QUERIES = 4
 #: (query, triangle) pairs handled at a time.
 _PAIRS = 1 << 18
 #: Queries looked up at a time (their candidates' arrays stay in cache).
@@ -177,6 +182,8 @@ class LocateIndex:
         """
         rays = _rays(directions)
         k = len(rays)
+        if k <= FEW_QUERIES:
+            return self._query_few(rays)
         cube, u, v = _cube_coordinates(rays)
         # Neighbouring queries one after another: they read the same cells and vertices. A
         # 16-bit key (the cube face, then 64 x 64 squares of it) sorts in one radix pass.
@@ -195,6 +202,48 @@ class LocateIndex:
             np.put(hits.barycentric, row_items, found[1])
             np.put(hits.points, row_items, found[2][:, None] * ordered[part])
         return hits
+
+    def _query_few(self, rays: np.ndarray) -> Hits:
+        """:meth:`query` for a few rays, each looked up alone: the same cells, the same
+        float32 box test and the same exact test, so the same answers."""
+        queries, faces = [np.empty(0, dtype=np.int64)], [np.empty(0, dtype=np.int64)]
+        for k, (x, y, z) in enumerate(rays.tolist()):
+            cube, u, v = _cube_coordinate(x, y, z)
+            found = self._candidates(cube, u, v)
+            queries.append(np.full(len(found), k, dtype=np.int64))
+            faces.append(found)
+        if len(self.everyone):
+            count = len(rays)
+            queries.append(np.repeat(np.arange(count), len(self.everyone)))
+            faces.append(np.tile(self.everyone, count))
+        query, face = np.concatenate(queries), np.concatenate(faces)
+        return _hits(rays, *_nearest_few(self.points, self.faces, rays, query, face))
+
+    def _candidates(self, cube: int, u: float, v: float) -> np.ndarray:
+        """The triangles whose boxes on cube face ``cube`` hold ``(u, v)`` (float32, as the
+        boxes), from the query's cell on each level of that face."""
+        ranges = []
+        for width, u0, v0, columns, rows, offset in self._face_levels[cube]:
+            column, row = math.floor((u - u0) / width), math.floor((v - v0) / width)
+            if 0 <= column < columns and 0 <= row < rows:
+                cell = offset + row * columns + column
+                ranges.append(slice(self.cell_start.item(cell), self.cell_start.item(cell + 1)))
+        if not ranges:
+            return np.empty(0, dtype=np.int64)
+        box = np.concatenate([self.entry_box[r] for r in ranges])
+        face = np.concatenate([self.entry_face[r] for r in ranges])
+        qu, qv = np.float32(u), np.float32(v)
+        held = (box[:, 0] <= qu) & (qu <= box[:, 2]) & (box[:, 1] <= qv) & (qv <= box[:, 3])
+        return face[held].astype(np.int64, copy=False)
+
+    @cached_property
+    def _face_levels(self) -> tuple[tuple[tuple[float, float, float, int, int, int], ...], ...]:
+        """The grid levels of each cube face as plain numbers: width, origin u and v,
+        columns, rows and first cell id."""
+        by_face: list[list] = [[] for _ in range(6)]
+        for face, width, u0, v0, columns, rows, offset in self.levels.tolist():
+            by_face[int(face)].append((width, u0, v0, int(columns), int(rows), int(offset)))
+        return tuple(tuple(levels) for levels in by_face)
 
     def _query_chunk(self, rays, cube, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         k = len(rays)
@@ -293,6 +342,19 @@ def _cube_coordinates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
     scale[scale == 0.0] = 1.0
     face = (on_y * 2 + on_z * 4 + (major < 0)).astype(np.int8)
     return face, b / scale, c / scale
+
+
+def _cube_coordinate(x: float, y: float, z: float) -> tuple[int, float, float]:
+    """:func:`_cube_coordinates` of one point, in plain numbers."""
+    ax, ay, az = abs(x), abs(y), abs(z)
+    if ax >= ay and ax >= az:
+        major, b, c, axis = x, y, z, 0
+    elif ay >= az:
+        major, b, c, axis = y, z, x, 1
+    else:
+        major, b, c, axis = z, x, y, 2
+    scale = abs(major) or 1.0
+    return 2 * axis + (major < 0), b / scale, c / scale
 
 
 def _boxes(points, faces, vertex_face, vertex_u, vertex_v):
@@ -527,6 +589,24 @@ def _nearest(points, faces, rays, pairs):
             hits = _pair_hits(points, faces, rays, pair_query[part], pair_face[part])
             _keep_nearest(*hits, hit_face, weights, depth)
     depth[hit_face < 0] = np.nan
+    return hit_face, weights, depth
+
+
+def _nearest_few(points, faces, rays, query, face):
+    """:func:`_nearest` for a few queries and their candidate pairs at once: of each query's
+    hits the nearest, the smaller position among equally near ones."""
+    k = len(rays)
+    hit_face = np.full(k, -1, dtype=np.int64)
+    weights = np.full((k, 3), np.nan)
+    depth = np.full(k, np.nan)
+    query, face, found, weight = _pair_hits(points, faces, rays, query, face)
+    if len(query):
+        order = np.lexsort((face, found, query))  # by query, then depth, then position
+        ordered = query[order]
+        first = order[np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]])]
+        hit_face[query[first]] = face[first]
+        weights[query[first]] = weight[first]
+        depth[query[first]] = found[first]
     return hit_face, weights, depth
 
 

@@ -331,6 +331,7 @@ async def test_values_listed_and_pictured_for_one_scan_are_refused(client):
     assert body["field"] == "params.baseline_values" and "not both" in body["detail"]
 
 
+@slow
 async def test_a_follow_up_of_another_head_does_not_register_and_is_said(client):
     other = SAMPLES["nefertiti-lowres.obj"].path.read_bytes()
     files = {

@@ -28,7 +28,7 @@ from transforms.strands import (
     grow_strands,
 )
 
-from .conftest import load_sample, real_servers
+from .conftest import load_sample, real_servers, slow
 from .test_api import flatten, problem
 from .test_growth import (
     accessor,
@@ -171,6 +171,7 @@ def test_a_strand_leaves_along_its_sites_direction_and_keeps_its_length():
     np.testing.assert_allclose(arcs, 60.0, rtol=0.01)
 
 
+@slow
 @pytest.mark.parametrize("clearance", [1.0, 3.0])
 def test_no_strand_point_is_inside_the_head_or_near_its_surface_past_2_mm(clearance):
     vertices, faces, *_ = scalp()
@@ -194,6 +195,7 @@ def distances_to_polyline(points: np.ndarray, polyline: np.ndarray) -> np.ndarra
     return np.linalg.norm(nearest - points[:, None, :], axis=2).min(axis=1)
 
 
+@slow
 @pytest.mark.parametrize(
     ("points", "radius", "period", "spread"),
     # Fewer points, a coarser axis: a point's distance to its chords strays further.
@@ -374,6 +376,7 @@ async def test_strands_need_growth_and_a_length(client):
     assert body["detail"].startswith("params: length_mm: the strands' length")
 
 
+@slow
 @pytest.mark.anyio
 async def test_curled_strands_keep_their_length_and_too_few_points_a_turn_are_refused(client):
     growth = await growth_of(client)

@@ -1,9 +1,11 @@
-"""The TypeScript client keeps up with the document, as the OpenAPI document does with the
-service (tests/test_service.py): ``clients/typescript/schema.d.ts`` is what the pinned
-openapi-typescript writes from the committed ``openapi/openapi.json``, and the client
-typechecks (``tsc --noEmit``). Each runs the tools its folder's ``package.json`` pins, with
-that file's own command: without ``node_modules`` (``npm ci --prefix ...``) a test is skipped
-with the reason, or fails under ``MESHFLAT_REQUIRE_TOOLS=1`` (CI)."""
+"""The TypeScript client and the demo page's bundle keep up with their sources, as the OpenAPI
+document does with the service (tests/test_service.py): ``clients/typescript/schema.d.ts`` is
+what the pinned openapi-typescript writes from the committed ``openapi/openapi.json``; the
+client and the page's TypeScript typecheck (``tsc --noEmit``); and the committed
+``service/static/demo.js`` is what the pinned esbuild bundles from ``web/``. Each runs the
+tools its folder's ``package.json`` pins, with that file's own command: without
+``node_modules`` (``npm ci --prefix ...``) a test is skipped with the reason, or fails under
+``MESHFLAT_REQUIRE_TOOLS=1`` (CI)."""
 
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from .tools import require
 ROOT = Path(__file__).parent.parent
 CLIENT = ROOT / "clients" / "typescript"
 WEB = ROOT / "web"
+BUNDLE = ROOT / "service" / "static" / "demo.js"
 
 
 def installed(*folders: Path) -> None:
@@ -104,9 +107,20 @@ def test_the_client_types_would_see_a_changed_field(tmp_path):
 
 
 @slow  # tsc takes some 3 s alone on a core, 8 s on a busy one
-@pytest.mark.parametrize("folder", [CLIENT], ids=["client"])
+@pytest.mark.parametrize("folder", [CLIENT, WEB], ids=["client", "web"])
 def test_the_typescript_typechecks(folder):
-    """`tsc --noEmit` with the folder's tsconfig.json: the client against the generated
-    types."""
+    """`tsc --noEmit` with the folder's tsconfig.json: the client against the generated types,
+    and the page's requests against the client (the pinned TypeScript is the client's)."""
     installed(CLIENT)
     run(folder, ["tsc", "--noEmit", "-p", "tsconfig.json"], tools=CLIENT)
+
+
+def test_the_committed_demo_bundle_is_what_web_builds(tmp_path):
+    """Rebuild with `npm run build --prefix web` after changing web/ or the client: the page
+    that is served is the source that is read."""
+    installed(WEB, CLIENT)
+    fresh = tmp_path / "demo.js"
+    run(WEB, writing_to(script(WEB, "build"), "--outfile", fresh))
+    assert fresh.read_bytes() == BUNDLE.read_bytes(), (
+        "service/static/demo.js is not what web/ builds: `npm run build --prefix web`"
+    )

@@ -127,8 +127,10 @@ soak: $(VENV)/.installed-test
 attack: $(VENV)/.installed-test
 	$(BIN)/python -m benchmarks.attack $(BENCH_ARGS)
 
+# The document, then the TypeScript client's types from it (needs `npm ci --prefix clients/typescript`).
 openapi: $(VENV)/.installed-run
 	$(BIN)/python -m service.openapi
+	npm run --prefix clients/typescript generate
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis

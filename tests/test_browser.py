@@ -3,7 +3,9 @@ uvicorn that requires an API key, enters the key, flattens a bundled scan, then 
 sample in automatic mode, and the test checks what the page shows; then draws a zone on the
 map, which the page measures (/v1/measure) and lifts onto the 3D view. The screenshots are
 kept in ``artifacts/demo.png``, ``artifacts/demo-auto.png`` and ``artifacts/demo-zone.png``
-(and the others' in ``artifacts/``); the plan's also in ``docs/figures/demo-plan.png``."""
+(and the others' in ``artifacts/``); the plan's, the 200k-face region's colours and the page
+at 1366 x 900 in ``docs/figures/`` (demo-plan, demo-colour-200k, demo-colour).
+The page is opened at 1366 x 900, the laptop screen it is laid out for."""
 
 from __future__ import annotations
 
@@ -32,14 +34,18 @@ ARTIFACTS = Path(__file__).parent.parent / "artifacts"
 FIGURES = Path(__file__).parent.parent / "docs" / "figures"
 SAMPLE = "fsaverage-head.ply"
 KEY = "browser-test-key"
-#: What the page's preset for the sample sends (web/demo.js, PRESETS).
+#: What the page's preset for the sample sends (web/demo.js, PRESETS): with facing, its up
+#: is where the face looks.
 PARAMS = {
     "region": {"cone": {"axis": [0, 0, 1], "half_angle_deg": 70}},
     "layout": "theta_phi",
     "center": "bbox_center",
     "rotation": {"pole": [0, 0, -1], "up": [0, 1, 0]},
+    "facing": [0, 1, 0],
     "sigma": 0.3,
 }
+#: The screen the page is laid out for: a common laptop's.
+SCREEN = {"width": 1366, "height": 900}
 
 
 @pytest.fixture(scope="module")
@@ -86,7 +92,7 @@ def chromium():
 def demo_page(browser, server: str, problems: list[str]):
     """The demo page, loaded and ready; its errors go to ``problems``. The one console
     error expected: the samples asked for before the key is given (401)."""
-    page = browser.new_page(viewport={"width": 1600, "height": 900})
+    page = browser.new_page(viewport=SCREEN)
     page.on(
         "console",
         lambda m: m.type == "error" and "401" not in m.text and problems.append(m.text),
@@ -1018,7 +1024,7 @@ def test_colour_by_shows_the_distortion_on_the_map_and_the_head(server, tmp_path
         assert page.locator("#map svg path.fill[class*=colour-]").count() > 20
         assert "isometric distortion" in page.locator("#map svg g.colour-bar").text_content()
         page.wait_for_timeout(500)
-        page.screenshot(path=str(ARTIFACTS / "demo-colour-200k.png"), full_page=True)
+        page.screenshot(path=str(FIGURES / "demo-colour-200k.png"), full_page=True)
     assert not problems, problems
 
 
@@ -1050,3 +1056,163 @@ def test_docs_page_lists_the_operations_with_nothing_fetched_from_elsewhere(serv
     assert set(paths) <= shown, set(paths) - shown
     assert not elsewhere, elsewhere
     assert not failed, failed
+
+
+#: The map's width on the page, its viewBox's and the least font size of its text (the
+#: SVG's own units, inherited where a text sets none), in the page's pixels.
+MAP_TEXT = """() => {
+    const svg = document.querySelector('#map svg');
+    const shown = svg.getBoundingClientRect().width;
+    const drawn = Number(svg.getAttribute('viewBox').split(/\\s+/)[2]);
+    const sizes = [...svg.querySelectorAll('text')]
+        .map((t) => parseFloat(getComputedStyle(t).fontSize));
+    return { shown, drawn, smallest: Math.min(...sizes), texts: sizes.length };
+}"""
+
+
+def requests_to(page) -> list[tuple[str, str]]:
+    """The (method, path) of every request the page sends to the API from now on."""
+    seen: list[tuple[str, str]] = []
+
+    def keep(request) -> None:
+        if "/v1/" in request.url:
+            seen.append((request.method, request.url.split("/", 3)[3]))
+
+    page.on("request", keep)
+    return seen
+
+
+def mesh_names(page, route: str) -> list[str]:
+    """The file name of the ``mesh`` part of each request the page posts to ``route`` from
+    now on (through a route, as :func:`posted`)."""
+    names: list[str] = []
+
+    def keep(intercepted) -> None:
+        body = intercepted.request.post_data_buffer
+        names.append(body.split(b'name="mesh"; filename="')[1].split(b'"')[0].decode())
+        intercepted.continue_()
+
+    page.route(f"**{route}", keep)
+    return names
+
+
+def assert_legible(page) -> None:
+    """The map at least 600 px wide, drawn at its own scale or larger, so that its text shows
+    at 12 px or more; front at the top, back at the bottom."""
+    text = page.evaluate(MAP_TEXT)
+    assert text["shown"] >= 600, text
+    assert text["texts"] > 10 and text["smallest"] * text["shown"] / text["drawn"] >= 12, text
+    labels = page.locator("#map svg g.orientation text")
+    assert labels.all_text_contents() == ["front", "back"]
+    front, back = (float(labels.nth(k).get_attribute("y")) for k in (0, 1))
+    assert front < back
+
+
+def drawn_on_the_map(page) -> dict:
+    """The zone's area and the grafts' count the page shows; checks the map draws both."""
+    grafts = page.locator("#sites-status").get_attribute("data-count")
+    assert page.locator("#map svg .zone-drawing polygon").count() == 1
+    dots = page.locator("#map svg g.sites-drawing path").get_attribute("d")
+    assert dots.count("M") == int(grafts)
+    return {"area": page.locator("#zone-area").inner_text(), "grafts": grafts}
+
+
+def assert_recolours_keeping(page, drawn: dict) -> None:
+    """Colour by, twice: the same map recoloured (its SVG and GLB from /v1/flatten, nothing
+    else asked), the zone and the grafts kept; the first kept as the README's figure."""
+    seen = requests_to(page)
+    for measure in ("isometric", "conformal"):
+        page.select_option("#colour-by", measure)
+        page.wait_for_selector("body[data-state=shown]", timeout=60_000)
+        page.wait_for_function(
+            "(m) => document.querySelector('#map svg g.colour-bar')?.textContent.includes(m)",
+            arg=measure,
+            timeout=60_000,
+        )
+        assert drawn_on_the_map(page) == drawn
+        if measure == "isometric":
+            page.wait_for_timeout(500)  # a few frames of the 3D view
+            page.screenshot(path=str(FIGURES / "demo-colour.png"), full_page=True)
+    assert seen == [("POST", "v1/flatten")] * 4, seen
+    # Flatten again, the same mesh and region: kept too; the sample is not downloaded again.
+    seen.clear()
+    page.click("#go")
+    page.wait_for_selector("body[data-state=shown]", timeout=60_000)
+    assert drawn_on_the_map(page) == drawn
+    assert seen == [("POST", "v1/flatten")] * 2, seen
+
+
+def assert_values_used(page, server: str) -> None:
+    """Automatic mode: the greyed fields show what the answer used (the same request, asked
+    directly); the zone is measured and the grafts placed again on the new map."""
+    sent = posted(page, "/v1/flatten")
+    page.check("#auto")
+    page.click("#go")
+    page.wait_for_selector("body[data-state=shown]", timeout=120_000)
+    assert sent[-1]["sigma"] == "auto" and sent[-1]["facing"] == [0, 1, 0]
+    used = post(server, "/v1/flatten", sent[-1])["params"]
+    for field in ("center", "pole", "sigma"):
+        assert page.locator(f"#{field}").is_disabled(), field
+    expected = {
+        "center": used["center"],
+        "pole": used["rotation"][1],
+        "up": used["rotation"][2],
+        "sigma": [used["sigma"]],
+    }
+    for field, values in expected.items():
+        shown = [float(v) for v in page.locator(f"#{field}").input_value().split(",")]
+        assert shown == pytest.approx(values, rel=1e-5, abs=1e-6), field
+    page.wait_for_selector("#zone-area[data-state=measured]", timeout=30_000)
+    page.wait_for_selector("#sites-status[data-state=placed]", timeout=30_000)
+    assert page.locator("#map svg .zone-drawing polygon").count() == 1
+    page.unroute("**/v1/flatten")
+    page.uncheck("#auto")
+
+
+def assert_upload_shown(page, upload: Path) -> None:
+    """An upload: the sample selector says so, it is what is flattened (no front named, no
+    labels); a sample picked again lets it go."""
+    upload.write_bytes(SAMPLES[SAMPLE].path.read_bytes())
+    page.set_input_files("#file", str(upload))
+    assert page.locator("#sample").input_value() == ""
+    assert page.locator("#sample option:checked").inner_text() == f"uploaded: {upload.name}"
+    assert page.locator("#facing").input_value() == ""  # the sample's front is not its
+    names = mesh_names(page, "/v1/flatten")
+    page.click("#go")
+    page.wait_for_selector("body[data-state=shown]", timeout=60_000)
+    assert names == [upload.name] * 2
+    assert page.locator("#map svg g.orientation").count() == 0
+    page.select_option("#sample", SAMPLE)
+    assert page.evaluate("() => document.getElementById('file').files.length") == 0
+    assert page.locator("#sample option.upload").count() == 0
+    assert page.locator("#facing").input_value() == "0, 1, 0"
+
+
+def test_the_demo_reads_on_a_laptop_screen_and_keeps_what_is_drawn(server, tmp_path):
+    """At 1366 x 900: the sample's units preselected; the map at least 600 px wide, its text
+    at 12 px or more, front and back labelled; "Colour by" recolours the same map (two
+    /v1/flatten requests, the SVG and the GLB; no sample downloaded again) and keeps the zone
+    and the grafts, as a new Flatten of the same mesh and region does; in automatic mode the
+    greyed fields show the values the answer used; an upload is what the sample selector
+    shows, and a sample picked again lets the upload go."""
+    flat = post(server, "/v1/flatten", PARAMS)
+    samples = httpx.get(f"{server}/v1/samples", headers={"X-API-Key": KEY}, timeout=30).json()
+    problems: list[str] = []
+    with chromium() as browser:
+        page = demo_page(browser, server, problems)
+        page.fill("#apikey", KEY)
+        page.locator("#apikey").blur()
+        page.wait_for_selector(f"#sample option[value='{SAMPLE}']", state="attached")
+        # The first sample is selected, and its units with it.
+        assert page.locator("#sample").input_value() == samples[0]["name"]
+        assert page.locator("#units").input_value() == samples[0]["units"]
+        flatten_sample(page)
+        assert page.locator("#units").input_value() == "mm"
+        assert_legible(page)
+        draw(page, flat, pentagon(flat, 0.2))
+        page.click("#place-sites")
+        page.wait_for_selector("#sites-status[data-state=placed]", timeout=30_000)
+        assert_recolours_keeping(page, drawn_on_the_map(page))
+        assert_values_used(page, server)
+        assert_upload_shown(page, tmp_path / "my-scan.ply")
+    assert not problems, problems

@@ -9,33 +9,34 @@
 // given) and draws them on the head. Recipient and donor zones drawn on the map are weighed
 // by /v1/plan: a table of each zone's area and grafts needed or available, the balance and
 // the sessions. The units are the sample's (from /v1/samples), and what an answer warns of
-// (units, a zone off the map) is listed.
+// (units, a zone off the map) is listed. Every request goes through the typed client
+// (clients/typescript), whose types come from the committed OpenAPI document.
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+import { meshflat } from '../clients/typescript/index.ts';
 
-// Regions and frames that suit each bundled scan (its scalp, the cap at the neck).
-// Lee Perry-Smith's box holds the shoulders: the cone starts inside the skull instead.
+// Regions and frames that suit each bundled scan (its scalp, the cap at the neck), and where
+// its face looks (facing: the front at the top of the map; fsaverage is RAS, +Y anterior;
+// Lee Perry-Smith looks along +Z). Lee Perry-Smith's box holds the shoulders: the cone
+// starts inside the skull instead.
 const PRESETS = {
-  'fsaverage-head.ply': { axis: [0, 0, 1], angle: 70, apex: null, center: 'bbox_center', pole: [0, 0, -1], up: [0, 1, 0] },
-  'lee-perry-smith.glb': { axis: [0, 1, 0], angle: 60, apex: [0, 1.2, -0.3], center: [0, 1.2, -0.3], pole: [0, -1, 0], up: [0, 0, 1] },
-  'lee-perry-smith.obj': { axis: [0, 1, 0], angle: 60, apex: [0, 1.2, -0.3], center: [0, 1.2, -0.3], pole: [0, -1, 0], up: [0, 0, 1] },
-  'nefertiti-lowres.obj': { axis: [0, 0, 1], angle: 60, apex: null, center: 'bbox_center', pole: [0, 0, -1], up: [0, 1, 0] },
+  'fsaverage-head.ply': { axis: [0, 0, 1], angle: 70, apex: null, center: 'bbox_center', pole: [0, 0, -1], up: [0, 1, 0], facing: [0, 1, 0] },
+  'lee-perry-smith.glb': { axis: [0, 1, 0], angle: 60, apex: [0, 1.2, -0.3], center: [0, 1.2, -0.3], pole: [0, -1, 0], up: [0, 0, 1], facing: [0, 0, 1] },
+  'lee-perry-smith.obj': { axis: [0, 1, 0], angle: 60, apex: [0, 1.2, -0.3], center: [0, 1.2, -0.3], pole: [0, -1, 0], up: [0, 0, 1], facing: [0, 0, 1] },
+  'nefertiti-lowres.obj': { axis: [0, 0, 1], angle: 60, apex: null, center: 'bbox_center', pole: [0, 0, -1], up: [0, 1, 0], facing: null },
 };
 
 // Each bundled scan's length unit, as /v1/samples gives it (estimated where its file has none).
 const SAMPLE_UNITS = {};
 
+// The page's elements by id (inputs, selects, outputs alike: the page knows which is which).
+/** @type {(id: string) => any} */
 const $ = (id) => document.getElementById(id);
 const vector = (id) => $(id).value.split(',').map(Number);
-// The API key, when the service requires one (MESHFLAT_API_KEYS); kept in the page only.
-const keyHeaders = () => ($('apikey').value.trim() ? { 'X-API-Key': $('apikey').value.trim() } : {});
-
-// The problem's field comes along: the page marks the flow or whorl a 422 names.
-async function problemOf(response) {
-  const problem = await response.json().catch(() => ({ detail: response.statusText }));
-  return Object.assign(new Error(`${response.status}: ${problem.detail}`), { field: problem.field });
-}
+// The API, with the key when the service requires one (MESHFLAT_API_KEYS; kept in the page
+// only). A refusal is thrown with its field: the page marks the flow or whorl a 422 names.
+const api = meshflat({ baseUrl: window.location.origin, apiKey: () => $('apikey').value });
 
 function setStatus(text, isError = false) {
   $('status').textContent = text;
@@ -43,14 +44,15 @@ function setStatus(text, isError = false) {
 }
 
 async function loadSamples() {
-  const response = await fetch('/v1/samples', { headers: keyHeaders() });
-  if (!response.ok) {
-    setStatus(`${(await problemOf(response)).message}${response.status === 401 ? ' (enter the API key)' : ''}`, true);
+  let samples;
+  try {
+    samples = await api.samples();
+  } catch (error) {
+    setStatus(`${error.message}${error.status === 401 ? ' (enter the API key)' : ''}`, true);
     return;
   }
-  const samples = await response.json();
   setStatus('');
-  if ($('sample').options.length > 0) return; // listed already (the key was changed)
+  if ($('sample').querySelector('option:not(.upload)')) return; // listed already (the key was changed)
   for (const sample of samples) {
     const option = document.createElement('option');
     option.value = sample.name;
@@ -59,7 +61,8 @@ async function loadSamples() {
     SAMPLE_UNITS[sample.name] = sample.units;
   }
   $('credits').textContent = samples.map((s) => `${s.name}: ${s.credit}`).join(' · ');
-  applyPreset();
+  if (!$('file').files[0]) applyPreset();
+  else showUpload(); // a file chosen before the samples came: it stays the source
 }
 
 function applyPreset() {
@@ -71,7 +74,17 @@ function applyPreset() {
   $('center').value = Array.isArray(preset.center) ? preset.center.join(', ') : preset.center;
   $('pole').value = preset.pole.join(', ');
   $('up').value = preset.up.join(', ');
+  $('facing').value = preset.facing ? preset.facing.join(', ') : '';
   if (SAMPLE_UNITS[$('sample').value]) $('units').value = SAMPLE_UNITS[$('sample').value];
+  syncFrameFields();
+}
+
+// The fields the service fills in rather than reads are greyed: in automatic mode the centre,
+// pole and sigma; with facing, the up direction (facing sets the roll). They still show the
+// values the last answer used.
+function syncFrameFields() {
+  for (const id of ['center', 'pole', 'sigma']) $(id).disabled = $('auto').checked;
+  $('up').disabled = Boolean($('facing').value.trim());
 }
 
 // What the last answer warns of: legal but probably wrong (units that make the region
@@ -91,41 +104,44 @@ function params() {
   const region = $('region-kind').value === 'vertex_color' ? { vertex_color: painted } : { cone };
   // The map and the 3D view coloured by the flags or by a distortion measure (with its bar).
   const p = { region, layout: $('layout').value, colour_by: $('colour-by').value };
+  // Where the face looks: the map's front at its top (the landmarks name their own).
+  const facing = $('facing').value.trim() ? vector('facing') : null;
   if ($('use-landmarks').checked) {
     // The head's frame: centre and rotation from the landmarks, sigma as given (or fitted).
     p.frame = { landmarks: { ...landmarks.points } };
     p.sigma = $('sigma').value.trim() ? Number($('sigma').value) : 'auto';
   } else if ($('auto').checked) {
     // Chosen by the service, and the map untangled: one piece, every triangle the right way.
-    const rotation = $('up').value.trim() ? { pole: 'auto', up: vector('up') } : 'auto';
+    // With facing the roll is its; else the up direction's, when given.
+    const rotation = !facing && $('up').value.trim() ? { pole: 'auto', up: vector('up') } : 'auto';
     Object.assign(p, { center: 'auto', rotation, sigma: 'auto', untangle: true });
+    if (facing) p.facing = facing;
   } else {
     p.center = /^[a-z_]+$/.test(center) ? center : center.split(',').map(Number);
-    // Left blank, the pole and sigma are chosen by the service's default rule.
-    if ($('pole').value.trim() && $('up').value.trim()) p.rotation = { pole: vector('pole'), up: vector('up') };
+    // Left blank, the pole and sigma are chosen by the service's default rule. With facing,
+    // it is the up direction too: the two must agree, and so they do exactly.
+    const up = facing ?? ($('up').value.trim() ? vector('up') : null);
+    if ($('pole').value.trim() && up) p.rotation = { pole: vector('pole'), up };
     if ($('sigma').value.trim()) p.sigma = Number($('sigma').value);
+    if (facing) p.facing = facing;
   }
   return p;
 }
 
+// The samples' files, each downloaded once.
+const sampleFiles = new Map();
+
+// The mesh to flatten: the file uploaded, else the sample selected; `source` says which, so
+// that a new flatten of the same mesh keeps what is drawn on its map.
 async function meshFile() {
   const upload = $('file').files[0];
-  if (upload) return { blob: upload, name: upload.name };
+  if (upload) return { blob: upload, name: upload.name, source: upload };
   const name = $('sample').value;
-  const response = await fetch(`/v1/samples/${encodeURIComponent(name)}`, { headers: keyHeaders() });
-  if (!response.ok) throw await problemOf(response);
-  return { blob: await response.blob(), name };
+  if (!sampleFiles.has(name)) sampleFiles.set(name, await api.sample(name));
+  return { ...sampleFiles.get(name), source: `sample ${name}` };
 }
 
-async function post(path, mesh, p, accept) {
-  const form = new FormData();
-  form.append('mesh', mesh.blob, mesh.name);
-  form.append('params', JSON.stringify(p));
-  const headers = { Accept: accept, ...keyHeaders() };
-  const response = await fetch(path, { method: 'POST', body: form, headers });
-  if (!response.ok) throw await problemOf(response);
-  return response;
-}
+
 
 // -- the 3D view ------------------------------------------------------------------------
 
@@ -290,6 +306,7 @@ const STROKE_PIXELS = 8;
 const STROKE_OF_SIZE = 1 / 20;
 let grafts = null; // the sites in the 3D view
 let placed = null; // the params they were placed with
+let sitesShown = null; // the answer shown
 let strokes = null; // their growth directions in the 3D view
 let sitesTicket = 0;
 
@@ -312,6 +329,7 @@ function clearSites() {
   delete $('sites-status').dataset.strokes;
   showWarnings(null);
   placed = null;
+  sitesShown = null;
   $('grow-hair').disabled = true;
   clearHair();
 }
@@ -350,9 +368,11 @@ function tableRow(cells, tag) {
   return row;
 }
 
-function showSites(answer) {
-  const { position, x, y, direction, map_direction: mapDirection } = answer.sites;
+// The grafts on the map: a dot at each, or with growth a stroke along its map direction.
+function drawSitesOnMap(answer) {
+  const { x, y, map_direction: mapDirection } = answer.sites;
   const grown = Boolean(answer.growth);
+  mapSvg().querySelector('g.sites-drawing')?.remove();
   const group = document.createElementNS(SVG, 'g');
   group.setAttribute('class', 'sites-drawing');
   // With growth a stroke from each site along its direction; else a dot at each.
@@ -370,6 +390,13 @@ function showSites(answer) {
   // The flows and whorls stay above the strokes, where they can be read.
   const drawn = mapSvg().querySelector('g.growth-drawing');
   if (drawn) mapSvg().append(drawn);
+}
+
+function showSites(answer) {
+  const { position, direction } = answer.sites;
+  const grown = Boolean(answer.growth);
+  sitesShown = answer;
+  drawSitesOnMap(answer);
   const geometry = new THREE.BufferGeometry();
   geometry.setAttribute('position', new THREE.Float32BufferAttribute(position.flat(), 3));
   grafts = new THREE.Points(geometry, new THREE.PointsMaterial({ color: SITES_COLOUR, size: 3, sizeAttenuation: false }));
@@ -407,8 +434,7 @@ async function placeSites() {
   drawGrowth();
   showStatus('sites-status', 'placing…', 'placing');
   try {
-    const response = await post('/v1/sites', map.mesh, p, 'application/json');
-    const answer = await response.json();
+    const answer = await api.json('/v1/sites', { mesh: map.mesh }, p);
     if (ticket !== sitesTicket) return;
     showWarnings(answer);
     showSites(answer);
@@ -453,8 +479,7 @@ async function measure() {
   $('zone-area').dataset.ring = JSON.stringify(outer);
   showStatus('zone-area', 'measuring…', 'measuring');
   try {
-    const response = await post('/v1/measure', map.mesh, p, 'application/json');
-    const answer = await response.json();
+    const answer = await api.json('/v1/measure', { mesh: map.mesh }, p);
     const [measured] = answer.zones;
     if (ticket !== zone.ticket) return; // cleared, or measured again, meanwhile
     showWarnings(answer);
@@ -765,8 +790,7 @@ async function runPlan() {
   drawPlanZones();
   showStatus('plan-status', 'planning…', 'planning');
   try {
-    const response = await post('/v1/plan', map.mesh, p, 'application/json');
-    const answer = await response.json();
+    const answer = await api.json('/v1/plan', { mesh: map.mesh }, p);
     if (ticket !== transplant.ticket) return; // the zones changed, or planned again, meanwhile
     showWarnings(answer);
     showPlan(answer);
@@ -830,8 +854,7 @@ async function growHair() {
   const p = { ...placed, length_mm: Number($('hair-length').value), points: HAIR_POINTS, output: 'json' };
   showStatus('hair-status', 'growing…', 'growing');
   try {
-    const response = await post('/v1/strands', map.mesh, p, 'application/json');
-    const answer = await response.json();
+    const answer = await api.json('/v1/strands', { mesh: map.mesh }, p);
     if (ticket !== hairTicket) return; // the grafts went, or grown again, meanwhile
     showWarnings(answer);
     showHair(answer);
@@ -852,8 +875,8 @@ const raycaster = new THREE.Raycaster();
 async function loadHead() {
   if (landmarks.head || !map) return;
   const p = { ...map.params, region: null, untangle: false, colour_by: 'flags' };
-  const response = await post('/v1/flatten', map.mesh, p, 'model/gltf-binary');
-  const gltf = await new GLTFLoader().parseAsync(await response.arrayBuffer(), '');
+  const glb = await api.glb('/v1/flatten', { mesh: map.mesh }, p);
+  const gltf = await new GLTFLoader().parseAsync(glb, '');
   gltf.scene.traverse((node) => {
     if (node.isMesh) node.material = new THREE.MeshLambertMaterial({ color: 0xb8c4cc, transparent: true, opacity: 0.55, side: THREE.DoubleSide });
   });
@@ -932,7 +955,7 @@ function viewFrom(side) {
 }
 
 // For tests and integrations: where a world point shows in the page's pixels.
-window.meshflatDemo = {
+/** @type {any} */ (window).meshflatDemo = {
   project(point) {
     const box = renderer.domElement.getBoundingClientRect();
     const ndc = new THREE.Vector3(...point).project(camera);
@@ -949,15 +972,16 @@ window.meshflatDemo = {
 // The region's own fields: the cone's, or the colour threshold's.
 $('region-kind').addEventListener('change', () => {
   const painted = $('region-kind').value === 'vertex_color';
-  for (const label of document.querySelectorAll('.cone-only')) label.hidden = painted;
-  for (const label of document.querySelectorAll('.color-only')) label.hidden = !painted;
+  for (const label of document.querySelectorAll('label.cone-only')) /** @type {HTMLElement} */ (label).hidden = painted;
+  for (const label of document.querySelectorAll('label.color-only')) /** @type {HTMLElement} */ (label).hidden = !painted;
 });
 
 function clearPresets() {
   // A file of one's own: the sample's region and frame do not fit it; the service chooses.
   $('apex').value = '';
   $('center').value = 'bbox_center';
-  for (const id of ['pole', 'up', 'sigma']) $(id).value = '';
+  for (const id of ['pole', 'up', 'sigma', 'facing']) $(id).value = '';
+  syncFrameFields();
 }
 
 // The isometric energy as the pictures' captions say it: the trusted faces' median and p95
@@ -986,77 +1010,220 @@ function summary(extras) {
   ].join('\n');
 }
 
+// The picture's size: as wide as the map's place on the page, so that it is drawn at its own
+// scale and its text (12 px and up) is not shrunk (the service's bounds: 480 to 4096 wide, at
+// least 360 high).
+function pictureSize() {
+  const width = Math.min(4096, Math.max(480, Math.floor($('map').getBoundingClientRect().width)));
+  return { image_width: width, image_height: Math.max(360, Math.round(width * 0.75)) };
+}
+
+// Where the front and the back of the head are on the map: with a front named (facing, or
+// the landmarks'), the pictures put it at the top and theta grows downwards to the back
+// (docs/math.md, section 18). Without one, no label: the roll follows the region.
+function labelOrientation(facing) {
+  if (!facing) return;
+  const plot = mapSvg().querySelector('#plot rect');
+  const [left, top, width, height] = ['x', 'y', 'width', 'height'].map((a) => Number(plot.getAttribute(a)));
+  const group = svgElement('g', { class: 'orientation' });
+  const label = (text, y, baseline) => {
+    const element = svgElement('text', { x: left + width / 2, y, 'text-anchor': 'middle', 'dominant-baseline': baseline, class: text });
+    element.textContent = text;
+    return element;
+  };
+  group.append(label('front', top + 4, 'hanging'), label('back', top + height - 4, 'auto'));
+  mapSvg().append(group);
+}
+
+// What is drawn on the map (the zone, flows and whorls, the plan's zones), in the layout's
+// coordinates: the picture's pixels change with a new picture, the layout's points do not.
+function drawingsInLayout() {
+  const ring = (points) => points.map(toLayout);
+  return {
+    zone: ring(zone.points),
+    flows: growth.flows.map(ring),
+    whorls: growth.whorls.map((whorl) => ({ ...whorl, point: toLayout(whorl.point) })),
+    recipient: transplant.recipient.map(ring),
+    donor: transplant.donor.map(ring),
+  };
+}
+
+// The drawings again on the new picture (the grafts from their answer's layout points).
+function redraw(drawings) {
+  const ring = (points) => points.map(toPicture);
+  zone.points = ring(drawings.zone);
+  growth.flows = drawings.flows.map(ring);
+  growth.whorls = drawings.whorls.map((whorl) => ({ ...whorl, point: toPicture(whorl.point) }));
+  transplant.recipient = drawings.recipient.map(ring);
+  transplant.donor = drawings.donor.map(ring);
+  if (zone.points.length) drawZone();
+  drawGrowth();
+  drawPlanZones();
+  if (sitesShown) drawSitesOnMap(sitesShown);
+}
+
+// A drawing half done is given up: its clicks were on the picture that goes.
+function stopDrawing() {
+  if (zone.drawing) clearZone();
+  if (growth.mode) setGrowthMode(null);
+  cancelPlanZone();
+}
+
+// Whether two resolved maps differ: the centre, the rotation or sigma by more than the
+// fields' six digits (a map sent back from the fields is the same map).
+function mapMoved(before, after) {
+  const numbers = (m) => [...m.center, ...m.rotation.flat(), m.sigma ?? 0];
+  const [a, b] = [numbers(before), numbers(after)];
+  return before.method !== after.method || a.some((value, i) => Math.abs(value - b[i]) > 1e-5 * Math.max(1, Math.abs(value)));
+}
+
+const shortNumber = (value) => String(Number(value.toPrecision(6)));
+const vectorText = (values) => values.map(shortNumber).join(', ');
+
+// The fields show what the answer used: the centre (fitted, or the box centre the name stood
+// for), the pole (local +Y), the up (local +Z), sigma and where the face looks.
+function showValuesUsed({ center, rotation, sigma, facing }) {
+  $('center').value = vectorText(center);
+  $('pole').value = vectorText(rotation[1]);
+  $('up').value = vectorText(rotation[2]);
+  $('sigma').value = sigma === null ? '' : shortNumber(sigma);
+  if (facing) $('facing').value = vectorText(facing);
+  syncFrameFields();
+}
+
+// The map picture and the 3D region for `p`: both from /v1/flatten (SVG at the map's size,
+// GLB), shown, and `map` set. What is drawn on the map stays when `keep` (the same mesh,
+// region and layout), carried to the new picture through the layout's coordinates.
+async function showMap(mesh, p, keep) {
+  const drawings = keep ? drawingsInLayout() : null;
+  const [svgText, glb] = await Promise.all([
+    api.svg('/v1/flatten', { mesh }, { ...p, ...pictureSize() }),
+    api.glb('/v1/flatten', { mesh }, p),
+  ]);
+  const svg = new DOMParser().parseFromString(svgText, 'image/svg+xml').documentElement;
+  svg.removeAttribute('width');
+  svg.removeAttribute('height');
+  $('map').replaceChildren(document.importNode(svg, true));
+  const gltf = await new GLTFLoader().parseAsync(glb, '');
+  const vertices = show(gltf);
+  const extras = gltf.parser.json.asset.extras.meshflat;
+  $('vertices').textContent = vertices.toLocaleString('en');
+  $('summary').textContent = summary(extras);
+  const { method, sigma, center, rotation, facing } = extras.params;
+  const json = gltf.parser.json;
+  const uv = json.accessors[json.meshes[0].primitives[0].attributes.TEXCOORD_0];
+  const { frame: _frame, ...resolved } = p; // the landmarks resolve to this centre and rotation
+  const size = new THREE.Box3().setFromObject(gltf.scene).getBoundingSphere(new THREE.Sphere()).radius;
+  const before = map;
+  map = { mesh, params: { ...resolved, method, sigma, center, rotation }, uv: { ...extras.uv, max: uv.max }, rotation, size };
+  labelOrientation(facing);
+  if (drawings) redraw(drawings);
+  document.body.dataset.vertices = String(vertices);
+  return { extras, vertices, moved: before !== null && mapMoved(before.params, map.params) };
+}
+
+// The map's tools, while there is a map to use them on.
+function enableTools(enabled) {
+  for (const id of ['draw', 'pick', 'place-sites', 'draw-flow', 'place-whorl', 'draw-recipient', 'draw-donor']) $(id).disabled = !enabled;
+}
+
 async function flatten(event) {
   event?.preventDefault();
   $('go').disabled = true;
-  $('draw').disabled = true;
-  $('place-sites').disabled = true;
-  $('draw-flow').disabled = true;
-  $('place-whorl').disabled = true;
-  $('draw-recipient').disabled = true;
-  $('draw-donor').disabled = true;
-  $('pick').disabled = true;
+  enableTools(false);
   if (landmarks.head) scene.remove(landmarks.head);
   landmarks.head = null;
   landmarks.picking = false;
   $('view').classList.remove('picking');
-  // The flows and whorls, and the plan's zones, are drawn on the map that goes: they go
-  // with it, as the zone does.
-  clearGrowth();
-  clearZone();
-  map = null;
-  clearPlan();
+  stopDrawing();
   document.body.dataset.state = 'flattening';
   setStatus('flattening…');
   const started = performance.now();
   try {
     const mesh = await meshFile();
     const p = params();
-    const [svgResponse, glbResponse] = await Promise.all([
-      post('/v1/flatten', mesh, p, 'image/svg+xml'),
-      post('/v1/flatten', mesh, p, 'model/gltf-binary'),
-    ]);
-    const svg = new DOMParser().parseFromString(await svgResponse.text(), 'image/svg+xml').documentElement;
-    svg.removeAttribute('width');
-    svg.removeAttribute('height');
-    $('map').replaceChildren(document.importNode(svg, true));
-    const gltf = await new GLTFLoader().parseAsync(await glbResponse.arrayBuffer(), '');
-    const vertices = show(gltf);
-    const extras = gltf.parser.json.asset.extras.meshflat;
-    $('vertices').textContent = vertices.toLocaleString('en');
-    $('summary').textContent = summary(extras);
-    // The centre actually used (fitted, or the box centre the name stood for).
-    $('center').value = extras.params.center.map((c) => Number(c.toPrecision(6))).join(', ');
-    const { method, sigma, center, rotation } = extras.params;
-    const json = gltf.parser.json;
-    const uv = json.accessors[json.meshes[0].primitives[0].attributes.TEXCOORD_0];
-    const { frame: _frame, ...resolved } = p; // the landmarks resolve to this centre and rotation
-    const size = new THREE.Box3().setFromObject(gltf.scene).getBoundingSphere(new THREE.Sphere()).radius;
-    map = { mesh, params: { ...resolved, method, sigma, center, rotation }, uv: { ...extras.uv, max: uv.max }, rotation, size };
-    $('draw').disabled = false;
-    $('pick').disabled = false;
-    $('place-sites').disabled = false;
-    $('draw-flow').disabled = false;
-    $('place-whorl').disabled = false;
-    $('draw-recipient').disabled = false;
-    $('draw-donor').disabled = false;
-    document.body.dataset.vertices = String(vertices);
+    // The same mesh, region and layout: the zone, the grafts, the flows and whorls and the
+    // plan's zones stay. Else they were drawn on a map that goes, and go with it.
+    const keep = map !== null && map.mesh.source === mesh.source && map.params.layout === p.layout && JSON.stringify(map.params.region) === JSON.stringify(p.region);
+    if (!keep) {
+      clearGrowth();
+      clearZone();
+      map = null;
+      clearPlan();
+    }
+    const { extras, moved } = await showMap(mesh, p, keep);
+    showValuesUsed(extras.params);
+    // Another map of the same region (another sigma, say): the numbers are made again on it.
+    if (moved) refreshNumbers();
+    enableTools(true);
+    drawPlanZones();
     document.body.dataset.state = 'shown';
     setStatus(`done in ${Math.round(performance.now() - started)} ms`);
   } catch (error) {
     document.body.dataset.state = 'error';
     setStatus(error.message, true);
+    enableTools(map !== null);
   } finally {
     $('go').disabled = false;
   }
 }
 
-$('sample').addEventListener('change', applyPreset);
-$('file').addEventListener('change', clearPresets);
-$('apikey').addEventListener('change', loadSamples);
-$('auto').addEventListener('change', () => {
-  for (const id of ['center', 'pole', 'sigma']) $(id).disabled = $('auto').checked;
+// The zone's area, the grafts and the plan, asked again for the map shown; the strands go
+// with the grafts they grew from.
+function refreshNumbers() {
+  const hadGrafts = sitesShown !== null; // measuring lets them go: they are placed again
+  if (zone.closed) measure();
+  if (hadGrafts) placeSites();
+  if ($('plan-status').dataset.state !== 'none') runPlan();
+}
+
+// Another colouring: the same map again (its resolved centre, rotation and sigma: nothing is
+// fitted again) with the new colours; what is drawn on it stays.
+async function recolour() {
+  if (!map) return;
+  document.body.dataset.state = 'recolouring';
+  setStatus('colouring…');
+  try {
+    await showMap(map.mesh, { ...map.params, colour_by: $('colour-by').value }, true);
+    document.body.dataset.state = 'shown';
+    setStatus('');
+  } catch (error) {
+    document.body.dataset.state = 'error';
+    setStatus(error.message, true);
+  }
+}
+
+// A file chosen: it is the source, and the sample selector says so.
+function showUpload() {
+  const upload = $('file').files[0];
+  let option = $('sample').querySelector('option.upload');
+  if (!upload) {
+    option?.remove();
+    return;
+  }
+  if (!option) {
+    option = Object.assign(document.createElement('option'), { className: 'upload', value: '' });
+    $('sample').prepend(option);
+  }
+  option.textContent = `uploaded: ${upload.name}`;
+  $('sample').value = '';
+}
+
+// A sample chosen: the file chosen before is let go.
+function chooseSample() {
+  $('file').value = '';
+  showUpload();
+  applyPreset();
+}
+
+$('sample').addEventListener('change', chooseSample);
+$('file').addEventListener('change', () => {
+  clearPresets();
+  showUpload();
 });
+$('apikey').addEventListener('change', loadSamples);
+$('auto').addEventListener('change', syncFrameFields);
+$('facing').addEventListener('input', syncFrameFields);
 $('form').addEventListener('submit', flatten);
 $('draw').addEventListener('click', startZone);
 $('clear-zone').addEventListener('click', clearZone);
@@ -1064,10 +1231,10 @@ $('place-sites').addEventListener('click', placeSites);
 $('pick').addEventListener('click', startPicking);
 $('clear-landmarks').addEventListener('click', clearLandmarks);
 $('view').addEventListener('click', pickLandmark);
-document.querySelectorAll('button.view').forEach((button) => button.addEventListener('click', () => viewFrom(button.dataset.view)));
+document.querySelectorAll('button.view').forEach((button) => button.addEventListener('click', () => viewFrom(/** @type {HTMLElement} */ (button).dataset.view)));
 $('units').addEventListener('change', () => zone.closed && measure());
 // Another colouring: the map and the 3D view again, with it.
-$('colour-by').addEventListener('change', () => map && $('form').requestSubmit());
+$('colour-by').addEventListener('change', recolour);
 $('map').addEventListener('click', addPoint);
 $('map').addEventListener('dblclick', closeZone);
 $('draw-flow').addEventListener('click', () => startGrowth('flow'));

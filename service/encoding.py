@@ -26,22 +26,40 @@ def encode(answer: BaseModel) -> bytes:
     ValueError
         A NaN or Inf anywhere: an answer never carries one (it would be a bug).
     """
+    return orjson.dumps(checked(answer), option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+def checked(answer: BaseModel) -> dict:
+    """``answer`` as :func:`plain` makes it, checked for a NaN or Inf (the forms built from
+    the JSON answer check it as the JSON does).
+
+    Raises
+    ------
+    ValueError
+        A NaN or Inf anywhere.
+    """
     payload = plain(answer)
     _check_finite(payload)
-    return orjson.dumps(payload, option=orjson.OPT_SERIALIZE_NUMPY)
+    return payload
 
 
 def plain(value):
     """``value`` with every model turned into a dict of the fields it was given, in the order
     given (numpy arrays and enums are left to orjson)."""
     if isinstance(value, BaseModel):
-        names = getattr(value, "_order", None) or [
-            name for name in type(value).model_fields if name in value.model_fields_set
-        ]
-        return {name: plain(getattr(value, name)) for name in names}
+        return {name: plain(item) for name, item in built_fields(value)}
     if isinstance(value, list) and value and isinstance(value[0], (BaseModel, type(None))):
         return [plain(item) for item in value]
     return value
+
+
+def built_fields(model: BaseModel) -> list[tuple[str, object]]:
+    """The fields ``model`` was built with and their values, in the order they are encoded
+    (the JSON's and the other forms' that follow it, such as the Arrow stream)."""
+    names = getattr(model, "_order", None) or [
+        name for name in type(model).model_fields if name in model.model_fields_set
+    ]
+    return [(name, getattr(model, name)) for name in names]
 
 
 def _check_finite(value) -> None:

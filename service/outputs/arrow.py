@@ -1,0 +1,184 @@
+"""The Arrow form of a JSON answer (``application/vnd.apache.arrow.stream``): an Arrow IPC
+stream of one record batch of one row. Each array of numbers of the answer's models is a
+column named by its dotted path (``vertices.x``, ``faces.vertices``,
+``zones.0.partial_faces``: a list of models counts its items from 0), holding exactly the
+JSON's numbers; the rest of the answer, without those fields, is JSON in the schema's
+metadata under ``meshflat``.
+
+A column is a list (one row: the lengths differ) of the array's items: of the numbers for an
+array ``(n,)``, of fixed-size lists of ``k`` numbers for ``(n, k)`` (``faces.vertices``: a
+list of fixed-size lists of 3), of fixed-size lists of ``p`` such lists for ``(n, p, k)``
+(``/v1/strands``' ``points``). Integers keep their width (numpy's int32 as int32, other
+integers as int64); floats are float64, bit for bit the double the JSON's text denotes (a
+float32 array goes through its JSON text); a null inside an array is a null of the column.
+What is not an array of numbers (strings, booleans, objects, a list of row objects such as
+``/v1/locate``'s hits, an empty or null field, a ragged list) stays in the metadata.
+
+Written by nanoarrow (its C library's IPC writer): the arrays are handed over as buffers, so
+a million-vertex answer has no Python loop over its numbers.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Callable
+
+import nanoarrow as na
+import numpy as np
+import orjson
+from nanoarrow.ipc import StreamWriter
+from pydantic import BaseModel
+
+from ..encoding import built_fields, checked, plain
+
+#: The schema metadata's key of the rest of the answer (JSON).
+METADATA_KEY = "meshflat"
+#: What an Arrow answer may hold per byte of its columns' numbers: the numbers converted (a
+#: list's, a float32 array's), the stream as it is written, and the bytes answered.
+ARROW_BYTES_PER_BYTE = 3
+#: The columns' number types, by the numpy type that holds them.
+_TYPES = {
+    np.dtype(np.int32): na.int32(),
+    np.dtype(np.int64): na.int64(),
+    np.dtype(np.float64): na.float64(),
+}
+
+
+class Column:
+    """An array of the answer as its column holds it: ``values`` (int32, int64 or float64)
+    and, where it has nulls (one dimension only), ``valid`` (false at a null)."""
+
+    def __init__(self, values: np.ndarray, valid: np.ndarray | None = None):
+        self.values, self.valid = values, valid
+
+    def arrow(self):
+        """The column: a list of one row holding the items (a number each; for ``(n, k)`` a
+        fixed-size list of ``k``, for ``(n, p, k)`` one of ``p`` such lists), over the
+        numbers' buffer as it is."""
+        values = self.values
+        kind = _TYPES[values.dtype]
+        flat = np.ascontiguousarray(values).reshape(-1)
+        bitmap = None if self.valid is None else np.packbits(self.valid, bitorder="little")
+        items = na.c_array_from_buffers(kind, length=flat.size, buffers=[bitmap, flat])
+        for axis in range(values.ndim - 1, 0, -1):  # (n, p, 3): lists of p lists of 3
+            items = na.c_array_from_buffers(
+                na.fixed_size_list(items.schema, values.shape[axis]),
+                length=int(np.prod(values.shape[:axis])),
+                buffers=[None],
+                children=[items],
+            )
+        offsets = np.array([0, len(values)], dtype=np.int32)
+        return na.c_array_from_buffers(
+            na.list_(items.schema), length=1, buffers=[None, offsets], children=[items]
+        )
+
+
+def arrow_stream(answer: BaseModel, charge: Callable[[int], None]) -> bytes:
+    """``answer`` (an :class:`~service.encoding.Answer`, as the JSON encoder is given it) as
+    an Arrow IPC stream; what each column takes is given to ``charge`` (bytes) before it is
+    built.
+
+    Raises
+    ------
+    ValueError
+        A NaN or Inf anywhere, as for the JSON answer.
+    """
+    checked(answer)
+    columns: dict[str, Column] = {}
+    rest = _split(answer, "", columns, charge)
+    arrays = [column.arrow() for column in columns.values()]
+    struct = na.struct(
+        {path: array.schema for path, array in zip(columns, arrays, strict=True)},
+        nullable=False,
+    )
+    metadata = {METADATA_KEY: orjson.dumps(rest, option=orjson.OPT_SERIALIZE_NUMPY)}
+    batch = na.c_array_from_buffers(
+        na.Schema(struct, metadata=metadata), length=1, buffers=[None], children=arrays
+    )
+    out = io.BytesIO()
+    with StreamWriter.from_writable(out) as writer:
+        writer.write_stream(batch)
+    return out.getvalue()
+
+
+def column_of(value) -> Column | None:
+    """``value`` as a column when it is a non-empty, rectangular array of numbers (nulls
+    allowed in one dimension), else None."""
+    if isinstance(value, np.ndarray):
+        array = value
+    elif isinstance(value, (list, tuple)) and len(value) > 0:
+        try:
+            array = np.asarray(value)
+        except ValueError:  # ragged
+            return None
+    else:
+        return None
+    valid = None
+    if array.dtype == object and array.ndim == 1:
+        valid = np.not_equal(array, None)
+        try:
+            present = np.asarray(array[valid].tolist())
+        except ValueError:
+            return None
+        if present.dtype.kind not in "iuf" or present.ndim != 1:
+            return None
+        array = np.zeros(len(valid), dtype=present.dtype)
+        array[valid] = present
+    if array.dtype.kind not in "iuf" or array.ndim == 0 or array.size == 0:
+        return None
+    if array.dtype == np.uint64 and array.max() > np.iinfo(np.int64).max:
+        return None  # no int64 holds it: the JSON's digits stay the reference
+    return Column(_as_json_numbers(array), valid)
+
+
+def _as_json_numbers(array: np.ndarray) -> np.ndarray:
+    """The numbers as the JSON has them: int32 and int64 as they are, other integers as
+    int64, float64 as it is; a narrower float as the double its shortest text denotes (what
+    the JSON says, and what a JSON parser reads)."""
+    if array.dtype in _TYPES:
+        return array
+    if array.dtype.kind in "iu":
+        return array.astype(np.int64)
+    return array.astype(str).astype(np.float64)
+
+
+def _split(value, path: str, columns: dict[str, Column], charge: Callable[[int], None]):
+    """The JSON of ``value`` without its models' arrays of numbers, which go to ``columns``
+    by their dotted paths."""
+    if isinstance(value, BaseModel):
+        rest = {}
+        for name, item in built_fields(value):
+            dotted = f"{path}{name}"
+            column = None
+            if _may_be_numbers(item):
+                charge(ARROW_BYTES_PER_BYTE * _size(item))
+                column = column_of(item)
+            if column is None:
+                rest[name] = _split(item, f"{dotted}.", columns, charge)
+            else:
+                columns[dotted] = column
+        return rest
+    if isinstance(value, list) and any(isinstance(item, BaseModel) for item in value):
+        return [_split(item, f"{path}{k}.", columns, charge) for k, item in enumerate(value)]
+    return plain(value)
+
+
+def _may_be_numbers(value) -> bool:
+    """Whether ``value`` may be an array of numbers (its first item tells a list of
+    objects or strings, which is not)."""
+    if isinstance(value, np.ndarray):
+        return True
+    return (
+        isinstance(value, (list, tuple))
+        and len(value) > 0
+        and not isinstance(value[0], (BaseModel, dict, str))
+    )
+
+
+def _size(value) -> int:
+    """The bytes of ``value``'s numbers as a column holds them (8 a number), counted by its
+    first items (a list of lists is rectangular, or no column)."""
+    count = 1
+    while isinstance(value, (list, tuple, np.ndarray)) and len(value) > 0:
+        count, value = count * len(value), value[0]
+    return 8 * count

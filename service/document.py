@@ -77,8 +77,9 @@ Arrow JS and pyarrow read into typed arrays without parsing text: one record bat
 row. Each array of numbers of the JSON answer is a column named by its dotted path
 (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
 numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
-fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); int32 and
-int64 as the JSON's integers, float64 bit for bit, null where the JSON has null. The rest of
+fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+where the JSON has null. The rest of
 the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
 Strings, objects, lists of row objects (`/v1/locate`'s hits) and empty or null arrays stay
 there.

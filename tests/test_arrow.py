@@ -146,9 +146,8 @@ async def test_flatten_by_accept_answers_its_arrays_as_columns_bit_for_bit(clien
     vertices = ("ids", "theta", "phi", "r", "x", "y")
     assert {f"vertices.{n}" for n in vertices} | {"faces.ids", "faces.vertices"} <= set(names)
     table, rest = read_arrow(as_arrow.content)
-    # The triangles are a list of fixed-size lists of 3; the angles float64; the ids as
-    # the core keeps them; what is not an array stays in the metadata.
-    assert table.schema.field("faces.vertices").type.value_type == pa.list_(pa.int64(), 3)
+    # The triangles are a list of fixed-size lists of 3 of int32; the angles float64.
+    assert table.schema.field("faces.vertices").type.value_type == pa.list_(pa.int32(), 3)
     assert table.schema.field("vertices.theta").type == pa.list_(pa.float64())
     assert rest["vertices"] == {} and rest["faces"] == {}  # every field a column
     assert rest["metrics"] == as_json.json()["metrics"]
@@ -215,6 +214,7 @@ class Sample(Answer):
     ids: list[int] = Field()
     narrow: list[float] = Field()
     small: list[int] = Field()
+    large: list[int] = Field()
     points: list[list[float]] = Field()
     strands: list[list[list[float]]] = Field()
     ragged: list[list[int]] = Field()
@@ -230,6 +230,7 @@ def sample_answer() -> Sample:
         ids=np.array([3, 1, 2], dtype=np.int32),
         narrow=np.array([0.1, 1 / 3, -0.0], dtype=np.float32),
         small=np.array([1, 2], dtype=np.uint16),
+        large=[1, 2**40],
         points=[[0.1, 0.2], [1e-300, -5e300]],
         strands=np.arange(24, dtype=np.float64).reshape(2, 4, 3) / 7,
         ragged=[[1, 2], [3]],
@@ -245,10 +246,12 @@ def test_columns_keep_the_jsons_ints_and_doubles_and_the_rest_stays_json():
     answer = sample_answer()
     as_json, as_arrow = encode(answer), arrow_stream(answer, lambda _: None)
     names = assert_same_answer(as_json, as_arrow)
-    assert names == ["ids", "narrow", "small", "points", "strands", "inner.0.values"]
+    assert names == ["ids", "narrow", "small", "large", "points", "strands", "inner.0.values"]
     table, rest = read_arrow(as_arrow)
     types = {name: table.schema.field(name).type.value_type for name in names}
-    assert types["ids"] == pa.int32() and types["small"] == pa.int64()
+    # Integers as int32 where they all fit, else int64.
+    assert types["ids"] == types["small"] == types["inner.0.values"] == pa.int32()
+    assert types["large"] == pa.int64()
     # A float32 array is the doubles its JSON text denotes: 0.1, not float32's 0.1.
     assert table.column("narrow")[0].as_py()[0] == 0.1
     assert types["points"] == pa.list_(pa.float64(), 2)
@@ -262,7 +265,7 @@ def test_columns_keep_the_jsons_ints_and_doubles_and_the_rest_stays_json():
 def test_writing_charges_its_columns_before_it_builds_them():
     charged = []
     arrow_stream(sample_answer(), charged.append)
-    numbers = 3 + 3 + 2 + 4 + 24 + 3  # ids, narrow, small, points, strands, inner.0.values
+    numbers = 3 + 3 + 2 + 2 + 4 + 24 + 3  # ids ... inner.0.values
     assert sum(charged) >= ARROW_BYTES_PER_BYTE * 8 * numbers
 
 

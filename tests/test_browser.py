@@ -1125,6 +1125,7 @@ def test_the_arrow_answer_reads_in_the_browser_as_the_json_answers_arrays(server
     for name in ("ids", "theta", "phi", "r", "x", "y"):
         assert columns[f"vertices.{name}"]["length"] == len(expected["vertices"]["ids"])
     assert columns["vertices.x"]["type"] == "Float64Array"
+    assert columns["faces.vertices"]["type"] == columns["vertices.ids"]["type"] == "Int32Array"
     assert columns["faces.vertices"]["width"] == 3
     assert columns["faces.vertices"]["length"] == 3 * len(expected["faces"]["ids"])
     assert [name for name, column in columns.items() if column["mismatches"]] == []

@@ -8,8 +8,8 @@ metadata under ``meshflat``.
 A column is a list (one row: the lengths differ) of the array's items: of the numbers for an
 array ``(n,)``, of fixed-size lists of ``k`` numbers for ``(n, k)`` (``faces.vertices``: a
 list of fixed-size lists of 3), of fixed-size lists of ``p`` such lists for ``(n, p, k)``
-(``/v1/strands``' ``points``). Integers keep their width (numpy's int32 as int32, other
-integers as int64); floats are float64, bit for bit the double the JSON's text denotes (a
+(``/v1/strands``' ``points``). Integers are int32 (int64 for an array with a value beyond
+int32); floats are float64, bit for bit the double the JSON's text denotes (a
 float32 array goes through its JSON text); a null inside an array is a null of the column.
 What is not an array of numbers (strings, booleans, objects, a list of row objects such as
 ``/v1/locate``'s hits, an empty or null field, a ragged list) stays in the metadata.
@@ -132,13 +132,16 @@ def column_of(value) -> Column | None:
 
 
 def _as_json_numbers(array: np.ndarray) -> np.ndarray:
-    """The numbers as the JSON has them: int32 and int64 as they are, other integers as
-    int64, float64 as it is; a narrower float as the double its shortest text denotes (what
-    the JSON says, and what a JSON parser reads)."""
-    if array.dtype in _TYPES:
-        return array
+    """The numbers as the JSON has them: integers as int32 when they all fit (every id
+    within the service's limits does: an Int32Array in Arrow JS, where int64 is a
+    BigInt64Array, and half the bytes), else int64; float64 as it is; a narrower float as
+    the double its shortest text denotes (what the JSON says, and a JSON parser reads)."""
     if array.dtype.kind in "iu":
-        return array.astype(np.int64)
+        low, high = np.iinfo(np.int32).min, np.iinfo(np.int32).max
+        fits = array.dtype.itemsize < 4 or (array.min() >= low and array.max() <= high)
+        return array.astype(np.int32 if fits else np.int64, copy=False)
+    if array.dtype == np.float64:
+        return array
     return array.astype(str).astype(np.float64)
 
 

@@ -6,6 +6,7 @@ the rest of the JSON answer; the two put together are the JSON answer."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import orjson
@@ -109,8 +110,7 @@ def example_result(capability):
 
 
 @pytest.mark.parametrize("capability", MESH_CAPABILITIES, ids=lambda c: c.name)
-@pytest.mark.parametrize("anyio_backend", ["asyncio"])
-async def test_every_mesh_routes_arrow_answer_holds_its_json_answer(capability):
+def test_every_mesh_routes_arrow_answer_holds_its_json_answer(capability):
     assert capability.outputs[-1] is Output.ARROW
     result, params, ctx = example_result(capability)
     as_json = capability.render(result, params, Output.JSON, ctx, Timings())
@@ -273,3 +273,12 @@ def test_a_nan_is_refused_as_the_json_refuses_it():
     answer = Inner.build(values=np.array([1.0, np.nan]), label="x")
     with pytest.raises(ValueError, match="NaN"):
         arrow_stream(answer, lambda _: None)
+
+
+def test_the_document_gives_every_mesh_route_its_arrow_form():
+    document = json.loads((Path(__file__).parent.parent / "openapi" / "openapi.json").read_text())
+    for capability in MESH_CAPABILITIES:
+        operation = document["paths"][capability.path]["post"]
+        assert ARROW in operation["responses"]["200"]["content"], capability.path
+        assert "406" in operation["responses"], capability.path
+        assert "application/vnd.apache.arrow.stream" in operation["description"]

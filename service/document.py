@@ -81,8 +81,9 @@ fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists)
 as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
 where the JSON has null. The rest of
 the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
-Strings, objects, lists of row objects (`/v1/locate`'s hits) and empty or null arrays stay
-there.
+`/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+`hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+and empty or null arrays stay in the metadata.
 """
 
 

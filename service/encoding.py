@@ -100,17 +100,21 @@ class Answer(BaseModel):
         return answer
 
     @classmethod
-    def rows(cls, present, **columns) -> list:
+    def rows(cls, present, **columns) -> Rows:
         """Many answers of this model at once, from equally long columns of field values:
         one dict a row (None where ``present`` is false). For long lists (a million hits),
         where an instance a row would cost ten times more; the names are checked once.
         """
         cls._check_names(columns.keys())
         names = list(columns)
-        return [
-            dict(zip(names, values, strict=True)) if keep else None
-            for keep, *values in zip(present, *columns.values(), strict=True)
-        ]
+        return Rows(
+            (
+                dict(zip(names, values, strict=True)) if keep else None
+                for keep, *values in zip(present, *columns.values(), strict=True)
+            ),
+            columns,
+            present,
+        )
 
     @classmethod
     def _check_names(cls, names) -> None:
@@ -119,3 +123,13 @@ class Answer(BaseModel):
         missing = {name for name, f in fields.items() if f.is_required()} - names
         if unknown or missing:
             raise TypeError(f"{cls.__name__}: unknown {sorted(unknown)}, missing {sorted(missing)}")
+
+
+class Rows(list):
+    """The rows :meth:`Answer.rows` makes (a list: JSON writes it as one), which keeps the
+    columns they were made of and where a row is present, for the forms that answer columns
+    (Arrow)."""
+
+    def __init__(self, rows, columns: dict, present):
+        super().__init__(rows)
+        self.columns, self.present = columns, present

@@ -60,14 +60,25 @@ def put(rest, path: str, value) -> None:
 
 def column_numbers(table: pa.Table, name: str) -> tuple[np.ndarray, np.ndarray | None]:
     """A column's one list as numpy: its numbers (``(n, k)`` for fixed-size lists of
-    ``k``, and so on) and, when it has nulls, where they are valid."""
+    ``k``, and so on; a null item's placeholder included) and, when it has nulls, where its
+    items (numbers, or rows) are valid."""
     items = table.column(name).chunk(0).values
+    valid = None if items.null_count == 0 else ~np.asarray(items.is_null())
     shape = [len(items)]
     while pa.types.is_fixed_size_list(items.type):
         shape.append(items.type.list_size)
-        items = items.flatten()
-    valid = None if items.null_count == 0 else ~np.asarray(items.is_null())
+        items = items.values
     return items.fill_null(0).to_numpy().reshape(shape), valid
+
+
+def expected_at(answer, path: str) -> tuple[list, bool]:
+    """The JSON's array a column holds, and whether it is a field of a list of rows
+    (``hits.face``: each row's face, None where the row is null)."""
+    *parents, name = path.split(".")
+    node = at(answer, ".".join(parents)) if parents else answer
+    if isinstance(node, list):
+        return [None if row is None else row[name] for row in node], True
+    return node[name], False
 
 
 def assert_same_answer(json_bytes: bytes, arrow_bytes: bytes) -> list[str]:
@@ -76,24 +87,41 @@ def assert_same_answer(json_bytes: bytes, arrow_bytes: bytes) -> list[str]:
     metadata with the columns put back is the JSON answer. Returns the columns' names."""
     answer = orjson.loads(json_bytes)
     table, rest = read_arrow(arrow_bytes)
+    rows: dict[str, dict[str, list]] = {}
     for name in table.column_names:
-        expected = at(answer, name)
+        expected, of_rows = expected_at(answer, name)
         numbers, valid = column_numbers(table, name)
-        if valid is None:
-            wanted = np.asarray(expected)
+        present = np.array([item is not None for item in expected])
+        if present.all():
+            assert valid is None, name
         else:
-            assert np.array_equal(valid, [item is not None for item in expected]), name
-            wanted = np.asarray([0 if item is None else item for item in expected])
-        assert numbers.shape == wanted.shape, name
-        if numbers.dtype.kind == "f":
+            assert np.array_equal(valid, present), name
+        wanted = np.asarray([item for item in expected if item is not None])
+        got = numbers[present]
+        assert got.shape == wanted.shape, name
+        if got.dtype.kind == "f":
             assert wanted.dtype.kind == "f", name
-            bits = wanted.astype(np.float64).view(np.uint64)
-            same = np.array_equal(numbers.view(np.uint64), bits)
+            same = np.array_equal(got.view(np.uint64), wanted.astype(np.float64).view(np.uint64))
         else:
-            assert numbers.dtype in (np.int32, np.int64) and wanted.dtype.kind == "i", name
-            same = np.array_equal(numbers, wanted)
+            assert got.dtype in (np.int32, np.int64) and wanted.dtype.kind == "i", name
+            same = np.array_equal(got, wanted)
         assert same, name
-        put(rest, name, table.column(name)[0].as_py())
+        values = table.column(name)[0].as_py()
+        if of_rows:
+            parent, _, field = name.rpartition(".")
+            rows.setdefault(parent, {})[field] = values
+        else:
+            put(rest, name, values)
+    for parent, fields in rows.items():  # a row is null in every column where it is null
+        first = next(iter(fields.values()))
+        put(
+            rest,
+            parent,
+            [
+                None if first[i] is None else {field: v[i] for field, v in fields.items()}
+                for i in range(len(first))
+            ],
+        )
     assert rest == answer
     return table.column_names
 
@@ -203,6 +231,19 @@ async def test_validate_answers_arrow_by_accept_and_refuses_what_it_cannot_answe
     )
     body = problem(refused, 406, "Accept")
     assert ARROW in body["detail"]
+
+
+async def test_locates_hits_are_a_column_a_field_null_where_a_ray_misses(client):
+    # Two rays into the scalp, one towards the chin (outside the cone): a miss.
+    params = {**SCALP[NAME], "theta": [1.5, 3.1, 1.6], "phi": [-1.6, 0.0, -1.5]}
+    as_json = await post(client, "/v1/locate", params)
+    as_arrow = await post(client, "/v1/locate", params, ARROW)
+    assert None in as_json.json()["hits"]
+    names = assert_same_answer(as_json.content, as_arrow.content)
+    assert {"hits.face", "hits.barycentric", "hits.point"} <= set(names)
+    table, rest = read_arrow(as_arrow.content)
+    assert "hits" not in rest
+    assert table.column("hits.point").chunk(0).values.null_count == 1
 
 
 class Inner(Answer):

@@ -11,8 +11,10 @@ list of fixed-size lists of 3), of fixed-size lists of ``p`` such lists for ``(n
 (``/v1/strands``' ``points``). Integers are int32 (int64 for an array with a value beyond
 int32); floats are float64, bit for bit the double the JSON's text denotes (a
 float32 array goes through its JSON text); a null inside an array is a null of the column.
-What is not an array of numbers (strings, booleans, objects, a list of row objects such as
-``/v1/locate``'s hits, an empty or null field, a ragged list) stays in the metadata.
+A list of rows whose fields are all arrays of numbers (``/v1/locate``'s hits, made by
+:meth:`~service.encoding.Answer.rows`) is a column a field (``hits.face``, ``hits.point``),
+null where the JSON's row is null. What is not an array of numbers (strings, booleans,
+objects, rows with a string, an empty or null field, a ragged list) stays in the metadata.
 
 Written by nanoarrow (its C library's IPC writer): the arrays are handed over as buffers, so
 a million-vertex answer has no Python loop over its numbers.
@@ -29,7 +31,7 @@ import orjson
 from nanoarrow.ipc import StreamWriter
 from pydantic import BaseModel
 
-from ..encoding import built_fields, checked, plain
+from ..encoding import Rows, built_fields, checked, plain
 
 #: The schema metadata's key of the rest of the answer (JSON).
 METADATA_KEY = "meshflat"
@@ -61,13 +63,15 @@ class Column:
         values = self.values
         kind = _TYPES[values.dtype]
         flat = np.ascontiguousarray(values).reshape(-1)
+        # The nulls are the items' (a number, or a row's fixed-size list).
         bitmap = None if self.valid is None else np.packbits(self.valid, bitorder="little")
-        items = na.c_array_from_buffers(kind, length=flat.size, buffers=[bitmap, flat])
+        leaf = bitmap if values.ndim == 1 else None
+        items = na.c_array_from_buffers(kind, length=flat.size, buffers=[leaf, flat])
         for axis in range(values.ndim - 1, 0, -1):  # (n, p, 3): lists of p lists of 3
             items = na.c_array_from_buffers(
                 na.fixed_size_list(items.schema, values.shape[axis]),
                 length=int(np.prod(values.shape[:axis])),
-                buffers=[None],
+                buffers=[bitmap if axis == 1 else None],
                 children=[items],
             )
         offsets = np.array([0, len(values)], dtype=np.int32)
@@ -155,18 +159,45 @@ def _split(value, path: str, columns: dict[str, Column], charge: Callable[[int],
         rest = {}
         for name, item in built_fields(value):
             dotted = f"{path}{name}"
-            column = None
-            if _may_be_numbers(item):
-                charge(ARROW_BYTES_PER_BYTE * _size(item))
-                column = column_of(item)
-            if column is None:
+            found = _field_columns(item, dotted, charge)
+            if found is None:
                 rest[name] = _split(item, f"{dotted}.", columns, charge)
             else:
-                columns[dotted] = column
+                columns |= found
         return rest
     if isinstance(value, list) and any(isinstance(item, BaseModel) for item in value):
         return [_split(item, f"{path}{k}.", columns, charge) for k, item in enumerate(value)]
     return plain(value)
+
+
+def _field_columns(value, path: str, charge: Callable[[int], None]) -> dict | None:
+    """The columns of a model's field: itself when it is an array of numbers, a column a
+    field for rows whose fields all are; None when it stays JSON."""
+    if isinstance(value, Rows):
+        return _row_columns(value, path, charge)
+    if not _may_be_numbers(value):
+        return None
+    charge(ARROW_BYTES_PER_BYTE * _size(value))
+    column = column_of(value)
+    return None if column is None else {path: column}
+
+
+def _row_columns(rows: Rows, path: str, charge: Callable[[int], None]) -> dict | None:
+    """Rows (:meth:`~service.encoding.Answer.rows`, ``/v1/locate``'s hits) whose every
+    field is an array of numbers as a column a field (``hits.face``, ``hits.point``), taken
+    from the columns they were made of, each null where a row is; None when a field is not
+    (``/v1/measure``'s overlaps name their zones), and the rows stay JSON."""
+    if len(rows) == 0:
+        return None
+    present = np.asarray(rows.present, dtype=bool)
+    found = {}
+    for name, values in rows.columns.items():
+        charge(ARROW_BYTES_PER_BYTE * _size(values))
+        column = column_of(values)
+        if column is None or column.valid is not None:
+            return None
+        found[f"{path}.{name}"] = Column(column.values, None if present.all() else present)
+    return found
 
 
 def _may_be_numbers(value) -> bool:

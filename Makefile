@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-locate bench-measure bench-plan bench-compare bench-sites bench-growth bench-strands bench-transfer bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-locate bench-measure bench-plan bench-compare bench-sites bench-growth bench-strands bench-transfer bench-arrow bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -89,6 +89,12 @@ bench-strands: $(VENV)/.installed-bench
 # the vertices' values to a 2048² image), against Pillow's ImageDraw a triangle at a time.
 bench-transfer: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.transfer_bench $(BENCH_ARGS)
+
+# /v1/flatten of a 1.13M-face head answered as JSON and as Arrow: sizes, encoding, and reading
+# in headless Chromium (JSON.parse against Arrow JS). Needs the test extra, Chromium and
+# `npm ci --prefix tests/js` besides the bench extra.
+bench-arrow: $(VENV)/.installed-bench $(VENV)/.installed-test
+	$(BIN)/python -m benchmarks.arrow_bench $(BENCH_ARGS)
 
 # A million-face scalp's map coloured by isometric distortion, PNG and SVG, against Pillow's
 # ImageDraw a triangle at a time.

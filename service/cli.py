@@ -198,9 +198,9 @@ def _cone(text: str) -> dict:
 
 
 def _output(capability: MeshCapability, out: str | None) -> Output:
-    """The form ``--out``'s extension asks for, when the command answers several (JSON
-    otherwise, whatever the file is called)."""
-    if not out or len(capability.outputs) == 1:
+    """The form ``--out``'s extension asks for (every command answers JSON and Arrow, some
+    more); JSON on standard output."""
+    if not out:
         return Output.JSON
     return capability.output_of_file(out, "--out")
 

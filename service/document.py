@@ -70,9 +70,26 @@ def multipart_body(capability: MeshCapability) -> dict:
     return {"requestBody": {"required": True, "content": {"multipart/form-data": form}}}
 
 
+ARROW_RULES = """
+Every mesh route also answers its JSON as an Arrow IPC stream
+(`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+row. Each array of numbers of the JSON answer is a column named by its dotted path
+(`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+where the JSON has null. The rest of
+the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+`/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+`hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+and empty or null arrays stay in the metadata.
+"""
+
+
 def mesh_description(capability: MeshCapability) -> str:
-    """A mesh route's description, ending with how files are read."""
-    return f"{capability.description}\n\n{reading_rules()}"
+    """A mesh route's description, ending with its Arrow form and how files are read."""
+    return f"{capability.description}\n{ARROW_RULES}\n{reading_rules()}"
 
 
 def other_forms(capability: MeshCapability) -> dict:
@@ -91,7 +108,7 @@ def other_forms(capability: MeshCapability) -> dict:
     }
     refusal = f"Accept allows none of the forms {capability.path} answers."
     return {
-        200: {"content": content, "description": "The flattened region, in the form asked for."},
+        200: {"content": content, "description": "The answer, in the form asked for."},
         406: PROBLEMS[422] | {"description": refusal},
     }
 

@@ -26,22 +26,40 @@ def encode(answer: BaseModel) -> bytes:
     ValueError
         A NaN or Inf anywhere: an answer never carries one (it would be a bug).
     """
+    return orjson.dumps(checked(answer), option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+def checked(answer: BaseModel) -> dict:
+    """``answer`` as :func:`plain` makes it, checked for a NaN or Inf (the forms built from
+    the JSON answer check it as the JSON does).
+
+    Raises
+    ------
+    ValueError
+        A NaN or Inf anywhere.
+    """
     payload = plain(answer)
     _check_finite(payload)
-    return orjson.dumps(payload, option=orjson.OPT_SERIALIZE_NUMPY)
+    return payload
 
 
 def plain(value):
     """``value`` with every model turned into a dict of the fields it was given, in the order
     given (numpy arrays and enums are left to orjson)."""
     if isinstance(value, BaseModel):
-        names = getattr(value, "_order", None) or [
-            name for name in type(value).model_fields if name in value.model_fields_set
-        ]
-        return {name: plain(getattr(value, name)) for name in names}
+        return {name: plain(item) for name, item in built_fields(value)}
     if isinstance(value, list) and value and isinstance(value[0], (BaseModel, type(None))):
         return [plain(item) for item in value]
     return value
+
+
+def built_fields(model: BaseModel) -> list[tuple[str, object]]:
+    """The fields ``model`` was built with and their values, in the order they are encoded
+    (the JSON's and the other forms' that follow it, such as the Arrow stream)."""
+    names = getattr(model, "_order", None) or [
+        name for name in type(model).model_fields if name in model.model_fields_set
+    ]
+    return [(name, getattr(model, name)) for name in names]
 
 
 def _check_finite(value) -> None:
@@ -82,17 +100,21 @@ class Answer(BaseModel):
         return answer
 
     @classmethod
-    def rows(cls, present, **columns) -> list:
+    def rows(cls, present, **columns) -> Rows:
         """Many answers of this model at once, from equally long columns of field values:
         one dict a row (None where ``present`` is false). For long lists (a million hits),
         where an instance a row would cost ten times more; the names are checked once.
         """
         cls._check_names(columns.keys())
         names = list(columns)
-        return [
-            dict(zip(names, values, strict=True)) if keep else None
-            for keep, *values in zip(present, *columns.values(), strict=True)
-        ]
+        return Rows(
+            (
+                dict(zip(names, values, strict=True)) if keep else None
+                for keep, *values in zip(present, *columns.values(), strict=True)
+            ),
+            columns,
+            present,
+        )
 
     @classmethod
     def _check_names(cls, names) -> None:
@@ -101,3 +123,13 @@ class Answer(BaseModel):
         missing = {name for name, f in fields.items() if f.is_required()} - names
         if unknown or missing:
             raise TypeError(f"{cls.__name__}: unknown {sorted(unknown)}, missing {sorted(missing)}")
+
+
+class Rows(list):
+    """The rows :meth:`Answer.rows` makes (a list: JSON writes it as one), which keeps the
+    columns they were made of and where a row is present, for the forms that answer columns
+    (Arrow)."""
+
+    def __init__(self, rows, columns: dict, present):
+        super().__init__(rows)
+        self.columns, self.present = columns, present

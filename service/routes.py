@@ -156,14 +156,11 @@ def answer_mesh(
     with core_errors_as_problems(capability.places):
         with timings.measure("parse"):
             given = mesh_form(body, content_type, capability, ctx)
-            output = Output.JSON
-            if len(capability.outputs) > 1:
-                requested = getattr(given.params, "output", None)
-                output = choose_output(accept, requested, capability.outputs)
+            # Every mesh route has several forms (JSON and Arrow at least).
+            requested = getattr(given.params, "output", None)
+            output = choose_output(accept, requested, capability.outputs)
         data = capability.answer(given, ctx, output, timings)
-    headers = {"Server-Timing": timings.header()}
-    if len(capability.outputs) > 1:
-        headers["Vary"] = "Accept"
+    headers = {"Server-Timing": timings.header(), "Vary": "Accept"}
     if output is not Output.JSON:
         headers["Content-Disposition"] = f'inline; filename="region{output.suffix}"'
     return Response(data, media_type=output.media_type, headers=headers)

@@ -305,7 +305,10 @@ LINE = {"mesh": "head.ply", "outputs": ["map.json"]}
         ("[1, 2]", ["not a JSON object"]),
         ({"outputs": ["map.json"]}, ["mesh", "each line needs"]),
         ({"mesh": "head.ply"}, ["outputs", "list of file names"]),
-        ({**LINE, "outputs": ["map.jpeg"]}, ["outputs", "'map.jpeg'", ".json, .glb, .svg or .png"]),
+        (
+            {**LINE, "outputs": ["map.jpeg"]},
+            ["outputs", "'map.jpeg'", ".json, .glb, .svg, .png or .arrow"],
+        ),
         ({**LINE, "command": "locate", "params": {"theta": [1], "phi": [0]},
           "outputs": ["hits.png"]}, ["outputs", "use .json"]),
         ({**LINE, "outputs": ["../map.json"]}, ["outputs", "not a plain file name"]),

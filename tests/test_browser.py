@@ -25,7 +25,7 @@ from service.samples import SAMPLES
 
 from .conftest import real_servers, slow
 from .test_serve import running
-from .tools import require
+from .tools import JS_TOOLS, require
 
 pytestmark = [slow, real_servers]
 
@@ -1216,3 +1216,96 @@ def test_the_demo_reads_on_a_laptop_screen_and_keeps_what_is_drawn(server, tmp_p
         assert_values_used(page, server)
         assert_upload_shown(page, tmp_path / "my-scan.ply")
     assert not problems, problems
+
+
+#: Arrow JS's browser bundle (tests/js, npm ci), which defines the global ``Arrow``.
+ARROW_JS = JS_TOOLS / "node_modules" / "apache-arrow" / "Arrow.es2015.min.js"
+#: In the page: the sample's /v1/flatten answered as JSON and as Arrow, each read as a
+#: browser client reads it (JSON.parse; Arrow JS's tableFromIPC), timed; then every column
+#: compared with the JSON's array at its path, number by number (floats by their bits, int64
+#: as BigInt, nulls by validity), and the metadata's JSON handed back.
+ARROW_IN_PAGE = """async ({sample, params, key}) => {
+    const headers = {"X-API-Key": key};
+    const mesh = await (await fetch(`/v1/samples/${sample}`, {headers})).blob();
+    const post = async (accept) => {
+        const form = new FormData();
+        form.append("params", JSON.stringify(params));
+        form.append("mesh", mesh, sample);
+        const response = await fetch("/v1/flatten", {
+            method: "POST", body: form, headers: {...headers, Accept: accept},
+        });
+        return {type: response.headers.get("content-type"), bytes: await response.arrayBuffer()};
+    };
+    const asJson = await post("application/json");
+    const asArrow = await post("application/vnd.apache.arrow.stream");
+    let start = performance.now();
+    const answer = JSON.parse(new TextDecoder().decode(asJson.bytes));
+    const jsonMs = performance.now() - start;
+    start = performance.now();
+    const table = Arrow.tableFromIPC(new Uint8Array(asArrow.bytes));
+    const arrowMs = performance.now() - start;
+    const at = (path) => path.split(".").reduce((node, key) => node[key], answer);
+    const columns = {};
+    for (const field of table.schema.fields) {
+        const items = table.getChild(field.name).get(0);
+        const fixed = items.type.typeId === Arrow.Type.FixedSizeList;
+        const numbers = fixed ? items.getChildAt(0) : items;
+        const values = numbers.toArray();
+        const expected = fixed ? at(field.name).flat() : at(field.name);
+        let mismatches = values.length === expected.length ? 0 : 1;
+        for (let i = 0; !mismatches && i < values.length; i++) {
+            const value = numbers.isValid(i) ? values[i] : null;
+            // Object.is: the same double, -0 apart from 0 (the answer has no NaN).
+            const want = typeof value === "bigint" ? BigInt(expected[i]) : expected[i];
+            mismatches += !Object.is(value, want);
+        }
+        columns[field.name] = {
+            type: values.constructor.name,
+            length: values.length,
+            width: fixed ? items.type.listSize : 1,
+            mismatches,
+        };
+    }
+    return {
+        types: [asJson.type, asArrow.type],
+        bytes: [asJson.bytes.byteLength, asArrow.bytes.byteLength],
+        ms: [jsonMs, arrowMs],
+        columns,
+        rest: JSON.parse(table.schema.metadata.get("meshflat")),
+    };
+}"""
+
+
+def test_the_arrow_answer_reads_in_the_browser_as_the_json_answers_arrays(server):
+    """Arrow JS in Chromium reads /v1/flatten's Arrow answer into typed arrays equal, bit
+    for bit, to the JSON answer's arrays, and its metadata is the rest of that answer."""
+    require(ARROW_JS.is_file(), "Arrow JS (apache-arrow)", "run `npm ci --prefix tests/js`")
+    expected = post(server, "/v1/flatten", PARAMS)
+    with chromium() as browser:
+        page = browser.new_page()
+        page.goto(f"{server}/healthz")  # the service's origin: its routes without CORS
+        page.add_script_tag(path=str(ARROW_JS))
+        found = page.evaluate(ARROW_IN_PAGE, {"sample": SAMPLE, "params": PARAMS, "key": KEY})
+    assert found["types"] == ["application/json", "application/vnd.apache.arrow.stream"]
+    columns = found["columns"]
+    for name in ("ids", "theta", "phi", "r", "x", "y"):
+        assert columns[f"vertices.{name}"]["length"] == len(expected["vertices"]["ids"])
+    assert columns["vertices.x"]["type"] == "Float64Array"
+    assert columns["faces.vertices"]["type"] == columns["vertices.ids"]["type"] == "Int32Array"
+    assert columns["faces.vertices"]["width"] == 3
+    assert columns["faces.vertices"]["length"] == 3 * len(expected["faces"]["ids"])
+    assert [name for name, column in columns.items() if column["mismatches"]] == []
+    # The metadata: the JSON answer without the columns' arrays.
+    rest = expected
+    for name in columns:
+        *parents, last = name.split(".")
+        node = rest
+        for key in parents:
+            node = node[int(key)] if isinstance(node, list) else node[key]
+        del node[last]
+    assert found["rest"] == rest
+    json_bytes, arrow_bytes = found["bytes"]
+    print(
+        f"flatten of {SAMPLE}: JSON {json_bytes:,} B parsed in {found['ms'][0]:.1f} ms; "
+        f"Arrow {arrow_bytes:,} B read in {found['ms'][1]:.1f} ms"
+    )

@@ -29,7 +29,7 @@ def cli(*args: str) -> int:
     return main([str(a) for a in args])
 
 
-@pytest.mark.parametrize("suffix", ["json", "glb", "svg", "png"])
+@pytest.mark.parametrize("suffix", ["json", "glb", "svg", "png", "arrow"])
 async def test_flatten_writes_what_the_api_answers(client, tmp_path, suffix):
     out = tmp_path / f"region.{suffix}"
     assert cli("flatten", SAMPLES[NAME].path, *ARGS, "--out", out) == 0

@@ -80,6 +80,20 @@ export interface paths {
          * Compare two visits: change over zones and at spots
          * @description Multipart: the `baseline` and `follow_up` meshes, optional `baseline_values` and `follow_up_values` PNG parts, and a `params` JSON field: the registration's params as for /v1/register (the baseline's region and frame, `landmarks`, `mode`), `units` (required), `zones` drawn on the baseline's map (as /v1/measure's) and `spots` ({name, x, y} on that map, with `baseline` and `follow_up` values when measured); the values of each scan as a list a vertex of its file (or a per-vertex property's name) in `baseline_values` and `follow_up_values`, or as the PNG parts of those names, each on its own scan's map (the grid of /v1/transfer; for the follow-up, with the registration's frame and `follow_up_region`). The follow-up is registered as /v1/register does (refused alike when it does not register). Answers, per zone in the order given, its area on the baseline (cm²), each scan's values averaged over it (area-weighted on that scan's surface, linear inside its triangles), the change and its percentage, and the share of the zone each scan has values on (a zone a cropped follow-up misses in part is said in warnings, never filled in); per spot, its position on the baseline, the same spot found on the follow-up (the nearest surface point to where the registration puts it) and its place on the follow-up's map, where to put the trichoscope next time, with the values' change; and the registration (transform, rms_mm, p95_mm, overlap, the follow-up's frame) (docs/math.md, section 22). Or, by the Accept header or params.output, the difference map on the baseline's map with the zones and spots (SVG or PNG).
          *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
+         *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
         post: operations["compare_v1_compare_post"];
@@ -101,6 +115,20 @@ export interface paths {
         /**
          * Choose the centre, rotation and sigma for a region
          * @description The same input as /v1/flatten, but centre, rotation and sigma not given are chosen ("auto"); any of them may be fixed. They are chosen together to minimise the region's area-weighted isometric energy, keeping the centre inside the region's kernel at a depth of at least min_kernel_depth of its inscribed radius and the margin to the seam and the singular points at least min_margin_deg. The search starts from the kernel's deepest point (a linear program), the middle of the largest cap free of region directions as the pole, the roll along the region's widest spread about the pole (or the up hint), and the best sigma with that cap; then refines the free ones together on an area-weighted sample of the triangles. Answers the resolved parameters, the validation and metrics they give on every triangle, and `explain`.
+         *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
          *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
@@ -135,6 +163,20 @@ export interface paths {
          *     flagged faces) and the metrics.
          *
          *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
+         *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
         post: operations["flatten_v1_flatten_post"];
@@ -156,6 +198,20 @@ export interface paths {
         /**
          * Find the surface points of directions on the map
          * @description Multipart like /v1/flatten; `params` also holds the queries, `theta` and `phi` (radians, in the frame the other params resolve to). Answers, per query, the region triangle the ray from the centre in that direction meets first (`via: ray`, the default) or the region triangle whose image on the map holds the layout's point of those angles (`via: map`: the point a picture or the GLB's UVs show there), the barycentric weights of the hit (of the triangle's vertices in file order) and the hit point (world coordinates), or null where the ray misses the region or no triangle holds the map point.
+         *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
          *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
@@ -179,6 +235,20 @@ export interface paths {
          * Measure zones and curves drawn on the map
          * @description Multipart like /v1/flatten; `params` also holds `zones` (an outer ring and holes each, in the layout's coordinates: the vertices.x and vertices.y of a flatten answer, straight edges in that plane), `curves` (polylines in the same plane) and `units`. The map is linear inside each region triangle, as the GLB's UVs and the pictures draw it: a map point in a triangle's image stands for the surface point with the same barycentric weights (docs/math.md, section 12). Answers, per zone, its surface area (in cm² too with units), the part on flagged triangles, the map area no triangle covers, the surface perimeter, the triangles wholly inside and the cut ones with the share of each inside, and the outline lifted onto the surface; per curve, the lifted polyline (its points and every crossing of a triangle edge, with face ids) and its surface length; and the area each pair of overlapping zones shares. Exact: a zone covering the whole map has the region's area, zones tiling the map sum to it. Or, by the Accept header or params.output, the map with the zones filled, named and labelled with their areas, and the curves (SVG or PNG).
          *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
+         *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
         post: operations["measure_v1_measure_post"];
@@ -200,6 +270,20 @@ export interface paths {
         /**
          * Plan a transplant: the grafts needed and available
          * @description Multipart like /v1/measure; `params` also holds `recipient` zones (as /v1/measure's zones, at least one), each with `density_per_cm2` (the target grafts per cm²) and optional `hairs_per_graft` (a mean, or a mix such as {"1": 0.2, "2": 0.5, "3": 0.3}); `donor` zones, each with `density_per_cm2` (the grafts per cm² measured), `hairs_per_graft` and `extraction_fraction` (default 0.3); `max_grafts_per_session` (default 3,000); and `units` (required). No two zones may overlap (a 422 naming both). Each zone's area is /v1/measure's. Answers, per recipient zone in the order given, its `area_cm2`, `grafts_needed` = round(area x density) and `hairs_needed`; per donor zone its `area_cm2`, `grafts_present` = area x density, `grafts_available` = floor(area x density x extraction_fraction) and `hairs_available`; the totals, the `balance` (available minus needed, in grafts and hairs) and the `sessions` = ceil(grafts_needed / max_grafts_per_session) (docs/math.md, section 21). Or, by the Accept header or params.output, the map with the recipient and donor zones, each labelled with its area and grafts, and the balance in the caption (SVG or PNG).
+         *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
          *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
@@ -266,6 +350,20 @@ export interface paths {
          * Register a follow-up scan to the baseline
          * @description Multipart: the `baseline` and `follow_up` meshes and a `params` JSON field: the baseline's region (the part to align on and to measure on: the scalp changes over time, the face and ears less) and frame as for /v1/flatten, `landmarks` of either scan, `mode` (rigid or similarity) and, optionally, `units`. Seeded by the landmarks of both scans when given, else by the scans' moments (their principal axes in 24 turns, centroids or ends matched, and in similarity mode also scaled to the scans' spreads; refused when two distinct alignments fit about as well); refined by small_gicp's point-to-plane ICP over area-weighted samples, trimmed so that a cropped follow-up still aligns, first on the whole scans, then on the regions: the follow-up's faces over the baseline's region aligned on that region (docs/math.md, section 15). In rigid mode a follow-up more than 4 times the whole baseline's size, or less than 1/4 of its region's, is refused at once as in other units; in either mode, one beyond 100 times or 1/100. In similarity mode the scale is held where the scaled follow-up is 4 times the baseline's size at most and 1/4 of its region's at least, and a fit held at either bound is refused with the scale and the bound. Answers the 4x4 transform onto the baseline, the RMS and 95th percentile of the residuals of the follow-up's region against the baseline's over the overlap (mesh units, and mm with `units`), the overlap, and the baseline's frame expressed for the follow-up, so that the follow-up's map lands on the baseline's; refuses (422) when after the best alignment less than 50% of the follow-up's region lies within 2 mm (without `units`, 0.025 of the region's spread) of the baseline's region, or when the whole scans disagree (less than 50% of the follow-up within it of the baseline and of the baseline of the follow-up). Or, by the Accept header or params.output, the overlay: the baseline's map with both regions' boundaries and the zones (SVG or PNG).
          *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
+         *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
         post: operations["register_v1_register_post"];
@@ -328,6 +426,20 @@ export interface paths {
          * Place sites (grafts) on the region at a density
          * @description Multipart like /v1/measure; `params` also holds the density, `density_per_cm2` for the whole region or `zones` (as /v1/measure's, not overlapping) each with its own, and `units` (required: densities are per cm²). Sites are Poisson-disk samples of the surface (random sequential adsorption, docs/math.md section 13): each zone gets its area times its density, rounded (or, with `count`, its share of that exact total), no two sites closer than `min_spacing_mm` or the default rule's 0.7 / sqrt(density), across triangle and zone borders; none on flagged triangles unless `allow_flagged`; the same `seed`, the same sites, in any pose of the mesh. Answers the sites (position, unit normal, face id, barycentric weights, theta and phi, and the layout's x and y), the count, per zone its area, sites and achieved density, and the smallest distance between two sites, measured. Or, by the Accept header or params.output: a PLY point cloud with normals and face ids, the region's GLB with the sites as a POINTS primitive, or the map with the sites and zones (SVG or PNG).
          *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
+         *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
         post: operations["sites_v1_sites_post"];
@@ -349,6 +461,20 @@ export interface paths {
         /**
          * Grow strands (guide hairs) from the plan's sites
          * @description Multipart like /v1/sites, whose params it takes (growth required), with the strands' `length_mm` (one, per zone, or a `length_map` part with `length_range`), `points` a strand (2-256, default 16), `clearance_mm` (default 1) and `width_mm` (default 0.08), and an optional `curl` (a helix about the path: `radius_mm`, `period_mm`). A strand starts at its site, leaves along the site's direction (the exit angle), bends over towards the field's tangent and runs on at the clearance above the scalp, following the field, until its arc length is the length; no point of it lies inside the head (docs/math.md, section 20). Answers each strand's points, its site and its length; or, by the Accept header or params.output, a USD text stage, a PLY of points and edges, the region's GLB with a strands node of LINES, or the map with the roots and their directions (SVG or PNG).
+         *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
          *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
@@ -372,6 +498,20 @@ export interface paths {
          * Carry values between the map and the mesh
          * @description Multipart like /v1/flatten, on the grid of the PNG answer (params.image_width by image_height; pixel centres at half-integers, rows down with theta; docs/math.md section 16). Image to mesh: an `image` part (a PNG of that size, painted over the map) and `value_range`; answers a value a region vertex (bilinear at its map position) and a face (the mean over its map triangle, with the share covered). Mesh to image: `values` (one a vertex of the file, or the name of a per-vertex property of the file), drawn linear inside each triangle; answers them as a 16-bit grey PNG and the coverage mask (data: URLs in the JSON, or one 16-bit grey and alpha PNG with params.output png). Look-ups: params.output face_ids or barycentric answers the file's face id a pixel (-1 outside) and the centre's weights in its corners, little-endian behind a 16-byte header (docs/api.md says how to read it).
          *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
+         *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
         post: operations["transfer_v1_transfer_post"];
@@ -393,6 +533,20 @@ export interface paths {
         /**
          * Validate a region of a mesh
          * @description The same input as /v1/flatten; answers only the resolved parameters, the validation report and the distortion metrics.
+         *
+         *     Every mesh route also answers its JSON as an Arrow IPC stream
+         *     (`application/vnd.apache.arrow.stream`, by `Accept` or `params.output`: `arrow`), which
+         *     Arrow JS and pyarrow read into typed arrays without parsing text: one record batch of one
+         *     row. Each array of numbers of the JSON answer is a column named by its dotted path
+         *     (`vertices.x`, `faces.vertices`, `zones.0.partial_faces`), a list holding exactly the JSON's
+         *     numbers: an array of numbers as a list of them, an array of rows of `k` numbers as a list of
+         *     fixed-size lists of `k` (of `p` rows of `k`: fixed-size lists of `p` such lists); integers
+         *     as int32 (int64 for an array with a value beyond int32), floats as float64 bit for bit, null
+         *     where the JSON has null. The rest of
+         *     the answer, the same JSON without those arrays, is the schema's metadata `meshflat`.
+         *     `/v1/locate`'s hits, an object of numbers a query, are a column a field (`hits.face`,
+         *     `hits.barycentric`, `hits.point`), null where the JSON's hit is null. Strings, other objects
+         *     and empty or null arrays stay in the metadata.
          *
          *     Mesh files are read from the uploaded bytes only: a glTF buffer or image that refers to a file or URL is refused. The file's order is kept: vertex ``i`` is the file's ``i``-th vertex and face ``i`` its ``i``-th triangle. OBJ polygons are fan-triangulated in order, ``(a, b, c), (a, c, d), ...``; negative references count back; groups are ``g`` (each name), ``o`` and ``usemtl`` names; ``v x y z r g b`` colours and ``vt`` texture coordinates (by the references' ``v/vt``) are kept. glTF triangles come primitive by primitive in document order (the default scene's nodes depth first, children in order, each node's mesh's primitives in order) with node transforms applied; groups are mesh and node names; COLOR_0, TEXCOORD_0 and custom scalar attributes such as _FEATURE_ID_0 are kept. PLY polygons are fan-triangulated like OBJ's; triangle strips (``tristrips``, ``-1`` ending a strip) give their triangles with the strip's winding, joins that repeat a vertex left out; faces and strips count in the header's order; vertex colours (red, green, blue, alpha), texture coordinates (u, v) and scalar vertex and face properties are kept, other elements and list properties skipped. STL triangles keep their own corners (nothing is merged).
          */
@@ -665,10 +819,10 @@ export interface components {
             mode?: "rigid" | "similarity";
             /**
              * Output
-             * @description The answer's form, for clients that cannot set Accept: json (application/json), svg (image/svg+xml) or png (image/png): the difference map, the follow-up's values less the baseline's on the baseline's map, with the zones and spots. Default: from the Accept header, JSON without one.
+             * @description The answer's form, for clients that cannot set Accept: json (application/json), svg (image/svg+xml) or png (image/png): the difference map, the follow-up's values less the baseline's on the baseline's map, with the zones and spots. Or arrow (application/vnd.apache.arrow.stream): the JSON answer's arrays as the columns of an Arrow IPC stream, named by their dotted paths, the rest as JSON in the schema's metadata (docs/api.md). Default: from the Accept header, JSON without one.
              * @default null
              */
-            output?: ("json" | "svg" | "png") | null;
+            output?: ("json" | "svg" | "png" | "arrow") | null;
             /**
              * Pole Angle Deg
              * @description The cap's angle rho in degrees, 0 < rho < 180.
@@ -751,9 +905,10 @@ export interface components {
             scale: number;
             /**
              * Seeded By
-             * @description landmarks or moments, as /v1/register's.
+             * @description What the registration started from, as /v1/register's.
+             * @enum {string}
              */
-            seeded_by: string;
+            seeded_by: "landmarks" | "moments";
             /**
              * Transform
              * @description The 4x4 matrix (rows) that maps the follow-up's points onto the baseline, as /v1/register's.
@@ -1307,10 +1462,10 @@ export interface components {
             min_margin_deg?: number;
             /**
              * Output
-             * @description The answer's form, for clients that cannot set Accept: json (application/json), glb (model/gltf-binary: the region with TEXCOORD_0 from the layout), svg (image/svg+xml) or png (image/png): a picture of the map. Default: from the Accept header, JSON without one.
+             * @description The answer's form, for clients that cannot set Accept: json (application/json), glb (model/gltf-binary: the region with TEXCOORD_0 from the layout), svg (image/svg+xml) or png (image/png): a picture of the map. Or arrow (application/vnd.apache.arrow.stream): the JSON answer's arrays as the columns of an Arrow IPC stream, named by their dotted paths, the rest as JSON in the schema's metadata (docs/api.md). Default: from the Accept header, JSON without one.
              * @default null
              */
-            output?: ("json" | "glb" | "svg" | "png") | null;
+            output?: ("json" | "glb" | "svg" | "png" | "arrow") | null;
             /**
              * Pole Angle Deg
              * @description The cap's angle rho in degrees, 0 < rho < 180.
@@ -1896,10 +2051,10 @@ export interface components {
             min_margin_deg?: number;
             /**
              * Output
-             * @description The answer's form, for clients that cannot set Accept: json (application/json), svg (image/svg+xml) or png (image/png): the map with each zone filled, named and labelled with its area, and the curves. Default: from the Accept header, JSON without one.
+             * @description The answer's form, for clients that cannot set Accept: json (application/json), svg (image/svg+xml) or png (image/png): the map with each zone filled, named and labelled with its area, and the curves. Or arrow (application/vnd.apache.arrow.stream): the JSON answer's arrays as the columns of an Arrow IPC stream, named by their dotted paths, the rest as JSON in the schema's metadata (docs/api.md). Default: from the Accept header, JSON without one.
              * @default null
              */
-            output?: ("json" | "svg" | "png") | null;
+            output?: ("json" | "svg" | "png" | "arrow") | null;
             /**
              * Pole Angle Deg
              * @description The cap's angle rho in degrees, 0 < rho < 180.
@@ -2301,10 +2456,10 @@ export interface components {
             min_margin_deg?: number;
             /**
              * Output
-             * @description The answer's form, for clients that cannot set Accept: json (application/json), svg (image/svg+xml) or png (image/png): the map with the recipient and donor zones, each labelled with its area and grafts, and the balance in the caption. Default: from the Accept header, JSON without one.
+             * @description The answer's form, for clients that cannot set Accept: json (application/json), svg (image/svg+xml) or png (image/png): the map with the recipient and donor zones, each labelled with its area and grafts, and the balance in the caption. Or arrow (application/vnd.apache.arrow.stream): the JSON answer's arrays as the columns of an Arrow IPC stream, named by their dotted paths, the rest as JSON in the schema's metadata (docs/api.md). Default: from the Accept header, JSON without one.
              * @default null
              */
-            output?: ("json" | "svg" | "png") | null;
+            output?: ("json" | "svg" | "png" | "arrow") | null;
             /**
              * Pole Angle Deg
              * @description The cap's angle rho in degrees, 0 < rho < 180.
@@ -2820,10 +2975,10 @@ export interface components {
             mode?: "rigid" | "similarity";
             /**
              * Output
-             * @description The answer's form, for clients that cannot set Accept: json (application/json), svg (image/svg+xml) or png (image/png): the baseline's map with the baseline's and the follow-up's region boundaries and the zones. Default: from the Accept header, JSON without one.
+             * @description The answer's form, for clients that cannot set Accept: json (application/json), svg (image/svg+xml) or png (image/png): the baseline's map with the baseline's and the follow-up's region boundaries and the zones. Or arrow (application/vnd.apache.arrow.stream): the JSON answer's arrays as the columns of an Arrow IPC stream, named by their dotted paths, the rest as JSON in the schema's metadata (docs/api.md). Default: from the Accept header, JSON without one.
              * @default null
              */
-            output?: ("json" | "svg" | "png") | null;
+            output?: ("json" | "svg" | "png" | "arrow") | null;
             /**
              * Pole Angle Deg
              * @description The cap's angle rho in degrees, 0 < rho < 180.
@@ -3348,10 +3503,10 @@ export interface components {
             min_spacing_mm?: number | null;
             /**
              * Output
-             * @description The answer's form, for clients that cannot set Accept: json (application/json); ply (application/ply: a point cloud with normals and face ids); glb (model/gltf-binary: the region mesh and a POINTS primitive of the sites); svg (image/svg+xml) or png (image/png): the map with the sites and the zones. Default: from the Accept header, JSON without one.
+             * @description The answer's form, for clients that cannot set Accept: json (application/json); ply (application/ply: a point cloud with normals and face ids); glb (model/gltf-binary: the region mesh and a POINTS primitive of the sites); svg (image/svg+xml) or png (image/png): the map with the sites and the zones. Or arrow (application/vnd.apache.arrow.stream): the JSON answer's arrays as the columns of an Arrow IPC stream, named by their dotted paths, the rest as JSON in the schema's metadata (docs/api.md). Default: from the Accept header, JSON without one.
              * @default null
              */
-            output?: ("json" | "ply" | "glb" | "svg" | "png") | null;
+            output?: ("json" | "ply" | "glb" | "svg" | "png" | "arrow") | null;
             /**
              * Pole Angle Deg
              * @description The cap's angle rho in degrees, 0 < rho < 180.
@@ -3729,10 +3884,10 @@ export interface components {
             min_spacing_mm?: number | null;
             /**
              * Output
-             * @description The answer's form, for clients that cannot set Accept: json (application/json); usd (model/vnd.usda: a USD text stage, the region as a Mesh with its map as primvars:st and the strands as one linear BasisCurves with widths, each root's st and face id); ply (application/ply: the strands' points and their segments as edges); glb (model/gltf-binary: the region mesh with its UVs and a strands node, a LINES primitive); svg (image/svg+xml) or png (image/png): the map with the roots and their directions. Default: from the Accept header, JSON without one.
+             * @description The answer's form, for clients that cannot set Accept: json (application/json); usd (model/vnd.usda: a USD text stage, the region as a Mesh with its map as primvars:st and the strands as one linear BasisCurves with widths, each root's st and face id); ply (application/ply: the strands' points and their segments as edges); glb (model/gltf-binary: the region mesh with its UVs and a strands node, a LINES primitive); svg (image/svg+xml) or png (image/png): the map with the roots and their directions. Or arrow (application/vnd.apache.arrow.stream): the JSON answer's arrays as the columns of an Arrow IPC stream, named by their dotted paths, the rest as JSON in the schema's metadata (docs/api.md). Default: from the Accept header, JSON without one.
              * @default null
              */
-            output?: ("json" | "usd" | "ply" | "glb" | "svg" | "png") | null;
+            output?: ("json" | "usd" | "ply" | "glb" | "svg" | "png" | "arrow") | null;
             /**
              * Points
              * @description Points a strand (2 to 256).
@@ -4009,10 +4164,10 @@ export interface components {
             min_margin_deg?: number;
             /**
              * Output
-             * @description The answer's form, for clients that cannot set Accept: json (application/json): the values carried; png (image/png): with values, the 16-bit grey and alpha PNG of them (the alpha 65535 where a triangle holds the pixel); face_ids or barycentric (application/octet-stream): the look-up images, a little-endian array behind a 16-byte header (docs/api.md says how to read it). Default: from the Accept header, JSON without one.
+             * @description The answer's form, for clients that cannot set Accept: json (application/json): the values carried; png (image/png): with values, the 16-bit grey and alpha PNG of them (the alpha 65535 where a triangle holds the pixel); face_ids or barycentric (application/octet-stream): the look-up images, a little-endian array behind a 16-byte header (docs/api.md says how to read it). Or arrow (application/vnd.apache.arrow.stream): the JSON answer's arrays as the columns of an Arrow IPC stream, named by their dotted paths, the rest as JSON in the schema's metadata (docs/api.md). Default: from the Accept header, JSON without one.
              * @default null
              */
-            output?: ("json" | "png" | "face_ids" | "barycentric") | null;
+            output?: ("json" | "png" | "face_ids" | "barycentric" | "arrow") | null;
             /**
              * Pole Angle Deg
              * @description The cap's angle rho in degrees, 0 < rho < 180.
@@ -4715,7 +4870,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description The flattened region, in the form asked for. */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -4864,6 +5019,7 @@ export interface operations {
                      *     }
                      */
                     "application/json": components["schemas"]["CompareResponse"];
+                    "application/vnd.apache.arrow.stream": string;
                     "image/png": string;
                     "image/svg+xml": string;
                 };
@@ -4993,7 +5149,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description Successful Response */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -5144,6 +5300,7 @@ export interface operations {
                      *     }
                      */
                     "application/json": components["schemas"]["FitResponse"];
+                    "application/vnd.apache.arrow.stream": string;
                 };
             };
             /** @description Malformed request (for example a broken multipart body). */
@@ -5157,6 +5314,15 @@ export interface operations {
             };
             /** @description No valid API key (when the service has keys): the detail says which. */
             401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description Accept allows none of the forms /v1/fit answers. */
+            406: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -5277,7 +5443,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description The flattened region, in the form asked for. */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -5503,6 +5669,7 @@ export interface operations {
                      *     }
                      */
                     "application/json": components["schemas"]["FlattenResponse"];
+                    "application/vnd.apache.arrow.stream": string;
                     "image/png": string;
                     "image/svg+xml": string;
                     "model/gltf-binary": string;
@@ -5677,7 +5844,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description Successful Response */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -5763,6 +5930,7 @@ export interface operations {
                      *     }
                      */
                     "application/json": components["schemas"]["LocateResponse"];
+                    "application/vnd.apache.arrow.stream": string;
                 };
             };
             /** @description Malformed request (for example a broken multipart body). */
@@ -5776,6 +5944,15 @@ export interface operations {
             };
             /** @description No valid API key (when the service has keys): the detail says which. */
             401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description Accept allows none of the forms /v1/locate answers. */
+            406: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -5931,7 +6108,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description The flattened region, in the form asked for. */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -6249,6 +6426,7 @@ export interface operations {
                      *     }
                      */
                     "application/json": components["schemas"]["MeasureResponse"];
+                    "application/vnd.apache.arrow.stream": string;
                     "image/png": string;
                     "image/svg+xml": string;
                 };
@@ -6453,7 +6631,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description The flattened region, in the form asked for. */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -6547,6 +6725,7 @@ export interface operations {
                      *     }
                      */
                     "application/json": components["schemas"]["PlanResponse"];
+                    "application/vnd.apache.arrow.stream": string;
                     "image/png": string;
                     "image/svg+xml": string;
                 };
@@ -7034,7 +7213,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description The flattened region, in the form asked for. */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -7163,6 +7342,7 @@ export interface operations {
                      *     }
                      */
                     "application/json": components["schemas"]["RegisterResponse"];
+                    "application/vnd.apache.arrow.stream": string;
                     "image/png": string;
                     "image/svg+xml": string;
                 };
@@ -7450,7 +7630,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description The flattened region, in the form asked for. */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -7730,6 +7910,7 @@ export interface operations {
                      */
                     "application/json": components["schemas"]["SitesResponse"];
                     "application/ply": string;
+                    "application/vnd.apache.arrow.stream": string;
                     "image/png": string;
                     "image/svg+xml": string;
                     "model/gltf-binary": string;
@@ -7899,7 +8080,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description The flattened region, in the form asked for. */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -8382,6 +8563,7 @@ export interface operations {
                      */
                     "application/json": components["schemas"]["StrandsResponse"];
                     "application/ply": string;
+                    "application/vnd.apache.arrow.stream": string;
                     "image/png": string;
                     "image/svg+xml": string;
                     "model/gltf-binary": string;
@@ -8549,7 +8731,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description The flattened region, in the form asked for. */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -8616,6 +8798,7 @@ export interface operations {
                      */
                     "application/json": components["schemas"]["TransferResponse"];
                     "application/octet-stream": string;
+                    "application/vnd.apache.arrow.stream": string;
                     "image/png": string;
                 };
             };
@@ -8759,7 +8942,7 @@ export interface operations {
             };
         };
         responses: {
-            /** @description Successful Response */
+            /** @description The answer, in the form asked for. */
             200: {
                 headers: {
                     [name: string]: unknown;
@@ -8881,6 +9064,7 @@ export interface operations {
                      *     }
                      */
                     "application/json": components["schemas"]["ValidateResponse"];
+                    "application/vnd.apache.arrow.stream": string;
                 };
             };
             /** @description Malformed request (for example a broken multipart body). */
@@ -8894,6 +9078,15 @@ export interface operations {
             };
             /** @description No valid API key (when the service has keys): the detail says which. */
             401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description Accept allows none of the forms /v1/validate answers. */
+            406: {
                 headers: {
                     [name: string]: unknown;
                 };

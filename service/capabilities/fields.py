@@ -50,17 +50,26 @@ class Strict(BaseModel):
 
 
 def output_choice(outputs: tuple[Output, ...], description: str):
-    """The type of the ``output`` parameter of a route that answers in ``outputs``: one of
-    their names (held as the :class:`Output`) or null, ``description`` saying what each is."""
-    values = tuple(output.value for output in outputs)
+    """The type of the ``output`` parameter of a route that answers in ``outputs`` and, as
+    every mesh route, Arrow: one of their names (held as the :class:`Output`) or null,
+    ``description`` saying what each of ``outputs`` is."""
+    values = tuple(output.value for output in (*outputs, Output.ARROW))
     return Annotated[
         Literal[values] | None,
         AfterValidator(lambda value: None if value is None else Output(value)),
         Field(
             description=f"The answer's form, for clients that cannot set Accept: {description} "
-            "Default: from the Accept header, JSON without one."
+            f"{ARROW_FORM} Default: from the Accept header, JSON without one."
         ),
     ]
+
+
+#: What the Arrow form of every mesh route is, in an ``output`` parameter's description.
+ARROW_FORM = (
+    "Or arrow (application/vnd.apache.arrow.stream): the JSON answer's arrays as the columns "
+    "of an Arrow IPC stream, named by their dotted paths, the rest as JSON in the schema's "
+    "metadata (docs/api.md)."
+)
 
 
 class FramingParams(Strict):

@@ -17,6 +17,7 @@ from pydantic import BaseModel
 from ..encoding import encode
 from ..errors import JSON_BODY, ErrorPlaces, InvalidInput
 from ..outputs import Output
+from ..outputs.arrow import arrow_stream
 from ..timings import Timings
 from .context import JSON_BYTES_PER_BYTE, READER_BYTES_PER_BYTE, Context
 from .inputs import MASK, MeshPart, PngFile, PngPart, Upload
@@ -60,7 +61,12 @@ class Capability:
         """The JSON answer to ``result``, with the warnings its use-case added to ``ctx``
         (timed as ``encode``)."""
         with timings.measure("encode"):
-            return encode(self.response.of(result).warned(ctx.warnings, self.places))
+            return encode(self.json_answer(result, ctx))
+
+    def json_answer(self, result, ctx: Context) -> BaseModel:
+        """The JSON answer's model for ``result``, with the warnings of ``ctx``: what the JSON
+        encodes and the forms made of it (Arrow) carry."""
+        return self.response.of(result).warned(ctx.warnings, self.places)
 
 
 #: The mesh part of most routes.
@@ -116,8 +122,9 @@ class MeshCapability(Capability):
 
     @property
     def outputs(self) -> tuple[Output, ...]:
-        """The forms of the answer, JSON first."""
-        return (Output.JSON, *self.renderers)
+        """The forms of the answer: JSON first, its own others, and the JSON's arrays as
+        Arrow columns last (every mesh answer has arrays: ids, faces, the params' centre)."""
+        return (Output.JSON, *self.renderers, Output.ARROW)
 
     def output_of_file(self, name: str, field: str) -> Output:
         """The form a file name's extension asks for, among this route's (the command
@@ -187,6 +194,9 @@ class MeshCapability(Capability):
         forms (``meshflat batch`` writes each output a manifest line names)."""
         if output is Output.JSON:
             return self.encoded(result, ctx, timings)
+        if output is Output.ARROW:
+            with timings.measure("encode"):
+                return arrow_stream(self.json_answer(result, ctx), ctx.charge)
         with timings.measure("encode"):
             return self.renderers[output](result, params, ctx)
 

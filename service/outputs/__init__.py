@@ -1,6 +1,7 @@
 """The forms of an answer (:class:`Output`, the one vocabulary of them) and the encoders of
 those besides JSON: the region as a GLB with UVs (:mod:`.glb`), a picture of its map as SVG
-or PNG (:mod:`.picture`, :mod:`.draw`, :mod:`.colours`), the look-up images (:mod:`.lookup`).
+or PNG (:mod:`.picture`, :mod:`.draw`, :mod:`.colours`), the look-up images (:mod:`.lookup`),
+the JSON answer's arrays as Arrow columns (:mod:`.arrow`).
 Which form a request gets is the HTTP edge's choice (:func:`service.forms.choose_output`)."""
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ class Output(StrEnum):
     USD = "usd"
     FACE_IDS = "face_ids"
     BARYCENTRIC = "barycentric"
+    ARROW = "arrow"
 
     @property
     def media_type(self) -> str:
@@ -32,7 +34,7 @@ class Output(StrEnum):
     @property
     def binary(self) -> bool:
         """Whether the form is bytes rather than text."""
-        return self in (Output.GLB, Output.PNG, Output.PLY, Output.FACE_IDS, Output.BARYCENTRIC)
+        return self not in (Output.JSON, Output.SVG, Output.USD)  # the text forms
 
 
 _MEDIA_TYPES = {
@@ -47,4 +49,7 @@ _MEDIA_TYPES = {
     # Look-up images: a little-endian array behind a 16-byte header (service.outputs.lookup).
     Output.FACE_IDS: "application/octet-stream",
     Output.BARYCENTRIC: "application/octet-stream",
+    # The JSON answer's arrays as the columns of an Arrow IPC stream (service.outputs.arrow);
+    # IANA's registration of the stream format.
+    Output.ARROW: "application/vnd.apache.arrow.stream",
 }

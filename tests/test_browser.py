@@ -4,7 +4,8 @@ sample in automatic mode, and the test checks what the page shows; then draws a 
 map, which the page measures (/v1/measure) and lifts onto the 3D view. The screenshots are
 kept in ``artifacts/demo.png``, ``artifacts/demo-auto.png`` and ``artifacts/demo-zone.png``
 (and the others' in ``artifacts/``); the plan's, the 200k-face region's colours and the page
-at 1366 x 900 in ``docs/figures/`` (demo-plan, demo-colour-200k, demo-colour).
+at 1366 x 900 too, or, with MESHFLAT_WRITE_FIGURES=1, in ``docs/figures/`` (demo-plan,
+demo-colour-200k, demo-colour), the figures the docs show.
 The page is opened at 1366 x 900, the laptop screen it is laid out for."""
 
 from __future__ import annotations
@@ -31,7 +32,13 @@ pytestmark = [slow, real_servers]
 
 CHROMIUM = os.environ.get("MESHFLAT_CHROMIUM", "/usr/bin/chromium")
 ARTIFACTS = Path(__file__).parent.parent / "artifacts"
-FIGURES = Path(__file__).parent.parent / "docs" / "figures"
+#: Where the figures the docs show are written: refreshed on request, so that a test run
+#: leaves the checkout as it was.
+FIGURES = (
+    Path(__file__).parent.parent / "docs" / "figures"
+    if os.environ.get("MESHFLAT_WRITE_FIGURES") == "1"
+    else ARTIFACTS
+)
 SAMPLE = "fsaverage-head.ply"
 KEY = "browser-test-key"
 #: What the page's preset for the sample sends (web/demo.js, PRESETS): with facing, its up

@@ -152,8 +152,8 @@ WORKER_BASELINE_BYTES = 320 * MiB
 #: for what the estimates do not see (allocator fragmentation, thread stacks).
 BUDGET_SHARE = 0.8
 #: The share of a worker's memory budget its mesh cache may hold unless
-#: MESHFLAT_MESH_CACHE_BYTES says: a 1.6M-face scan with its region, map and locate index
-#: takes some 0.5 GB; the jobs take back what they need (the cache gives way to them).
+#: MESHFLAT_MESH_CACHE_BYTES says: a 1.6M-face scalp with its region, map and locate index
+#: takes 411 MiB (make bench-cache); the jobs take back what they need (it gives way).
 MESH_CACHE_SHARE = 0.25
 
 

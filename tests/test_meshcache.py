@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 
+import httpx
 import numpy as np
 import pytest
 
@@ -23,11 +24,13 @@ from service.samples import SAMPLES
 from service.server.jobs import MemoryBudget
 from service.settings import Settings
 
-from .conftest import started
+from .conftest import real_servers, started
 from .test_api import SCALP, problem
 from .test_measure import PARAMS as SCALP_MEASURE
 from .test_measure import rectangle
+from .test_operations import families, sample
 from .test_privacy import watched_writes
+from .test_serve import running
 
 pytestmark = pytest.mark.anyio
 
@@ -312,6 +315,31 @@ async def test_sending_and_using_a_held_mesh_opens_no_file_for_writing(client):
             assert (await post(client, "/v1/locate", params)).status_code == 200
 
     assert await watched_writes(send_and_use) == []
+
+
+@real_servers
+def test_a_real_server_keeps_a_mesh_and_counts_it_in_its_metrics():
+    data = SAMPLES[HEAD].path.read_bytes()
+    with running() as server, httpx.Client(base_url=server.url, timeout=60) as client:
+        held = client.post("/v1/meshes", files={"mesh": (HEAD, data)})
+        assert held.status_code == 201, held.text
+        click = {
+            **SCALP_HEAD,
+            "theta": [1.5],
+            "phi": [-1.6],
+            "mesh_sha256": held.json()["mesh_sha256"],
+        }
+        form = {"params": (None, json.dumps(click).encode(), "application/json")}
+        answers = [client.post("/v1/locate", files=form) for _ in range(2)]
+        assert [a.status_code for a in answers] == [200, 200] and answers[0].content == answers[
+            1
+        ].content
+        metrics = families(client.get("/metrics").text)
+        assert sample(metrics, "meshflat_mesh_cache_bytes") > held.json()["bytes"]
+        assert sample(metrics, "meshflat_mesh_cache_steps_total", result="reused") >= 1
+        assert sample(metrics, "meshflat_memory_reserved_bytes") == sample(
+            metrics, "meshflat_mesh_cache_bytes"
+        )
 
 
 def test_the_command_line_refuses_a_digest():

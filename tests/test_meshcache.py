@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import threading
 
 import httpx
 import numpy as np
@@ -147,6 +148,38 @@ def test_the_cache_takes_its_bytes_from_the_jobs_budget_and_gives_way_to_them():
     assert cache.put("b", mesh_of(19)) is None  # no room while the job holds it
     budget.give(600)
     assert cache.put("b", mesh_of(19)) is not None and budget.reserved == 480
+
+
+def test_threads_keeping_using_and_reclaiming_at_once_leave_the_counts_exact():
+    budget = MemoryBudget(40_000)
+    cache = MeshCache(capacity=20_000, budget=budget)
+    budget.reclaim = cache.reclaim
+    errors = []
+
+    def work(seed: int) -> None:
+        rng = np.random.default_rng(seed)
+        try:
+            for _ in range(300):
+                digest = str(rng.integers(8))
+                held = cache.put(digest, mesh_of(int(rng.integers(1, 200))))
+                if held is not None:
+                    ctx = Context(meshes=cache)
+                    step = ctx.remembered(held[0], "step", lambda ctx: np.ones(100))
+                    ctx.remembered(step, "next", lambda ctx: np.ones(50))
+                job = int(rng.integers(1, 30_000))
+                if budget.take(job):  # a job, which may take the cache's room
+                    budget.give(job)
+        except Exception as error:  # reported below: a thread's error is lost otherwise
+            errors.append(error)
+
+    threads = [threading.Thread(target=work, args=(seed,)) for seed in range(4)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert not errors
+    assert cache.bytes == sum(unit.bytes for unit in cache._units.values()) <= 20_000
+    assert budget.reserved == cache.bytes
 
 
 # -- through the API -----------------------------------------------------------------------

@@ -6,7 +6,7 @@ HOST ?= 127.0.0.1
 PORT ?= 8000
 BIN := $(VENV)/bin
 
-.PHONY: serve test bench bench-fit bench-locate bench-measure bench-plan bench-compare bench-sites bench-growth bench-strands bench-transfer bench-arrow bench-picture bench-repeat bench-service bench-zoo bench-batch bench-memory soak attack openapi clean
+.PHONY: serve test bench bench-fit bench-locate bench-measure bench-plan bench-compare bench-sites bench-growth bench-strands bench-transfer bench-arrow bench-picture bench-repeat bench-service bench-cache bench-zoo bench-batch bench-memory soak attack openapi clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -109,6 +109,11 @@ bench-repeat: $(VENV)/.installed-bench
 # Needs curl (the end-to-end client) besides the bench extra.
 bench-service: $(VENV)/.installed-bench
 	$(BIN)/python -m benchmarks.service_bench $(BENCH_ARGS)
+
+# A mesh sent once (POST /v1/meshes) and named by its digest: clicks on a held 1.6M-face
+# scalp and a measure on a held 1M-face one, end to end through a real server. Needs curl.
+bench-cache: $(VENV)/.installed-bench
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.cache_bench $(BENCH_ARGS)
 
 # The scan zoo: every scan the project can cite and variants of them (../shared beside it
 # adds the shared meshes); exits 1 when a case is not seam-free, fold-free or identical.

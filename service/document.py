@@ -9,6 +9,7 @@ from fastapi.openapi.utils import get_openapi
 from pydantic import BaseModel
 from pydantic.json_schema import models_json_schema
 
+from . import heldmeshes
 from .capabilities import JSON_CAPABILITIES, MESH_CAPABILITIES, MeshCapability
 from .capabilities.inputs import MeshPart
 from .meshio import reading_rules
@@ -29,6 +30,12 @@ does not. The paper's printed eq. 2 is not the inverse of eq. 1; meshflat uses t
 Every error is `application/problem+json` (RFC 9457) whose `detail` names the field, the face
 or vertex, and the limit.
 """
+
+
+#: What the route's own mesh part adds to its description.
+HELD = (
+    " Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both)."
+)
 
 
 def json_body(model: type[BaseModel]) -> dict:
@@ -53,15 +60,21 @@ def multipart_body(capability: MeshCapability) -> dict:
         part.name: {
             "type": "string",
             "format": "binary",
-            "description": part.documented,
+            "description": part.documented + (HELD if part is capability.mesh else ""),
         }
         for part in capability.parts
     }
+    # Every mesh part is read (a missing one is refused), but the route's own may be one held
+    # instead (params.mesh_sha256); the PNG parts may be left out.
+    required = [
+        part.name
+        for part in capability.parts
+        if isinstance(part, MeshPart) and part is not capability.mesh
+    ]
     form = {
         "schema": {
             "type": "object",
-            # Every mesh part is read (a missing one is refused); the PNG parts may be left out.
-            "required": [part.name for part in capability.parts if isinstance(part, MeshPart)],
+            "required": required,
             "properties": {"params": params, **parts},
             "additionalProperties": False,  # a part the route does not read is refused
         },
@@ -116,7 +129,7 @@ def other_forms(capability: MeshCapability) -> dict:
 def referenced_models() -> list[type[BaseModel]]:
     """The models the hand-made request bodies refer to, and the problem details."""
     models = [c.params for c in MESH_CAPABILITIES] + [c.request for c in JSON_CAPABILITIES]
-    return [*dict.fromkeys(models), ProblemDetails]
+    return [*dict.fromkeys(models), *heldmeshes.MODELS, ProblemDetails]
 
 
 def build(app: FastAPI) -> dict:

@@ -92,6 +92,15 @@ class UnreadableMesh(Exception):
         self.part, self.error = part, error
 
 
+class UnknownMesh(Exception):
+    """A mesh named by the SHA-256 of its upload (``field``) that this process does not hold:
+    never sent to it, or let go since (the cache is a cache, never a store)."""
+
+    def __init__(self, field: str, digest: str) -> None:
+        super().__init__(f"{field}: {digest}")
+        self.field, self.digest = field, digest
+
+
 @dataclass(frozen=True)
 class ErrorPlaces:
     """Where the fields a core error names lie in a request.

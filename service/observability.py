@@ -77,8 +77,21 @@ UPLOADS_IN_PROGRESS = Gauge(
 )
 MEMORY_RESERVED = Gauge(
     "meshflat_memory_reserved_bytes",
-    "Bytes of the memory budget held by the jobs in flight (bodies, readers, computations).",
+    "Bytes of the memory budget held by the jobs in flight (bodies, readers, computations) "
+    "and the mesh cache.",
     multiprocess_mode="livesum",
+)
+MESH_CACHE_BYTES = Gauge(
+    "meshflat_mesh_cache_bytes",
+    "Bytes the mesh cache holds (meshes sent once and what was computed from them), part of "
+    "the memory reserved.",
+    multiprocess_mode="livesum",
+)
+MESH_CACHE_STEPS = Counter(
+    "meshflat_mesh_cache_steps",
+    "Steps on a held mesh (a region resolved or flattened, its map, a locate index), by "
+    "whether the cache had them (reused) or they were computed and kept (computed).",
+    ["result"],
 )
 JOBS_COMPUTING = Gauge(
     "meshflat_jobs_computing", "Jobs computing in a slot.", multiprocess_mode="livesum"

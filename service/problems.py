@@ -23,7 +23,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from transforms import EmptyRegionError, TransformInputError
 
-from .errors import JSON_BODY, ErrorPlaces, InvalidInput, OverLimit, UnreadableMesh
+from .errors import JSON_BODY, ErrorPlaces, InvalidInput, OverLimit, UnknownMesh, UnreadableMesh
 from .meshio import MeshFormatError, MeshTooLargeError
 from .observability import REJECTIONS
 
@@ -95,6 +95,11 @@ PROBLEMS = {
         (504, "The job did not finish within the time limit (MESHFLAT_REQUEST_TIMEOUT)."),
     )
 }
+#: The problem of a mesh route whose params.mesh_sha256 names a mesh not held.
+MESH_NOT_HELD = PROBLEMS[422] | {
+    "description": "params.mesh_sha256 names a mesh this worker does not hold (never sent to "
+    "it, or let go since): POST it to /v1/meshes again."
+}
 PROBLEMS[503]["headers"] = {
     "Retry-After": {"description": "Seconds to wait.", "schema": {"type": "integer"}}
 }
@@ -135,6 +140,7 @@ INPUT_ERRORS = (
     TransformInputError,
     InvalidInput,
     OverLimit,
+    UnknownMesh,
     UnreadableMesh,
     MeshFormatError,
     ValidationError,
@@ -160,6 +166,16 @@ def problem_of(error: Exception, places: ErrorPlaces = JSON_BODY) -> Problem:
     if isinstance(error, OverLimit):
         where = places.named(error.field)
         return Problem(413, f"{where}: {error.message}", "too-many-points", where)
+    if isinstance(error, UnknownMesh):
+        where = places.named(error.field)
+        return Problem(
+            404,
+            f"{where}: this worker holds no mesh of SHA-256 {error.digest} (it was never sent "
+            "here, or the cache has let go of it): POST the mesh to /v1/meshes again, or send "
+            "it in the request's mesh part",
+            "mesh-not-held",
+            where,
+        )
     if isinstance(error, UnreadableMesh):
         return _unreadable(error.error, error.part)
     if isinstance(error, MeshFormatError):

@@ -14,7 +14,7 @@ from fastapi import APIRouter, Path, Request
 from starlette.concurrency import run_in_threadpool
 from starlette.responses import Response
 
-from . import document
+from . import document, heldmeshes
 from .capabilities import (
     JSON_CAPABILITIES,
     MESH_CAPABILITIES,
@@ -29,7 +29,7 @@ from .forms import choose_output, mesh_form, parse_json
 from .meshio import READERS, format_of
 from .observability import metrics_response
 from .outputs import Output
-from .problems import PROBLEMS, Problem, core_errors_as_problems
+from .problems import MESH_NOT_HELD, PROBLEMS, Problem, core_errors_as_problems
 from .samples import SAMPLES, SampleInfo, sample_infos
 from .selfcheck import Health
 from .server.admission import Job, run_job
@@ -152,7 +152,7 @@ def answer_mesh(
     """A mesh route's answer to a multipart body, in the form ``Accept`` or
     ``params.output`` asks for (CPU-bound: run it off the event loop)."""
     timings = Timings(job.deadline)
-    ctx = Context(job.settings, job.ticket)
+    ctx = Context(job.settings, job.ticket, meshes=job.meshes)
     with core_errors_as_problems(capability.places):
         with timings.measure("parse"):
             given = mesh_form(body, content_type, capability, ctx)
@@ -200,7 +200,7 @@ def _mesh_route(capability: MeshCapability) -> None:
         lambda request: partial(answer_mesh, capability, accept=request.headers.get("accept")),
         tags=["meshes"],
         description=document.mesh_description(capability),
-        responses=PROBLEMS | document.other_forms(capability),
+        responses=PROBLEMS | {404: MESH_NOT_HELD} | document.other_forms(capability),
         openapi_extra=document.multipart_body(capability),
     )
 
@@ -209,3 +209,33 @@ for _capability in JSON_CAPABILITIES:
     _json_route(_capability)
 for _capability in MESH_CAPABILITIES:
     _mesh_route(_capability)
+
+
+# -- meshes sent once ----------------------------------------------------------------------
+
+
+@router.post(
+    heldmeshes.PATH,
+    tags=["meshes"],
+    summary="Send a mesh once; name it by its SHA-256 in later requests",
+    status_code=201,
+    response_model=heldmeshes.HeldMesh,
+    responses={
+        200: {"model": heldmeshes.HeldMesh, "description": "The worker held it already."},
+        201: {"description": "Kept."},
+        **{status: PROBLEMS[status] for status in (400, 401, 408, 413, 415, 422, 503, 504)},
+    },
+    openapi_extra=heldmeshes.request_body(),
+)
+async def hold_mesh(request: Request) -> Response:
+    """Multipart: the `mesh` part (and `params` with its `format`, if the file name does not
+    tell). The worker reads it and keeps it in memory (never on disk) and answers the
+    SHA-256 of the part's bytes, which every mesh route takes as `params.mesh_sha256`
+    instead of its mesh part; the region, map and locate index that requests compute from
+    it are kept with it for the same params. A cache, not a store: the worker lets go of
+    the least recently used within MESHFLAT_MESH_CACHE_BYTES and whenever its jobs need the
+    memory, and each worker and replica has its own: a route answers 404 for a digest the
+    worker does not hold, and the client sends the mesh again. A mesh held already is not
+    read again (200)."""
+    work = partial(heldmeshes.hold_mesh, request.app.state.mesh_cache)
+    return await run_job(request, work, heldmeshes.PARSE_BYTES_PER_BYTE)

@@ -43,7 +43,12 @@ class Settings:
     max_uploads : MESHFLAT_MAX_UPLOADS, request bodies arriving at once per process (they hold
         no compute slot)
     memory_budget : MESHFLAT_MEMORY_BUDGET, bytes per process for its jobs' bodies, readers
-        and computations; 0 (the default): :func:`memory_budget_of` the container's limit
+        and computations and its mesh cache; 0 (the default): :func:`memory_budget_of` the
+        container's limit
+    mesh_cache_bytes : MESHFLAT_MESH_CACHE_BYTES, the most the process's cache of meshes sent
+        once (POST /v1/meshes: the meshes and what is computed from them) holds, within the
+        memory budget (a job's charge that finds no room empties it, least recently used
+        first); 0: no cache; unset: :data:`MESH_CACHE_SHARE` of the memory budget
     min_upload_rate, upload_grace : MESHFLAT_MIN_UPLOAD_RATE bytes/s, MESHFLAT_UPLOAD_GRACE
         seconds: after the grace, a body must have arrived at that mean rate, or a 408
     header_timeout : MESHFLAT_HEADER_TIMEOUT, seconds for a request's headers to arrive on a
@@ -75,6 +80,7 @@ class Settings:
     max_waiting: int = 1
     max_uploads: int = 256
     memory_budget: int = 0
+    mesh_cache_bytes: int = -1  # unset: a share of the budget (mesh_cache_capacity)
     min_upload_rate: int = 64 * 1024
     upload_grace: float = 2.0
     header_timeout: float = 10.0
@@ -123,6 +129,13 @@ class Settings:
         return self.memory_budget or memory_budget_of(container_memory(), self.workers)
 
     @property
+    def mesh_cache_capacity(self) -> int:
+        """MESHFLAT_MESH_CACHE_BYTES, or :data:`MESH_CACHE_SHARE` of the memory budget."""
+        if self.mesh_cache_bytes >= 0:
+            return self.mesh_cache_bytes
+        return int(self.memory_budget_bytes * MESH_CACHE_SHARE)
+
+    @property
     def limits(self) -> Limits:
         return Limits(
             max_vertices=self.max_vertices,
@@ -138,6 +151,10 @@ WORKER_BASELINE_BYTES = 320 * MiB
 #: The share of a container's memory given to the workers' budgets; the rest is headroom
 #: for what the estimates do not see (allocator fragmentation, thread stacks).
 BUDGET_SHARE = 0.8
+#: The share of a worker's memory budget its mesh cache may hold unless
+#: MESHFLAT_MESH_CACHE_BYTES says: a 1.6M-face scalp with its region, map and locate index
+#: takes 411 MiB (make bench-cache); the jobs take back what they need (it gives way).
+MESH_CACHE_SHARE = 0.25
 
 
 def memory_budget_of(container_bytes: int, workers: int) -> int:
@@ -190,12 +207,13 @@ def _parse(name: str, text: str, default: object) -> object:
 
 
 #: Settings for which 0 makes sense: no queue (a job beyond MESHFLAT_MAX_JOBS is refused);
-#: the budget from the container; no header timer and no lingering close (an ingress in front
-#: does both).
+#: the budget from the container; no mesh cache; no header timer and no lingering close (an
+#: ingress in front does both).
 _MAY_BE_ZERO = frozenset(
     {
         "MESHFLAT_MAX_WAITING",
         "MESHFLAT_MEMORY_BUDGET",
+        "MESHFLAT_MESH_CACHE_BYTES",
         "MESHFLAT_HEADER_TIMEOUT",
         "MESHFLAT_LINGERING_CLOSE",
     }

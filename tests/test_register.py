@@ -475,12 +475,15 @@ async def test_units_are_optional_and_the_answer_says_the_residuals_unit(client)
 
 
 async def test_the_document_requires_both_scans_and_nothing_else(client):
-    """Both meshes are read (a missing one is refused, above); params may be left out now
-    that units are optional, and the mask is only for a texture_mask region."""
+    """Both meshes are read (a missing one is refused, above), the baseline as its part or as
+    a mesh held by params.mesh_sha256 (so only the follow-up's part is required); params may
+    be left out now that units are optional, and the mask is only for a texture_mask
+    region."""
     document = (await client.get("/openapi.json")).json()
     body = document["paths"]["/v1/register"]["post"]["requestBody"]["content"]
     form = body["multipart/form-data"]["schema"]
-    assert form["required"] == ["baseline", "follow_up"]
+    assert form["required"] == ["follow_up"]
+    assert "params.mesh_sha256" in form["properties"]["baseline"]["description"]
     params = document["components"]["schemas"]["RegisterParams"]
     assert "required" not in params, params.get("required")
     data = SAMPLES[NAME].path.read_bytes()

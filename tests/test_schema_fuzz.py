@@ -48,6 +48,8 @@ app = create_app(Settings(api_keys=(KEY,), max_sites=20_000))
 # fit at, and 413 to more sites than the limit; /v1/register 422 to a follow-up that cannot
 # be read or registered; /v1/transfer 422 to an image part that is not a PNG of the
 # picture's size, an image and values together, values not one a vertex, or nothing to carry.
+# Every mesh route answers 404 to a params.mesh_sha256 the worker does not hold (a generated
+# one never is), and /v1/meshes 422 to a file that is not the mesh its format names.
 CONFIG = SchemathesisConfig.from_dict(
     {
         "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx"]}},
@@ -57,13 +59,19 @@ CONFIG = SchemathesisConfig.from_dict(
                     "^/v1/(flatten|validate|fit|locate|measure|plan|register|compare|transfer|points"
                     "|points/inverse)$"
                 ),
-                "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx", "422"]}},
+                "checks": {
+                    "positive_data_acceptance": {"expected-statuses": ["2xx", "404", "422"]}
+                },
             },
             {
                 "include-path-regex": "^/v1/(sites|strands)$",
                 "checks": {
-                    "positive_data_acceptance": {"expected-statuses": ["2xx", "413", "422"]}
+                    "positive_data_acceptance": {"expected-statuses": ["2xx", "404", "413", "422"]}
                 },
+            },
+            {
+                "include-path-regex": "^/v1/meshes$",
+                "checks": {"positive_data_acceptance": {"expected-statuses": ["2xx", "422"]}},
             },
         ],
     }

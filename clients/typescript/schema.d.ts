@@ -258,6 +258,34 @@ export interface paths {
         patch?: never;
         trace?: never;
     };
+    "/v1/meshes": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        get?: never;
+        put?: never;
+        /**
+         * Send a mesh once; name it by its SHA-256 in later requests
+         * @description Multipart: the `mesh` part (and `params` with its `format`, if the file name does not
+         *     tell). The worker reads it and keeps it in memory (never on disk) and answers the
+         *     SHA-256 of the part's bytes, which every mesh route takes as `params.mesh_sha256`
+         *     instead of its mesh part; the region, map and locate index that requests compute from
+         *     it are kept with it for the same params. A cache, not a store: the worker lets go of
+         *     the least recently used within MESHFLAT_MESH_CACHE_BYTES and whenever its jobs need the
+         *     memory, and each worker and replica has its own: a route answers 404 for a digest the
+         *     worker does not hold, and the client sends the mesh again. A mesh held already is not
+         *     read again (200).
+         */
+        post: operations["hold_mesh_v1_meshes_post"];
+        delete?: never;
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
     "/v1/plan": {
         parameters: {
             query?: never;
@@ -792,6 +820,12 @@ export interface components {
              */
             layout?: "theta_phi" | "mercator";
             /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
+            /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
              * @default distorted
@@ -1245,6 +1279,12 @@ export interface components {
              */
             layout?: "theta_phi" | "mercator";
             /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
+            /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
              * @default distorted
@@ -1442,6 +1482,12 @@ export interface components {
              */
             layout?: "theta_phi" | "mercator";
             /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
+            /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
              * @default distorted
@@ -1557,6 +1603,32 @@ export interface components {
              */
             status?: string;
         };
+        /**
+         * HeldMesh
+         * @description A mesh the worker holds.
+         */
+        HeldMesh: {
+            /**
+             * Bytes
+             * @description What the mesh takes in the worker's cache (its arrays), of MESHFLAT_MESH_CACHE_BYTES; what is computed from it later takes more.
+             */
+            bytes: number;
+            /**
+             * Faces
+             * @description The mesh's face count.
+             */
+            faces: number;
+            /**
+             * Mesh Sha256
+             * @description The SHA-256 (hex) of the mesh part's bytes as sent: give it as params.mesh_sha256 to any mesh route instead of the mesh part.
+             */
+            mesh_sha256: string;
+            /**
+             * Vertices
+             * @description The mesh's vertex count.
+             */
+            vertices: number;
+        };
         /** Hit */
         Hit: {
             /**
@@ -1574,6 +1646,21 @@ export interface components {
              * @description The hit point, world coordinates.
              */
             point: number[];
+        };
+        /**
+         * HoldParams
+         * @description The JSON of the ``params`` field of POST /v1/meshes.
+         * @example {
+         *       "format": "obj"
+         *     }
+         */
+        HoldParams: {
+            /**
+             * Format
+             * @description The file's format; default: from the file name's extension.
+             * @default null
+             */
+            format?: ("obj" | "gltf" | "glb" | "ply" | "stl") | null;
         };
         /**
          * InverseRequest
@@ -1804,6 +1891,12 @@ export interface components {
              */
             layout?: "theta_phi" | "mercator";
             /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
+            /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
              * @default distorted
@@ -2031,6 +2124,12 @@ export interface components {
              */
             layout?: "theta_phi" | "mercator";
             /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
+            /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
              * @default distorted
@@ -2179,6 +2278,12 @@ export interface components {
              * @enum {string}
              */
             layout?: "theta_phi" | "mercator";
+            /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
             /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
@@ -2435,6 +2540,12 @@ export interface components {
              * @default 3000
              */
             max_grafts_per_session?: number;
+            /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
             /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
@@ -2947,6 +3058,12 @@ export interface components {
              * @enum {string}
              */
             layout?: "theta_phi" | "mercator";
+            /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
             /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
@@ -3477,6 +3594,12 @@ export interface components {
              */
             layout?: "theta_phi" | "mercator";
             /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
+            /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
              * @default distorted
@@ -3858,6 +3981,12 @@ export interface components {
              */
             length_range?: number[] | null;
             /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
+            /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
              * @default distorted
@@ -4143,6 +4272,12 @@ export interface components {
              * @enum {string}
              */
             layout?: "theta_phi" | "mercator";
+            /**
+             * Mesh Sha256
+             * @description Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does not hold it, and the client sends the mesh again). The answer is the one the mesh part would give; the region, map and locate index of repeated params are kept with it. Not with the mesh part; not on the command line.
+             * @default null
+             */
+            mesh_sha256?: string | null;
             /**
              * Method
              * @description distorted: pole warp then eq. 1; standard: eq. 1 only; separable: the paper's alternative.
@@ -4730,9 +4865,9 @@ export interface operations {
                 "multipart/form-data": {
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    baseline: string;
+                    baseline?: string;
                     /**
                      * Format: binary
                      * @description Values on the baseline as a PNG on the grid /v1/transfer gives the baseline with these params (image_width by image_height; 8- or 16-bit grey, or colour read as its luminance; the alpha as coverage), black and white standing for value_range.
@@ -5042,6 +5177,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["ProblemDetails"];
                 };
             };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
             /** @description Accept allows none of the forms /v1/compare answers. */
             406: {
                 headers: {
@@ -5126,9 +5270,9 @@ export interface operations {
                     mask?: string;
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    mesh: string;
+                    mesh?: string;
                     /**
                      * @description JSON, as the FitParams schema; default {}.
                      * @example {
@@ -5321,6 +5465,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["ProblemDetails"];
                 };
             };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
             /** @description Accept allows none of the forms /v1/fit answers. */
             406: {
                 headers: {
@@ -5405,9 +5558,9 @@ export interface operations {
                     mask?: string;
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    mesh: string;
+                    mesh?: string;
                     /**
                      * @description JSON, as the FlattenParams schema; default {}.
                      * @example {
@@ -5693,6 +5846,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["ProblemDetails"];
                 };
             };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
             /** @description Accept allows none of the forms /v1/flatten answers. */
             406: {
                 headers: {
@@ -5798,9 +5960,9 @@ export interface operations {
                     mask?: string;
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    mesh: string;
+                    mesh?: string;
                     /**
                      * @description JSON, as the LocateParams schema; default {}.
                      * @example {
@@ -5951,6 +6113,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["ProblemDetails"];
                 };
             };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
             /** @description Accept allows none of the forms /v1/locate answers. */
             406: {
                 headers: {
@@ -6035,9 +6206,9 @@ export interface operations {
                     mask?: string;
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    mesh: string;
+                    mesh?: string;
                     /**
                      * @description JSON, as the MeasureParams schema; default {}.
                      * @example {
@@ -6449,8 +6620,132 @@ export interface operations {
                     "application/problem+json": components["schemas"]["ProblemDetails"];
                 };
             };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
             /** @description Accept allows none of the forms /v1/measure answers. */
             406: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description The body did not arrive within the time limit (MESHFLAT_REQUEST_TIMEOUT) or at the least rate (MESHFLAT_MIN_UPLOAD_RATE). */
+            408: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description Body, file or mesh beyond a limit; the detail names the limit. */
+            413: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description Wrong content type. */
+            415: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description Invalid parameters or an unreadable mesh; the detail names the field, face or vertex. */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description Busy: too many jobs or uploads in flight, or the memory budget taken; Retry-After gives the seconds to wait. */
+            503: {
+                headers: {
+                    /** @description Seconds to wait. */
+                    "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description The job did not finish within the time limit (MESHFLAT_REQUEST_TIMEOUT). */
+            504: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+        };
+    };
+    hold_mesh_v1_meshes_post: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody: {
+            content: {
+                "multipart/form-data": {
+                    /**
+                     * Format: binary
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     */
+                    mesh: string;
+                    /** @description JSON, as the HoldParams schema; default {}. */
+                    params?: components["schemas"]["HoldParams"];
+                };
+            };
+        };
+        responses: {
+            /** @description The worker held it already. */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HeldMesh"];
+                };
+            };
+            /** @description Kept. */
+            201: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["HeldMesh"];
+                };
+            };
+            /** @description Malformed request (for example a broken multipart body). */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description No valid API key (when the service has keys): the detail says which. */
+            401: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -6533,9 +6828,9 @@ export interface operations {
                     mask?: string;
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    mesh: string;
+                    mesh?: string;
                     /**
                      * @description JSON, as the PlanParams schema; default {}.
                      * @example {
@@ -6741,6 +7036,15 @@ export interface operations {
             };
             /** @description No valid API key (when the service has keys): the detail says which. */
             401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -7118,9 +7422,9 @@ export interface operations {
                 "multipart/form-data": {
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    baseline: string;
+                    baseline?: string;
                     /**
                      * Format: binary
                      * @description The follow-up scan of the same head (OBJ, glTF, GLB, PLY or STL; its format from its file name).
@@ -7365,6 +7669,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["ProblemDetails"];
                 };
             };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
             /** @description Accept allows none of the forms /v1/register answers. */
             406: {
                 headers: {
@@ -7589,9 +7902,9 @@ export interface operations {
                     mask?: string;
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    mesh: string;
+                    mesh?: string;
                     /**
                      * @description JSON, as the SitesParams schema; default {}.
                      * @example {
@@ -7934,6 +8247,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["ProblemDetails"];
                 };
             };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
             /** @description Accept allows none of the forms /v1/sites answers. */
             406: {
                 headers: {
@@ -8028,9 +8350,9 @@ export interface operations {
                     mask?: string;
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    mesh: string;
+                    mesh?: string;
                     /**
                      * @description JSON, as the StrandsParams schema; default {}.
                      * @example {
@@ -8588,6 +8910,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["ProblemDetails"];
                 };
             };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
             /** @description Accept allows none of the forms /v1/strands answers. */
             406: {
                 headers: {
@@ -8677,9 +9008,9 @@ export interface operations {
                     mask?: string;
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    mesh: string;
+                    mesh?: string;
                     /**
                      * @description JSON, as the TransferParams schema; default {}.
                      * @example {
@@ -8820,6 +9151,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["ProblemDetails"];
                 };
             };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
             /** @description Accept allows none of the forms /v1/transfer answers. */
             406: {
                 headers: {
@@ -8904,9 +9244,9 @@ export interface operations {
                     mask?: string;
                     /**
                      * Format: binary
-                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format.
+                     * @description The mesh file: OBJ, glTF (embedded buffers), GLB, PLY or STL; the format comes from the file name's extension or params.format. Required unless params.mesh_sha256 names a mesh sent to POST /v1/meshes instead (not both).
                      */
-                    mesh: string;
+                    mesh?: string;
                     /**
                      * @description JSON, as the MeshParams schema; default {}.
                      * @example {
@@ -9078,6 +9418,15 @@ export interface operations {
             };
             /** @description No valid API key (when the service has keys): the detail says which. */
             401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["ProblemDetails"];
+                };
+            };
+            /** @description params.mesh_sha256 names a mesh this worker does not hold (never sent to it, or let go since): POST it to /v1/meshes again. */
+            404: {
                 headers: {
                     [name: string]: unknown;
                 };

@@ -7,15 +7,25 @@ In a served request the budget is the job's admission ticket (:mod:`service.serv
 whose charge may refuse (503 when the process has no room now, 413 when the job could never
 fit): that refusal is the server's, and passes through the use-case untouched. On the command
 line nothing is charged.
+
+A served job may also find what it computes kept from an earlier request on the same mesh
+(:class:`MeshStore`, the server's cache of meshes sent once): a step asks
+:meth:`Context.remembered` for it, and computes it only when it is not there.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Protocol
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Protocol, TypeVar
 
 from ..settings import Settings
 from .warnings import Warned, WarningCode
+
+if TYPE_CHECKING:
+    from ..meshio import Mesh
+
+T = TypeVar("T")
 
 MiB = 2**20
 #: What a reader may allocate per byte of its file beside its mesh (the readers keep within
@@ -93,6 +103,22 @@ class Unlimited:
         pass
 
 
+class MeshStore(Protocol):
+    """Meshes sent once and what was computed from them (the server's
+    :class:`service.meshcache.MeshCache`)."""
+
+    def mesh(self, digest: str) -> Mesh | None:
+        """The mesh whose upload had the SHA-256 ``digest`` (hex), if it is held."""
+
+    def holds(self, owner: object) -> bool:
+        """Whether ``owner`` is a held mesh or a value remembered of one."""
+
+    def remember(
+        self, ctx: Context, owner: object, key: Hashable, compute: Callable[[Context], T]
+    ) -> T:
+        """What ``compute(ctx)`` gives for ``owner`` and ``key``, computed once while held."""
+
+
 @dataclass(frozen=True)
 class Context:
     """The settings, the memory budget and the threads of one computation.
@@ -103,11 +129,30 @@ class Context:
     budget : Budget, what the use-case charges its allocations to
     warnings : list of Warned, what the use-case found legal but probably wrong, in the
         order found (:meth:`warn`); the JSON answer carries them
+    meshes : MeshStore or None, the server's meshes sent once (None on the command line)
     """
 
     settings: Settings = field(default_factory=Settings)
     budget: Budget = field(default_factory=Unlimited)
     warnings: list[Warned] = field(default_factory=list)
+    meshes: MeshStore | None = None
+
+    def remembered(self, owner: object, key: Hashable, compute: Callable[[Context], T]) -> T:
+        """``compute(ctx)``: a step's result on ``owner`` (a mesh, or a step's result on one)
+        for the inputs ``key`` stands for. Where ``owner`` is held by the mesh cache, it is
+        computed once and kept with it, with the warnings it added (added again on each use);
+        elsewhere it is computed now."""
+        if self.meshes is None:
+            return compute(self)
+        return self.meshes.remember(self, owner, key, compute)
+
+    def holds(self, owner: object) -> bool:
+        """Whether what is computed on ``owner`` is kept (:meth:`remembered`)."""
+        return self.meshes is not None and self.meshes.holds(owner)
+
+    def apart(self) -> Context:
+        """This context with a list of warnings of its own (a step whose warnings are kept)."""
+        return replace(self, warnings=[])
 
     def warn(self, code: WarningCode, field: str, message: str) -> None:
         """Add a warning to the answer: ``code`` (one of :class:`WarningCode`), the

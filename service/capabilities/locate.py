@@ -10,24 +10,25 @@ from typing import Annotated
 import numpy as np
 from pydantic import ConfigDict, Field, model_validator
 
-from transforms import Chart, Frame, Hits, Layout, layout_xy, locate
+from transforms import Chart, Frame, Hits, Layout, LocateIndex, layout_xy, locate
 from transforms.viewpoint import check_center_sees_area
 
 from ..encoding import Answer
 from ..errors import check_count
+from ..meshio import Mesh
 from .context import Context
 from .fields import Number, choice
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
 from .region.resolve import (
     MeshInput,
+    Resolved,
     Selection,
     facing_of,
     flatten,
     map_triangles,
     region_faces,
-    resolve,
-    select_region,
+    resolved_region,
 )
 from .rows import MeshCapability
 from .warnings import WarnedAnswer
@@ -113,23 +114,39 @@ def locate_directions(given: MeshInput[LocateParams], ctx: Context) -> Located:
     check_count(len(params.theta), ctx.settings.max_points, "theta")
     if params.via is LocateVia.MAP:
         return _locate_on_map(given, ctx)
-    selection = select_region(given, ctx)
-    chart, frame, _ = resolve(mesh, selection, params, ctx)
+    resolved = resolved_region(given, ctx)
+    selection, chart, frame, _ = resolved
     directions = chart.inverse(params.theta, params.phi, 1.0)
-    faces = region_faces(mesh, selection)
-    # Seen edge-on from the centre, the region has nothing to hit (the flatten routes refuse
-    # such a centre in the core; a fixed frame and sigma reach locate without it).
-    check_center_sees_area(mesh.vertices, faces, frame.center)
-    # Every vertex given, so that an error names the file's vertex ids. A rotation keeps the
-    # triangle a ray meets, the weights and the depth: the rays turn to the world's axes
-    # instead of every vertex to the frame's, and the few hit points back.
+    # A rotation keeps the triangle a ray meets, the weights and the depth: the rays turn to
+    # the world's axes instead of every vertex to the frame's, and the few hit points back.
     rotation = frame.rotation
-    hits = locate(mesh.vertices - frame.center, faces, directions @ rotation)
+    if ctx.holds(resolved):  # a held mesh keeps the region's index for the next click
+        index = ctx.remembered(resolved, "locate_index", lambda _: _index(mesh, resolved))
+        hits = index.query(directions @ rotation)
+    else:
+        faces = _seen_faces(mesh, resolved)
+        hits = locate(mesh.vertices - frame.center, faces, directions @ rotation)
     hits = Hits(hits.faces, hits.barycentric, hits.points @ rotation.T)
     facing = facing_of(params)
     return Located(
         chart, frame, selection, hits, params.layout, mesh.format, params.untangle, facing
     )
+
+
+def _seen_faces(mesh: Mesh, resolved: Resolved) -> np.ndarray:
+    """(m, 3) int: the region's faces, checked to be seen from the centre."""
+    faces = region_faces(mesh, resolved.selection)
+    # Seen edge-on from the centre, the region has nothing to hit (the flatten routes refuse
+    # such a centre in the core; a fixed frame and sigma reach locate without it).
+    check_center_sees_area(mesh.vertices, faces, resolved.frame.center)
+    return faces
+
+
+def _index(mesh: Mesh, resolved: Resolved) -> LocateIndex:
+    """The locate index of the region's triangles about its centre (every vertex given, so
+    that an error names the file's vertex ids)."""
+    faces = _seen_faces(mesh, resolved)
+    return LocateIndex.build(mesh.vertices - resolved.frame.center, faces)
 
 
 def _locate_on_map(given: MeshInput[LocateParams], ctx: Context) -> Located:

@@ -15,7 +15,8 @@ from typing import ClassVar
 from pydantic import BaseModel
 
 from ..encoding import encode
-from ..errors import JSON_BODY, ErrorPlaces, InvalidInput
+from ..errors import JSON_BODY, ErrorPlaces, InvalidInput, UnknownMesh
+from ..meshio import Mesh
 from ..outputs import Output
 from ..outputs.arrow import arrow_stream
 from ..timings import Timings
@@ -148,15 +149,25 @@ class MeshCapability(Capability):
         read and charged to ``ctx``, each PNG as a :class:`~.inputs.PngFile` for the use-case
         to decode once it knows it wants it (None where not sent).
 
+        The route's own mesh may instead be one the server holds, named by
+        ``params.mesh_sha256`` (:class:`~.context.MeshStore`); its computation is charged as
+        a read mesh's is.
+
         Raises
         ------
         InvalidInput
             A mesh is missing, or a file is one the route does not read (a misspelt part would
-            be left out unseen).
+            be left out unseen); a mesh part and ``mesh_sha256`` both; ``mesh_sha256`` on the
+            command line.
         UnreadableMesh
             A mesh that cannot be read.
+        UnknownMesh
+            ``mesh_sha256`` names a mesh the server does not hold.
         """
-        if self.mesh.name not in files:
+        held = None
+        if params.mesh_sha256 is not None:
+            held = self._held_mesh(params.mesh_sha256, files, ctx)
+        elif self.mesh.name not in files:
             raise self.mesh.missing()
         taken = ("params", *(part.name for part in self.parts))
         for name in files:
@@ -169,6 +180,8 @@ class MeshCapability(Capability):
             upload = files.get(part.name)
             if isinstance(part, PngPart):
                 read[part.name] = None if upload is None else PngFile(part, upload)
+            elif part is self.mesh and held is not None:
+                read[part.name] = held
             elif upload is None:
                 raise part.missing()
             elif part is self.mesh:
@@ -176,6 +189,24 @@ class MeshCapability(Capability):
             else:
                 read[part.name] = part.read(upload, ctx, own=False)
         return self.input(params=params, **read)
+
+    def _held_mesh(self, digest: str, files: Mapping[str, Upload], ctx: Context) -> Mesh:
+        """The mesh ``params.mesh_sha256`` names, its computation charged to ``ctx``."""
+        if ctx.meshes is None:  # the command line, the batch
+            raise InvalidInput(
+                "mesh_sha256",
+                "names a mesh sent to a server's POST /v1/meshes; here, give the mesh's file",
+            )
+        if self.mesh.name in files:
+            raise InvalidInput(
+                "mesh_sha256",
+                f"the form has a '{self.mesh.name}' part too: send the mesh or name it, not both",
+            )
+        mesh = ctx.meshes.mesh(digest.lower())
+        if mesh is None:
+            raise UnknownMesh("mesh_sha256", digest.lower())
+        ctx.charge_mesh(len(mesh.vertices), len(mesh.faces))
+        return mesh
 
     def answer(self, given, ctx: Context, output: Output, timings: Timings) -> bytes:
         """The answer's bytes in ``output`` (one of :attr:`outputs`); the use-case sees it as

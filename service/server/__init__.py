@@ -14,6 +14,7 @@ import sys
 
 from fastapi import FastAPI
 
+from ..meshcache import MeshCache
 from ..settings import Settings
 from .admission import gate_of
 from .allocator import keep_large_blocks
@@ -32,11 +33,16 @@ SWITCH_INTERVAL = 0.001
 
 def install(app: FastAPI, settings: Settings) -> None:
     """Put the protection in front of ``app``'s routes: its job gate (admission, compute
-    slots, the memory budget: :func:`.admission.run_job` runs each job through it), and as
+    slots, the memory budget: :func:`.admission.run_job` runs each job through it) and the
+    mesh cache that shares its budget (``app.state.mesh_cache``), and as
     middleware the body-size limit and, with keys configured, the API keys. Call it before
     adding the middleware that must see every answer (errors, CORS, request ids), which then
     wraps these."""
-    app.state.job_gate = gate_of(settings)
+    gate = gate_of(settings)
+    app.state.job_gate = gate
+    # Meshes sent once, kept within the jobs' budget: a job short of room empties it first.
+    app.state.mesh_cache = MeshCache(settings.mesh_cache_capacity, gate.memory)
+    gate.memory.reclaim = app.state.mesh_cache.reclaim
     app.add_middleware(BodySizeLimit, limit=settings.max_upload_bytes)
     app.add_middleware(RequireApiKey, check=KeyCheck(settings.api_keys))
 

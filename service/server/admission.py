@@ -9,6 +9,7 @@ import gc
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
+from typing import TYPE_CHECKING
 
 import anyio
 import anyio.to_thread
@@ -20,6 +21,9 @@ from ..settings import Settings
 from .allocator import release_free_memory
 from .jobs import Deadline, JobGate, Ticket, TimeLimit, TooSlow
 
+if TYPE_CHECKING:
+    from ..meshcache import MeshCache
+
 
 @dataclass(frozen=True)
 class Job:
@@ -30,11 +34,13 @@ class Job:
     settings : Settings, the service's
     ticket : Ticket, its admission: the memory budget it charges (``charge``, ``charge_mesh``)
     deadline : Deadline, the moment its answer is due (a stage starting after it stops)
+    meshes : MeshCache or None, the process's meshes sent once (:mod:`service.meshcache`)
     """
 
     settings: Settings
     ticket: Ticket
     deadline: Deadline
+    meshes: MeshCache | None = None
 
 
 #: A job's work: ``(body, content_type, job) -> Response``, run in a worker thread.
@@ -64,8 +70,9 @@ async def run_job(request: Request, work: Work, parse_bytes_per_byte: int) -> Re
         ticket.uploaded()
         ticket.charge(parse_bytes_per_byte * len(body))
         content_type = request.headers.get("content-type", "")
+        meshes = getattr(request.app.state, "mesh_cache", None)
         job = partial(
-            ticket.run, work, deadline, body, content_type, Job(settings, ticket, deadline)
+            ticket.run, work, deadline, body, content_type, Job(settings, ticket, deadline, meshes)
         )
         try:
             with anyio.fail_after(max(0.0, deadline.remaining())):

@@ -136,19 +136,30 @@ class Deadline:
 
 
 class MemoryBudget:
-    """Bytes a process may hold for its jobs (bodies, readers, computations); thread-safe.
+    """Bytes a process may hold for its jobs (bodies, readers, computations) and for the
+    meshes it keeps (:mod:`service.meshcache`); thread-safe.
 
-    ``total`` None is no limit."""
+    ``total`` None is no limit. ``reclaim(nbytes)``, when set, is asked to give back at least
+    ``nbytes`` (what it kept: the mesh cache) before a charge is refused; it answers the
+    bytes it gave back."""
 
     def __init__(self, total: int | None) -> None:
         self.total, self.reserved = total, 0
+        self.reclaim: Callable[[int], int] | None = None
         self._lock = threading.Lock()
 
-    def take(self, nbytes: int) -> bool:
-        with self._lock:
-            if self.total is not None and self.reserved + nbytes > self.total:
+    def take(self, nbytes: int, reclaiming: bool = True) -> bool:
+        """Hold ``nbytes`` if they fit, after what ``reclaim`` gives back (unless not
+        ``reclaiming``: the cache itself takes that way); whether they were held."""
+        while True:
+            with self._lock:
+                short = 0 if self.total is None else self.reserved + nbytes - self.total
+                if short <= 0:
+                    self.reserved += nbytes
+                    break
+            # Outside the lock: reclaim gives back through give().
+            if not reclaiming or self.reclaim is None or self.reclaim(short) <= 0:
                 return False
-            self.reserved += nbytes
         MEMORY_RESERVED.inc(nbytes)
         return True
 

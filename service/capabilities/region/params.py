@@ -20,6 +20,9 @@ from ..units import KnownDistance, LengthUnit
 #: The centres a mesh request may name instead of a point: the core's, and "auto" (fitted).
 CENTERS = (*NAMED_CENTERS, "auto")
 
+#: A SHA-256 in hex, as POST /v1/meshes answers it (either case).
+SHA256_PATTERN = r"^[0-9a-fA-F]{64}$"
+
 #: The paper's example.
 DEFAULT_SIGMA = 0.3
 
@@ -376,6 +379,14 @@ class MeshParams(ChartParams):
     )
     format: Literal[FORMATS] | None = Field(
         None, description="The file's format; default: from the file name's extension."
+    )
+    mesh_sha256: Annotated[str, Field(pattern=SHA256_PATTERN)] | None = Field(
+        None,
+        description="Instead of the route's own mesh part: the SHA-256 (hex) of a mesh sent "
+        "to POST /v1/meshes, which the worker keeps for a while (a cache: a 404 when it does "
+        "not hold it, and the client sends the mesh again). The answer is the one the mesh "
+        "part would give; the region, map and locate index of repeated params are kept with "
+        "it. Not with the mesh part; not on the command line.",
     )
     frame: LandmarkFrame | None = Field(
         None,

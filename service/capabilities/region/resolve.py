@@ -8,10 +8,12 @@ placed in the request by :func:`service.problems.problem_of`.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Generic, TypeVar
+from typing import Generic, NamedTuple, TypeVar
 
 import numpy as np
 
@@ -508,12 +510,55 @@ def checked_landmarks(mesh: Mesh, given, field: str) -> Landmarks:
     return landmarks
 
 
+class Resolved(NamedTuple):
+    """A request's region selected, and the chart and frame it is flattened with
+    (:func:`resolve`)."""
+
+    selection: Selection
+    chart: Chart
+    frame: Frame
+    fit: Fit | None
+
+
+#: The params that decide the region, its chart and frame, and its flattening: the key of
+#: what a held mesh keeps of them (the route's own params, its format and the mesh's name
+#: decide none of it).
+REGION_PARAMS = frozenset(MeshParams.model_fields) - {"format", "mesh_sha256"}
+
+
+def region_key(given: MeshInput) -> tuple:
+    """What decides :func:`resolved_region` and :func:`flatten` of ``given`` besides its
+    mesh: the params that do (``auto`` too, which a route's params may fix), and the
+    mask's bytes."""
+    params = given.params
+    decided = json.dumps(params.model_dump(mode="json", include=REGION_PARAMS), sort_keys=True)
+    mask = None if given.mask is None else hashlib.sha256(given.mask.upload.data).hexdigest()
+    return hashlib.sha256(decided.encode()).hexdigest(), params.auto, mask
+
+
+def resolved_region(given: MeshInput, ctx: Context) -> Resolved:
+    """The region selected (:func:`select_region`) and resolved (:func:`resolve`); kept
+    with a held mesh for the same :func:`region_key`."""
+
+    def compute(ctx: Context) -> Resolved:
+        selection = select_region(given, ctx)
+        return Resolved(selection, *resolve(given.mesh, selection, given.params, ctx))
+
+    return ctx.remembered(given.mesh, ("resolved", region_key(given)), compute)
+
+
 def flatten(given: MeshInput, ctx: Context) -> MeshRegion:
     """The region flattened with the chart and frame :func:`resolve` gives: the use-case of
-    /v1/flatten, /v1/validate and /v1/fit, and where every other mesh route starts."""
+    /v1/flatten, /v1/validate and /v1/fit, and where every other mesh route starts. Kept
+    with a held mesh for the same :func:`region_key`, with its warnings."""
+    return ctx.remembered(
+        given.mesh, ("flatten", region_key(given)), lambda ctx: _flatten(given, ctx)
+    )
+
+
+def _flatten(given: MeshInput, ctx: Context) -> MeshRegion:
     mesh, params = given.mesh, given.params
-    selection = select_region(given, ctx)
-    chart, frame, fit = resolve(mesh, selection, params, ctx)
+    selection, chart, frame, fit = resolved_region(given, ctx)
     if fit is not None and selection.links is None:
         flat = fit.region  # else fitted on the faces welded: flattened with the file's ids
     else:
@@ -587,7 +632,11 @@ def untangle_layout(mesh: Mesh, flat: FlatRegion) -> Untangled:
 
 def map_triangles(region: MeshRegion, ctx: Context) -> MapTriangles:
     """The region's triangles on its answered map (untangled when asked) and on the
-    surface: the correspondence of docs/math.md, section 12."""
+    surface: the correspondence of docs/math.md, section 12. Kept with a held region."""
+    return ctx.remembered(region, "map_triangles", lambda ctx: _map_triangles(region, ctx))
+
+
+def _map_triangles(region: MeshRegion, ctx: Context) -> MapTriangles:
     flat = region.flat
     ctx.charge(MAP_BYTES_PER_FACE * len(flat.faces))
     x, y = region.layout

@@ -173,10 +173,11 @@ class LocateIndex:
         TransformInputError
             A zero direction.
         """
+        directions = as_points(directions, "directions")
+        if len(directions) <= FEW_QUERIES:
+            return self._query_few(_few_rays(directions))
         rays = _rays(directions)
         k = len(rays)
-        if k <= FEW_QUERIES:
-            return self._query_few(rays)
         cube, u, v = cube_coordinates(rays)
         # Neighbouring queries one after another: they read the same cells and vertices. A
         # 16-bit key (the cube face, then 64 x 64 squares of it) sorts in one radix pass.
@@ -198,19 +199,21 @@ class LocateIndex:
 
     def _query_few(self, rays: np.ndarray) -> Hits:
         """:meth:`query` for a few rays, each looked up alone: the same cells, the same
-        float32 box test and the same exact test, so the same answers."""
-        queries, faces = [np.empty(0, dtype=np.int64)], [np.empty(0, dtype=np.int64)]
-        for k, (x, y, z) in enumerate(rays.tolist()):
-            cube, u, v = cube_coordinate(x, y, z)
-            found = self._candidates(cube, u, v)
-            queries.append(np.full(len(found), k, dtype=np.int64))
-            faces.append(found)
-        if len(self.everyone):
-            count = len(rays)
-            queries.append(np.repeat(np.arange(count), len(self.everyone)))
-            faces.append(np.tile(self.everyone, count))
-        query, face = np.concatenate(queries), np.concatenate(faces)
-        return _hits(rays, *_nearest_few(self.points, self.faces, rays, query, face))
+        float32 box test and the same exact test (:func:`_nearest_hit`, in plain floats,
+        operation for operation as :func:`_pair_hits`), so the same answers."""
+        count = len(rays)
+        hit_face = np.full(count, -1, dtype=np.int64)
+        weights = np.full((count, 3), np.nan)
+        depth = np.full(count, np.nan)
+        for k, ray in enumerate(rays.tolist()):
+            found = self._candidates(*cube_coordinate(*ray))
+            if len(self.everyone):
+                found = np.concatenate([found, self.everyone])
+            corners = self.points[self.faces[found]].tolist()
+            hit = _nearest_hit(ray, found.tolist(), corners)
+            if hit is not None:
+                hit_face[k], depth[k], weights[k] = hit
+        return _hits(rays, hit_face, weights, depth)
 
     def _candidates(self, cube: int, u: float, v: float) -> np.ndarray:
         """The triangles whose boxes on cube face ``cube`` hold ``(u, v)`` (float32, as the
@@ -289,6 +292,20 @@ def _rays(directions) -> np.ndarray:
     return rays
 
 
+def _few_rays(directions: np.ndarray) -> np.ndarray:
+    """:func:`_rays` of a few checked directions ((k, 3) float), row by row in plain floats
+    as :func:`.arrays.unit_rows` computes them (the same bits)."""
+    rays = []
+    for row, (x, y, z) in enumerate(directions.tolist()):
+        largest = max(abs(x), abs(y), abs(z))
+        if largest == 0.0:
+            raise TransformInputError("directions", "a direction is zero", [row])
+        x, y, z = x / largest, y / largest, z / largest
+        length = math.sqrt(x * x + y * y + z * z)
+        rays.append((x / length, y / length, z / length))
+    return np.array(rays, dtype=np.float64).reshape(-1, 3)
+
+
 def _checked(vertices_local, faces) -> tuple[np.ndarray, np.ndarray]:
     """The points and faces as arrays; a vertex of a triangle at the centre refused (a
     vertex no triangle uses may be anywhere)."""
@@ -361,22 +378,29 @@ def _nearest(points, faces, rays, pairs):
     return hit_face, weights, depth
 
 
-def _nearest_few(points, faces, rays, query, face):
-    """:func:`_nearest` for a few queries and their candidate pairs at once: of each query's
-    hits the nearest, the smaller position among equally near ones."""
-    k = len(rays)
-    hit_face = np.full(k, -1, dtype=np.int64)
-    weights = np.full((k, 3), np.nan)
-    depth = np.full(k, np.nan)
-    query, face, found, weight = _pair_hits(points, faces, rays, query, face)
-    if len(query):
-        order = np.lexsort((face, found, query))  # by query, then depth, then position
-        ordered = query[order]
-        first = order[np.flatnonzero(np.r_[True, ordered[1:] != ordered[:-1]])]
-        hit_face[query[first]] = face[first]
-        weights[query[first]] = weight[first]
-        depth[query[first]] = found[first]
-    return hit_face, weights, depth
+def _nearest_hit(ray, faces: list[int], corners: list):
+    """The nearest of the triangles ``faces`` (their ``corners``, three points each) that
+    holds ``ray`` (three floats), the smaller position among equally near ones: ``(face,
+    depth, weights)``, or None. The test of :func:`_pair_hits`, in plain floats in the same
+    order of operations (IEEE arithmetic, so the same bits), for a ray with few candidates."""
+    qx, qy, qz = ray
+    best = None
+    for face, ((x0, y0, z0), (x1, y1, z1), (x2, y2, z2)) in zip(faces, corners, strict=True):
+        ax, ay, az = y1 * z2 - z1 * y2, z1 * x2 - x1 * z2, x1 * y2 - y1 * x2  # c1 x c2
+        e0 = qx * ax + qy * ay + qz * az
+        e1 = qx * (y2 * z0 - z2 * y0) + qy * (z2 * x0 - x2 * z0) + qz * (x2 * y0 - y2 * x0)
+        e2 = qx * (y0 * z1 - z0 * y1) + qy * (z0 * x1 - x0 * z1) + qz * (x0 * y1 - y0 * x1)
+        total = e0 + e1 + e2
+        if total == 0.0:
+            continue
+        slack = _INSIDE * (abs(e0) + abs(e1) + abs(e2))
+        side = 1.0 if total > 0.0 else -1.0
+        if side * e0 < slack or side * e1 < slack or side * e2 < slack:
+            continue
+        depth = (x0 * ax + y0 * ay + z0 * az) / total
+        if depth > 0.0 and (best is None or (depth, face) < (best[1], best[0])):
+            best = (face, depth, (e0 / total, e1 / total, e2 / total))
+    return best
 
 
 def _keep_nearest(query, face, depth, weight, hit_face, weights, nearest_depth) -> None:

@@ -4,8 +4,9 @@ sample in automatic mode, and the test checks what the page shows; then draws a 
 map, which the page measures (/v1/measure) and lifts onto the 3D view. The screenshots are
 kept in ``artifacts/demo.png``, ``artifacts/demo-auto.png`` and ``artifacts/demo-zone.png``
 (and the others' in ``artifacts/``); the plan's, the 200k-face region's colours and the page
-at 1366 x 900 too, or, with MESHFLAT_WRITE_FIGURES=1, in ``docs/figures/`` (demo-plan,
-demo-colour-200k, demo-colour), the figures the docs show.
+at 1366 x 900 and the strands grown too, or, with MESHFLAT_WRITE_FIGURES=1, in
+``docs/figures/`` (demo-plan, demo-colour-200k, demo-colour, demo-strands), the figures the
+docs show.
 The page is opened at 1366 x 900, the laptop screen it is laid out for."""
 
 from __future__ import annotations
@@ -693,6 +694,8 @@ def test_grow_hair_draws_the_strands_of_the_grafts_on_the_head(server):
         assert np.median(tips[60] / tips[30]) > 1.5  # longer hair reaches further
         ARTIFACTS.mkdir(exist_ok=True)
         page.screenshot(path=str(ARTIFACTS / "demo-hair.png"), full_page=True)
+        FIGURES.mkdir(exist_ok=True)
+        page.screenshot(path=str(FIGURES / "demo-strands.png"), full_page=True)
 
         # The growth cleared takes the grafts and their strands; grafts placed without it
         # grow none: the service's 422 shows.

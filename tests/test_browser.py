@@ -692,10 +692,9 @@ def test_grow_hair_draws_the_strands_of_the_grafts_on_the_head(server):
             page.wait_for_timeout(500)
             assert page.evaluate(CHANGED_PIXELS, False) > 50  # the new strands on the head
         assert np.median(tips[60] / tips[30]) > 1.5  # longer hair reaches further
-        ARTIFACTS.mkdir(exist_ok=True)
-        page.screenshot(path=str(ARTIFACTS / "demo-hair.png"), full_page=True)
-        FIGURES.mkdir(exist_ok=True)
-        page.screenshot(path=str(FIGURES / "demo-strands.png"), full_page=True)
+        for path in (ARTIFACTS / "demo-hair.png", FIGURES / "demo-strands.png"):
+            path.parent.mkdir(exist_ok=True)
+            page.screenshot(path=str(path), full_page=True)
 
         # The growth cleared takes the grafts and their strands; grafts placed without it
         # grow none: the service's 422 shows.

@@ -25,7 +25,8 @@ from ..outputs.picture import Drawn
 from .context import Context
 from .drawn import Curve, charge_crossings, check_drawn, check_names, checked_curve
 from .fields import Coordinate, Strict, choice
-from .region.resolve import MeshRegion, checked_landmarks
+from .region.heads import checked_landmarks
+from .region.resolve import MeshRegion
 
 #: A site's stroke in the GLB, millimetres: long enough to see, short of its neighbours at
 #: the densities of a plan (1 to 2 mm apart).

@@ -44,9 +44,10 @@ from .drawn import (
 from .fields import PictureParams, Strict, choice, output_choice
 from .inputs import MeshPart, PngFile
 from .region.answers import ResolvedParams
+from .region.heads import checked_landmarks
 from .region.params import MESH_PARAMS_EXAMPLE, Landmarks, MeshParams
 from .region.pictures import map_renderers
-from .region.resolve import MeshInput, MeshRegion, checked_landmarks, flatten
+from .region.resolve import MeshInput, MeshRegion, flatten
 from .rows import MeshCapability
 from .units import KnownDistance, LengthUnit, Units, in_mm, mm_per_unit, warn_of_size
 from .warnings import WarnedAnswer

@@ -48,6 +48,7 @@ from service.meshio import Mesh, read_mesh
 from service.server.allocator import keep_large_blocks
 from service.settings import Settings
 from transforms import Chart, Frame, MapTriangles, PoleCap
+from transforms.selection import cone_faces
 
 TARGETS_S = {"moments": 3.0, "landmarks": 1.0}
 FACES = 100_000
@@ -105,11 +106,10 @@ def density(points_on_map: np.ndarray) -> np.ndarray:
 
 
 def base_triangles(scans: Scans) -> MapTriangles:
-    """The baseline's region on its map (to draw the zones on)."""
+    """The baseline's region (the cone of ``REGION``) on its map (to draw the zones on)."""
     v, f = scans.baseline.vertices, scans.baseline.faces
-    direction = v[f].mean(axis=1) - scans.center
-    direction /= np.linalg.norm(direction, axis=1)[:, None]
-    faces = f[direction[:, 2] >= np.cos(np.radians(70))]
+    cone = REGION["cone"]
+    faces = f[cone_faces(v, f, scans.center, cone["axis"], cone["half_angle_deg"])]
     used, local = np.unique(faces, return_inverse=True)
     xy = on_map(v[used], scans.center)
     return MapTriangles.of(xy[:, 0], xy[:, 1], v[used], local.reshape(-1, 3))

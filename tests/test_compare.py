@@ -302,6 +302,7 @@ async def test_spot_values_as_measured_give_their_change(client):
         ({"baseline_values": [1.0, 2.0]}, {}, "params.baseline_values"),
         ({"zones": [], "spots": []}, {}, "params"),
         ({"value_range": [0, 1], "spots": SPOTS}, {}, "params.value_range"),
+        ({"value_range": [1, 0], "spots": SPOTS}, {"baseline_values": "png"}, "params.value_range"),
         ({"spots": SPOTS}, {"follow_up_values": "png"}, "params.follow_up_region"),
         ({"baseline_values": "no_such_property", "spots": SPOTS}, {}, "params.baseline_values"),
         (

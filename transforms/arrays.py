@@ -319,3 +319,10 @@ def solve_2x2(matrices: np.ndarray, right: np.ndarray) -> np.ndarray:
             pseudo = np.linalg.pinv(matrices[~regular])
         out[~regular] = np.einsum("pij,pj->pi", pseudo, right[~regular])
     return out
+
+
+def triangle_boxes(vertices: np.ndarray, faces: np.ndarray, pad: float = 0.0):
+    """(m, 3) float each: the least and the largest corner coordinates of the triangles
+    ``faces`` ((m, 3) int) of ``vertices`` ((k, 3) float), less and plus ``pad``."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return np.minimum(np.minimum(a, b), c) - pad, np.maximum(np.maximum(a, b), c) + pad

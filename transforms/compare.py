@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import igl
 import numpy as np
 
-from .landmarks import triangle_boxes
+from .arrays import triangle_boxes
 from .mapping import MapTriangles
 from .zones import ZoneCover
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .arrays import as_points
+from .arrays import as_points, triangle_boxes
 from .errors import TransformInputError
 from .frames import Frame
 from .topology import face_components
@@ -179,13 +179,6 @@ class Landmarks:
 
 def _unit(vector: np.ndarray) -> np.ndarray:
     return vector / np.linalg.norm(vector)
-
-
-def triangle_boxes(vertices: np.ndarray, faces: np.ndarray, pad: float = 0.0):
-    """(m, 3) float each: the least and the largest corner coordinates of the triangles
-    ``faces`` ((m, 3) int) of ``vertices`` ((k, 3) float), less and plus ``pad``."""
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    return np.minimum(np.minimum(a, b), c) - pad, np.maximum(np.maximum(a, b), c) + pad
 
 
 def distance_to_triangles(point: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> float:

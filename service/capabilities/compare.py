@@ -36,7 +36,7 @@ from .drawn import (
     checked_zone,
     warn_outside,
 )
-from .fields import Coordinate, choice, output_choice
+from .fields import Coordinate, ValueRange, choice, output_choice
 from .inputs import MeshPart, PngFile, PngPart
 from .region.answers import ResolvedParams
 from .region.params import Region
@@ -94,7 +94,7 @@ class CompareParams(RegisterParams):
         description="Values on the follow-up, as baseline_values, for the follow-up's file; "
         "or a follow_up_values PNG part.",
     )
-    value_range: tuple[Coordinate, Coordinate] | None = Field(
+    value_range: ValueRange | None = Field(
         None,
         description="With a values PNG part: the values its black and white stand for "
         "(default [0, 1]), as /v1/transfer's.",

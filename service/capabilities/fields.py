@@ -38,7 +38,17 @@ Vector3 = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
 Matrix3 = Annotated[list[Vector3], Field(min_length=3, max_length=3)]
 #: A name of a zone or a curve: what the answer and the picture label it with.
 Name = Annotated[str, Field(min_length=1, max_length=120)]
+
+
 #: Coordinates on the map: the layout's x or y of a flatten answer.
+def _low_below_high(value_range: tuple[float, float]) -> tuple[float, float]:
+    if not value_range[0] < value_range[1]:
+        raise ValueError("[low, high] with low < high")
+    return value_range
+
+
+#: The values a picture's black and white stand for, or values are drawn between.
+ValueRange = Annotated[tuple[Coordinate, Coordinate], AfterValidator(_low_below_high)]
 MapCoordinates = Annotated[list[Coordinate], Field(fail_fast=True)]
 
 

@@ -12,7 +12,7 @@ from typing import Annotated
 
 import numpy as np
 from PIL import Image
-from pydantic import ConfigDict, Field, field_validator
+from pydantic import ConfigDict, Field
 
 from transforms import Framing, TransformInputError, pixels
 
@@ -23,7 +23,7 @@ from ..meshio import Mesh
 from ..outputs import Output
 from ..outputs.lookup import grey_alpha_png16, lookup_bytes
 from .context import Context
-from .fields import MAX_COORDINATE, Coordinate, FramingParams, output_choice
+from .fields import MAX_COORDINATE, Coordinate, FramingParams, ValueRange, output_choice
 from .inputs import PngFile, PngPart
 from .region.answers import ResolvedParams
 from .region.params import MESH_PARAMS_EXAMPLE, MeshParams
@@ -42,7 +42,7 @@ class TransferParams(MeshParams, FramingParams):
         "order), or the name of a per-vertex property of the file (a PLY property, a glTF "
         "custom attribute such as _FEATURE_ID_0); each within +-1e15.",
     )
-    value_range: tuple[Coordinate, Coordinate] | None = Field(
+    value_range: ValueRange | None = Field(
         None,
         description="With an image part: the values its black and white stand for (default "
         "[0, 1]). With values: the values drawn as 0 and 65535 (default: their least and "
@@ -56,13 +56,6 @@ class TransferParams(MeshParams, FramingParams):
         "face_ids or barycentric (application/octet-stream): the look-up images, a "
         "little-endian array behind a 16-byte header (docs/api.md says how to read it).",
     ) = None
-
-    @field_validator("value_range")
-    @classmethod
-    def _low_below_high(cls, value_range):
-        if value_range is not None and not value_range[0] < value_range[1]:
-            raise ValueError("[low, high] with low < high")
-        return value_range
 
     model_config = ConfigDict(
         json_schema_extra={

@@ -1,6 +1,9 @@
 """Edge classification: boundary, outline, loops."""
 
 import numpy as np
+import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from transforms import region_edges
 from transforms.topology import RegionEdges, face_components
@@ -65,15 +68,58 @@ def test_loops_of_disk_annulus_and_closed_surface():
     assert closed.boundary_loops() == 0 and len(closed.boundary) == 0
 
 
-def test_threads_give_the_same_edges():
-    vertices, faces = sphere_mesh(120, 240)
-    orientation = np.where(np.arange(len(faces)) % 97 == 0, -1, 1).astype(np.int8)
-    keep = np.arange(len(faces)) % 13 != 0
-    one = region_edges(faces[keep], orientation[keep], len(vertices), threads=1)
-    for threads in (2, 3):
-        many = region_edges(faces[keep], orientation[keep], len(vertices), threads=threads)
-        assert as_set(one.boundary) == as_set(many.boundary)
-        assert as_set(one.outline) == as_set(many.outline)
+def _edges_by_brute_force(faces, orientation):
+    """Boundary and outline as sorted (low, high) lists, from a dict of each edge's sides."""
+    sides = {}
+    for face, turn in zip(faces.tolist(), orientation.tolist(), strict=True):
+        for c in range(3):
+            a, b = face[c], face[(c + 1) % 3]
+            if a != b:
+                sides.setdefault((min(a, b), max(a, b)), []).append(turn if a < b else -turn)
+    smooth = {edge for edge, s in sides.items() if sorted(s) == [-1, 1]}
+    boundary = sorted(edge for edge, s in sides.items() if len(s) == 1)
+    return boundary, sorted(set(sides) - smooth)
+
+
+def _pieces_by_brute_force(faces):
+    """Labels numbered by first face, from scipy's components of the faces-sharing-an-edge
+    graph built with a dict."""
+    on_edge = {}
+    for f, face in enumerate(faces.tolist()):
+        for c in range(3):
+            a, b = face[c], face[(c + 1) % 3]
+            on_edge.setdefault((min(a, b), max(a, b)), []).append(f)
+    pairs = [(fs[0], g) for fs in on_edge.values() for g in fs[1:]]
+    rows, cols = zip(*pairs, strict=True) if pairs else ((), ())
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(faces), len(faces)))
+    return connected_components(graph, directed=False)[1]
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_edges_and_pieces_agree_with_brute_force_on_random_soups(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 60))
+    faces = rng.integers(0, n, (int(rng.integers(1, 150)), 3))
+    orientation = rng.integers(-1, 2, len(faces)).astype(np.int8)
+    edges = region_edges(faces, orientation, n)
+    boundary, outline = _edges_by_brute_force(faces, orientation)
+    assert edges.boundary.tolist() == [list(e) for e in boundary]
+    assert edges.outline.tolist() == [list(e) for e in outline]
+    assert (face_components(faces) == _pieces_by_brute_force(faces)).all()
+
+
+def test_a_fan_of_many_faces_round_one_vertex_is_sorted_exactly():
+    # Above the insertion sort's bucket size: the merge sort's path.
+    k = 500
+    rng = np.random.default_rng(3)
+    faces = np.stack([np.zeros(k, int), np.arange(1, k + 1), np.arange(2, k + 2)], axis=1)
+    faces = faces[rng.permutation(k)]
+    orientation = rng.choice(np.array([-1, 1], dtype=np.int8), k)
+    edges = region_edges(faces, orientation, k + 2)
+    boundary, outline = _edges_by_brute_force(faces, orientation)
+    assert edges.boundary.tolist() == [list(e) for e in boundary]
+    assert edges.outline.tolist() == [list(e) for e in outline]
+    assert (face_components(faces) == 0).all()
 
 
 def test_empty_boundary_has_no_loops():

@@ -78,6 +78,9 @@ class RegionValidation:
     boundary_edges : (k, 2) int, vertex pairs (indices as in the measured faces) of the edges
         only one region face uses
     winding : int, +1 when the file's winding is outward, -1 when it was flipped
+    encloses_centre : bool, the region has no outline edge (every edge is smooth interior):
+        seen from the centre it closes round it and covers every direction, so no cap of
+        directions is free of it
     """
 
     singular_point_faces: np.ndarray
@@ -92,6 +95,7 @@ class RegionValidation:
     boundary_loops: int
     boundary_edges: np.ndarray
     winding: int
+    encloses_centre: bool = False
 
     @property
     def seam_free(self) -> bool:
@@ -188,6 +192,7 @@ def validate(
         boundary_loops=edges.boundary_loops(),
         boundary_edges=edges.boundary,
         winding=winding,
+        encloses_centre=len(edges.outline) == 0,
     )
 
 

@@ -51,8 +51,9 @@ MEANINGS = {
     '"largest" keeps the largest alone.',
     WarningCode.SEAM_ON_REGION: "The seam or a singular point lies on the region, so the map "
     "is not one patch (validation.seam_faces, singular_point_faces). The message says whether "
-    'a cap of directions is free of the region (then "auto" puts the seam there) or how large '
-    "the largest gap between its vertices' directions is.",
+    'a cap of directions is free of the region (then "auto" puts the seam there) or, when none '
+    "is, that the region closes round the centre or how large the largest gap between its "
+    "vertices' directions is.",
     WarningCode.REGION_FOLDS: "Triangles of the region are folded in the map or face away "
     "from the centre, so the map overlaps itself there (validation.folded_faces, "
     "backfacing_faces). The message gives how many, and whether untangling was asked for.",

@@ -377,12 +377,15 @@ class MeshRegion:
         return self.selection.pieces
 
     @cached_property
-    def free_cap(self) -> tuple[float, float]:
+    def free_cap(self) -> tuple[float, float | None]:
         """Degrees: the angular radius of the largest cap free of the region seen from its
         centre, and that of the largest gap between its vertices' directions
         (:func:`transforms.fit.emptycap.region_free_cap`; found once, for the validation
-        and the warnings)."""
+        and the warnings). A region that closes round its centre (no outline edge) leaves
+        no cap free whatever its vertices' gaps: ``(0.0, None)`` without a search."""
         flat = self.flat
+        if flat.validation.encloses_centre:
+            return 0.0, None
         points = self.mesh.vertices[flat.vertex_ids]
         boundary = flat.validation.boundary_edges
         _, free, gap = region_free_cap(
@@ -522,13 +525,17 @@ def _warn_of_the_seam(region: MeshRegion, ctx: Context) -> None:
             'seam there ("auto" or /v1/fit does)',
         )
     else:
+        # A region closed round its centre covers every direction whatever its vertices'
+        # gaps (region.free_cap does not look for them then).
+        gaps = ""
+        if gap is not None:
+            gaps = f"; the largest gap between its vertices' directions is {gap:.3g} degrees"
         ctx.warn(
             WarningCode.SEAM_ON_REGION,
             "region",
             "the seam or a singular point lies on the region: no cap is free of it seen from "
-            "the centre (its faces close round every direction), so no pole can keep them off; "
-            f"the largest gap between its vertices' directions is {gap:.3g} degrees. A smaller "
-            "region, or a centre that sees it from one side, can be one patch",
+            f"the centre (its faces close round every direction), so no pole can keep them off"
+            f"{gaps}. A smaller region, or a centre that sees it from one side, can be one patch",
         )
 
 

@@ -6,7 +6,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from transforms import region_edges
-from transforms.topology import RegionEdges, face_components
+from transforms.topology import RegionEdges, face_components, representatives
 
 from .conftest import grid_mesh, sphere_mesh
 
@@ -143,3 +143,14 @@ def test_a_triangle_soup_is_one_piece_where_its_triangles_meet():
     soup = np.arange(6).reshape(2, 3)
     assert len(np.unique(face_components(soup))) == 2
     assert len(np.unique(face_components(soup, corners))) == 1
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_each_point_is_welded_to_the_first_row_at_its_exact_position(seed):
+    rng = np.random.default_rng(seed)
+    distinct = rng.integers(-3, 4, (int(rng.integers(1, 40)), 3)).astype(float) * 0.5
+    points = distinct[rng.integers(0, len(distinct), int(rng.integers(1, 400)))]
+    points[rng.random(points.shape) < 0.2] *= -1.0  # -0.0 where a coordinate is 0
+    first = {}
+    expected = [first.setdefault(tuple(p), i) for i, p in enumerate(points.tolist())]
+    assert representatives(points).tolist() == expected  # -0.0 == 0.0 as dict keys too

@@ -10,10 +10,10 @@ arrays of the region's size.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numba import njit
 
 from .arrays import as_angles, as_faces, as_points, unit_scale
 from .cap import PoleCap
@@ -163,32 +163,49 @@ def measure_checked(
         "layout_double_area": np.empty(m),
         "degenerate": np.empty(m, dtype=bool),
         "crosses_seam": np.empty(m, dtype=bool),
-        "contains_north": np.empty(m, dtype=bool),
-        "contains_south": np.empty(m, dtype=bool),
+        "contains_north": np.zeros(m, dtype=bool),
+        "contains_south": np.zeros(m, dtype=bool),
         "stretch_max": np.empty(m),
         "stretch_min": np.empty(m),
     }
-    singular = (cap.north, cap.south)
-    plane = np.empty(len(phi), dtype=np.complex128)
-    plane.real, plane.imag = phi, theta
     sides = _sides_of_singular_lines(rows, cap, threads)
+    recheck = np.empty(m, dtype=np.uint8)  # _UNSURE, _NEAR_NORTH, _NEAR_SOUTH bits
+    faces = np.ascontiguousarray(faces)
 
-    def measure(block: slice) -> None:
-        ids = faces[block].T.astype(np.intp, order="C")  # take() converts int32 every call
-        corners = np.empty((3, 3, ids.shape[1]))  # (axis, corner, face)
-        for axis in range(3):
-            np.take(rows[axis], ids, out=corners[axis])
-        # (phi|theta, corner, face), gathered as pairs: one take instead of two.
-        layout = np.take(plane, ids).view(np.float64).reshape(*ids.shape, 2).transpose(2, 0, 1)
-        face_sides = np.bitwise_or.reduce(np.take(sides, ids), axis=0)
-
-        def unscaled(picked: np.ndarray) -> np.ndarray:
-            return unscaled_rows[:, ids[:, picked]]  # (axis, corner, k)
-
-        views = {k: v[block] for k, v in out.items()}
-        return _measure_block(corners, layout, unscaled, singular, face_sides, views)
+    def measure(block: slice) -> float:
+        return _measure_block(
+            rows,
+            phi,
+            theta,
+            faces,
+            sides,
+            block.start,
+            block.stop,
+            out["orientation"],
+            out["double_area"],
+            out["layout_double_area"],
+            out["degenerate"],
+            out["crosses_seam"],
+            out["stretch_max"],
+            out["stretch_min"],
+            recheck,
+        )
 
     longest_legs = map_blocks(measure, m, threads)
+    # Orientation seen from the centre, exact where the rounding bound left its sign in doubt.
+    unsure = np.flatnonzero(recheck & _UNSURE)
+    if unsure.size:
+        (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = unscaled_rows[:, faces[unsure].T]
+        out["orientation"][unsure] = orient3d_sign_components(x0, y0, z0, x1, y1, z1, x2, y2, z2)
+    for point, bit, hit in (
+        (cap.north, _NEAR_NORTH, out["contains_north"]),
+        (cap.south, _NEAR_SOUTH, out["contains_south"]),
+    ):
+        near = np.flatnonzero(recheck & bit)
+        if near.size:
+            hit[near] = _contains_singular_point(
+                unscaled_rows[:, faces[near].T], out["orientation"][near], point
+            )
     # The third edge is at most the sum of the two at corner 0.
     edge_bound = 2.0 * math.sqrt(max(longest_legs))
     return FaceMeasures(
@@ -196,92 +213,91 @@ def measure_checked(
     )
 
 
+#: Bits of a face's recheck code from :func:`_measure_block`: its orientation's sign is in
+#: doubt; it may hold the north, the south singular point (the exact tests decide).
+_UNSURE, _NEAR_NORTH, _NEAR_SOUTH = np.uint8(1), np.uint8(2), np.uint8(4)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _measure_block(
-    corners: np.ndarray,
-    layout: np.ndarray,
-    unscaled: Callable[[np.ndarray], np.ndarray],
-    singular,
-    face_sides: np.ndarray,
-    out: dict,
+    rows,
+    phi,
+    second,
+    faces,
+    sides,
+    first,
+    last,
+    orientation,
+    double_area,
+    layout_double_area,
+    degenerate,
+    crosses_seam,
+    stretch_max,
+    stretch_min,
+    recheck,
 ) -> float:
-    """Fill ``out`` (views into the per-face arrays) for one block of faces; return the largest
-    squared edge at corner 0.
-
-    ``corners`` are scaled; ``unscaled(rows)`` gives the original corners of some of the
-    block's faces, ``(3, 3, k)``, for the exact tests.
-    """
-    e1 = corners[:, 1] - corners[:, 0]
-    e2 = corners[:, 2] - corners[:, 0]
-    normal = np.empty_like(e1)
-    for i, j, k in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
-        np.multiply(e1[j], e2[k], out=normal[i])
-        normal[i] -= e1[k] * e2[j]
-    double_area = np.sqrt(_dot(normal, normal), out=out["double_area"])
-    g11, g12, g22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
-    longest_leg = float(np.maximum(g11, g22).max())
-    f1 = layout[:, 1] - layout[:, 0]
-    f2 = layout[:, 2] - layout[:, 0]
-    layout_area = np.multiply(f1[0], f2[1], out=out["layout_double_area"])
-    layout_area -= f1[1] * f2[0]
-
-    # Orientation seen from the centre: c0 . (e1 x e2) = det[c0, c1, c2], exact where the
-    # rounding bound leaves its sign in doubt.
-    det = _dot(corners[:, 0], normal)
-    orientation = out["orientation"]
-    np.sign(det, out=orientation, casting="unsafe")
-    reference = g11 + g22
-    unsure = np.flatnonzero(np.abs(det) <= _ORIENT_BOUND * reference + _ORIENT_SLACK)
-    if unsure.size:
-        (x0, x1, x2), (y0, y1, y2), (z0, z1, z2) = unscaled(unsure)
-        orientation[unsure] = orient3d_sign_components(x0, y0, z0, x1, y1, z1, x2, y2, z2)
-
-    degenerate = np.less_equal(double_area, DEGENERATE_RTOL * reference, out=out["degenerate"])
-    phi = layout[0]
-    span = np.maximum(np.maximum(phi[0], phi[1]), phi[2])
-    span -= np.minimum(np.minimum(phi[0], phi[1]), phi[2])
-    np.greater(span, math.pi, out=out["crosses_seam"])
-    _contains_singular_points(
-        unscaled,
-        normal,
-        orientation,
-        singular,
-        face_sides,
-        out["contains_north"],
-        out["contains_south"],
-    )
-
-    # Singular values of the affine map from the triangle (in its own plane) to its layout
-    # triangle. In the orthonormal basis (e1 / |e1|, its normal in the plane) the 3D edges are
-    # columns [[p, q], [0, r]]; J = F [[p, q], [0, r]]^-1 with F the layout edges. Then
-    # s1 = sqrt(E^2 + H^2) + sqrt(F^2 + G^2) from J's conformal and anti-conformal parts, and
-    # s2 = |det J| / s1: sums of squares, accurate even for a similarity (s1 = s2).
-    # Meaningless (inf or NaN) on degenerate faces, which the metrics skip.
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        p = np.sqrt(g11)
-        shear = g12 / g11  # q / p
+    """Measure faces ``first:last`` into the per-face arrays (see :class:`FaceMeasures`);
+    return the largest squared edge at corner 0. ``rows`` (3, n) are scaled, ``phi`` and
+    ``second`` the layout, ``sides`` the vertices' codes (:func:`_sides_of_singular_lines`).
+    ``recheck`` gets each face's bits for the exact tests left to numpy. One face at a time,
+    every quantity in the order of operations the section's formulas give, so no (m,)
+    temporary is made."""
+    longest_leg = 0.0
+    north_bits = _X_BITS | _NORTH_BITS | _AHEAD_NORTH_BIT
+    south_bits = _X_BITS | _SOUTH_BITS | _AHEAD_SOUTH_BIT
+    for f in range(first, last):
+        i, j, k = faces[f, 0], faces[f, 1], faces[f, 2]
+        x0, y0, z0 = rows[0, i], rows[1, i], rows[2, i]
+        ax, ay, az = rows[0, j] - x0, rows[1, j] - y0, rows[2, j] - z0  # e1
+        bx, by, bz = rows[0, k] - x0, rows[1, k] - y0, rows[2, k] - z0  # e2
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        area = math.sqrt(nx * nx + ny * ny + nz * nz)
+        g11, g12, g22 = (
+            ax * ax + ay * ay + az * az,
+            ax * bx + ay * by + az * bz,
+            bx * bx + by * by + bz * bz,
+        )
+        longest_leg = max(longest_leg, max(g11, g22))
+        p0, p1, p2 = phi[i], phi[j], phi[k]
+        f1u, f1v = p1 - p0, second[j] - second[i]
+        f2u, f2v = p2 - p0, second[k] - second[i]
+        layout_area = f1u * f2v - f1v * f2u
+        # Orientation seen from the centre: c0 . (e1 x e2) = det[c0, c1, c2].
+        det = x0 * nx + y0 * ny + z0 * nz
+        orientation[f] = 1 if det > 0 else (-1 if det < 0 else 0)
+        reference = g11 + g22
+        code = _UNSURE if abs(det) <= _ORIENT_BOUND * reference + _ORIENT_SLACK else 0
+        face_sides = sides[i] | sides[j] | sides[k]
+        if face_sides & north_bits == north_bits:
+            code |= _NEAR_NORTH
+        if face_sides & south_bits == south_bits:
+            code |= _NEAR_SOUTH
+        recheck[f] = code
+        double_area[f] = area
+        layout_double_area[f] = layout_area
+        crosses_seam[f] = max(max(p0, p1), p2) - min(min(p0, p1), p2) > math.pi
+        # Singular values of the affine map from the triangle (in its own plane) to its
+        # layout triangle. In the orthonormal basis (e1 / |e1|, its normal in the plane) the
+        # 3D edges are columns [[p, q], [0, r]]; J = F [[p, q], [0, r]]^-1 with F the layout
+        # edges. Then s1 = sqrt(E^2 + H^2) + sqrt(F^2 + G^2) from J's conformal and
+        # anti-conformal parts, and s2 = |det J| / s1: sums of squares, accurate even for a
+        # similarity (s1 = s2). Meaningless (inf or NaN) on degenerate faces, which the
+        # metrics skip.
+        p = math.sqrt(g11)
+        shear = g12 / g11
         inverse_p = 1.0 / p
-        inverse_r = p / double_area
-        a = f1[0] * inverse_p
-        c = f1[1] * inverse_p
-        b = f2[0] - shear * f1[0]
-        b *= inverse_r
-        d = f2[1] - shear * f1[1]
-        d *= inverse_r
-        conformal_part = _norm2(a + d, c - b)
-        s1 = np.add(conformal_part, _norm2(a - d, c + b), out=out["stretch_max"])
-        s1 *= 0.5
-        s2 = np.divide(np.abs(layout_area) / double_area, s1, out=out["stretch_min"])
-        # Degenerate in the layout: squashed flat (also NaN from a degenerate 3D triangle).
-        degenerate |= ~(s2 > DEGENERATE_RTOL * s1)
+        inverse_r = p / area
+        a, c = f1u * inverse_p, f1v * inverse_p
+        b = (f2u - shear * f1u) * inverse_r
+        d = (f2v - shear * f1v) * inverse_r
+        s1 = (math.sqrt((a + d) * (a + d) + (c - b) * (c - b))
+              + math.sqrt((a - d) * (a - d) + (c + b) * (c + b))) * 0.5  # fmt: skip
+        s2 = abs(layout_area) / area / s1
+        stretch_max[f], stretch_min[f] = s1, s2
+        # Degenerate in 3D, or squashed flat in the layout (also NaN from a degenerate 3D
+        # triangle).
+        degenerate[f] = area <= DEGENERATE_RTOL * reference or not s2 > DEGENERATE_RTOL * s1
     return longest_leg
-
-
-def _norm2(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """``sqrt(x^2 + y^2)`` for values far from overflow (faster than ``np.hypot``); ``x`` is
-    overwritten with the result."""
-    x *= x
-    x += y * y
-    return np.sqrt(x, out=x)
 
 
 #: Bits of a vertex's side code: for the plane x = 0 and, for each singular point s, the
@@ -337,46 +353,42 @@ def _sides_of_singular_lines(rows: np.ndarray, cap: PoleCap, threads: int = 1) -
     return codes
 
 
-def _contains_singular_points(
-    unscaled, normal, orientation, singular, face_sides, north_out, south_out
-) -> None:
-    """Whether the ray from the centre through each singular point meets each closed triangle
-    (docs/math.md, section 6: "holds a singular point").
+def _contains_singular_point(corners: np.ndarray, orientation: np.ndarray, point) -> np.ndarray:
+    """(k,) bool: whether the ray from the centre through the singular ``point`` meets each
+    closed triangle (docs/math.md, section 6: "holds a singular point").
 
-    Only faces whose corners lie on both sides of both planes through the singular line and
-    not all behind the centre as seen along the ray (see :func:`_sides_of_singular_lines`)
-    can; for them, with ``e_ij = det[s, c_i, c_j]`` over the
-    three edges and ``d = det[c0, c1, c2]``, all exact, the ray along ``s`` hits when all
-    ``e_ij >= 0`` and ``d > 0``, or all ``e_ij <= 0`` and ``d < 0`` (their sum is ``s . n``;
-    the hit is at ``t = d / (s . n) > 0``). When ``d = 0`` the plane of the triangle holds the
-    centre, and the ray can only meet it inside that plane: :func:`_ray_in_plane_hits`.
+    Asked only of faces whose corners lie on both sides of both planes through the singular
+    line and not all behind the centre as seen along the ray (see
+    :func:`_sides_of_singular_lines`). With ``e_ij = det[s, c_i, c_j]`` over the three edges
+    and ``d = det[c0, c1, c2]`` (``orientation``), all exact, the ray along ``s`` hits when
+    all ``e_ij >= 0`` and ``d > 0``, or all ``e_ij <= 0`` and ``d < 0`` (their sum is
+    ``s . n``; the hit is at ``t = d / (s . n) > 0``). When ``d = 0`` the plane of the
+    triangle holds the centre, and the ray can only meet it inside that plane:
+    :func:`_ray_in_plane_hits`.
+
+    Parameters
+    ----------
+    corners : (3, 3, k) float, ``[axis, corner, face]``, unscaled
+    orientation : (k,) int8, exact
+    point : (3,) float, the singular point
     """
-    pairs = ((0, 1), (1, 2), (2, 0))
-    for point, hit, bits in zip(
-        singular,
-        (north_out, south_out),
-        (_NORTH_BITS | _AHEAD_NORTH_BIT, _SOUTH_BITS | _AHEAD_SOUTH_BIT),
-        strict=True,
-    ):
-        hit[:] = False
-        both = _X_BITS | bits
-        rows = np.flatnonzero((face_sides & both) == both)
-        if rows.size == 0:
-            continue
-        sx, sy, sz = point
-        cx, cy, cz = unscaled(rows)
-        signs = [
-            orient3d_sign_components(sx, sy, sz, cx[i], cy[i], cz[i], cx[j], cy[j], cz[j])
-            for i, j in pairs
-        ]
-        d = orientation[rows]
-        all_nonnegative = (signs[0] >= 0) & (signs[1] >= 0) & (signs[2] >= 0)
-        all_nonpositive = (signs[0] <= 0) & (signs[1] <= 0) & (signs[2] <= 0)
-        hit[rows] = (all_nonnegative & (d > 0)) | (all_nonpositive & (d < 0))
-        in_plane = np.flatnonzero(all_nonnegative & all_nonpositive & (d == 0))
-        if in_plane.size:
-            corners = np.stack([cx, cy, cz])[:, :, in_plane]
-            hit[rows[in_plane]] = _ray_in_plane_hits(corners, normal[:, rows[in_plane]], point)
+    sx, sy, sz = point
+    cx, cy, cz = corners
+    signs = [
+        orient3d_sign_components(sx, sy, sz, cx[i], cy[i], cz[i], cx[j], cy[j], cz[j])
+        for i, j in ((0, 1), (1, 2), (2, 0))
+    ]
+    all_nonnegative = (signs[0] >= 0) & (signs[1] >= 0) & (signs[2] >= 0)
+    all_nonpositive = (signs[0] <= 0) & (signs[1] <= 0) & (signs[2] <= 0)
+    hit = (all_nonnegative & (orientation > 0)) | (all_nonpositive & (orientation < 0))
+    in_plane = np.flatnonzero(all_nonnegative & all_nonpositive & (orientation == 0))
+    if in_plane.size:
+        planar = corners[:, :, in_plane]
+        e1, e2 = planar[:, 1] - planar[:, 0], planar[:, 2] - planar[:, 0]
+        normal = np.stack([e1[(i + 1) % 3] * e2[(i + 2) % 3] - e1[(i + 2) % 3] * e2[(i + 1) % 3]
+                           for i in range(3)])  # fmt: skip
+        hit[in_plane] = _ray_in_plane_hits(planar, normal, point)
+    return hit
 
 
 def _ray_in_plane_hits(corners: np.ndarray, normal: np.ndarray, direction: np.ndarray):
@@ -420,11 +432,3 @@ def _ray_in_plane_hits(corners: np.ndarray, normal: np.ndarray, direction: np.nd
         crossing = side[i] * side[j] < 0
         hits |= crossing & (cross(u[i], v[i], u[j], v[j]) == side[j])
     return hits
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise dot product of (d, b) arrays."""
-    out = a[0] * b[0]
-    for i in range(1, len(a)):
-        out += a[i] * b[i]
-    return out

@@ -15,12 +15,14 @@ lists them.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
-from .arrays import blocks
+from .checkpoints import checkpoint
 from .errors import TransformInputError
 from .faces import FaceMeasures
 
@@ -28,13 +30,15 @@ from .faces import FaceMeasures
 _SORT_BELOW = 65536
 #: Size of the sample that brackets the quantile, and the bracket's half-width in weight.
 _SAMPLE = 32768
-_BRACKET = 0.004
+_BRACKET = 0.01
+#: How much wider the second bracket is, where the sample's first misled.
+_WIDE = 4.0
 #: The quantiles every summary gives: the median and the 95th percentile.
 _P50, _P95 = 0.5, 0.95
 _BINS = 1024
 
 #: Values around the ``q`` quantile of a weighted sample: ``(sample, weights, q)`` to
-#: ``(low, high)`` (:func:`_bracket`).
+#: ``(low, high)`` (by default the sample's ``q -+ _BRACKET`` quantiles, :func:`_brackets`).
 Bracket = Callable[[np.ndarray, np.ndarray, float], tuple[float, float]]
 
 
@@ -97,13 +101,7 @@ def face_distortion(measures: FaceMeasures) -> FaceDistortion:
         Every face is degenerate.
     """
     measured, squared_scale = _measured_faces(measures)
-    conformal = np.empty(measured.size)
-    area = np.empty(measured.size)
-    isometric = np.empty(measured.size)
-    for block in blocks(measured.size):
-        conformal[block], area[block], isometric[block] = _measures_of(
-            measures, _rows_of(measured, block, len(measures)), squared_scale
-        )
+    conformal, area, isometric = _values_of(measures, measured, squared_scale)
     length_scale = measures.scale  # areas back in the mesh's units
     return FaceDistortion(
         faces=measured,
@@ -118,61 +116,34 @@ def face_distortion(measures: FaceMeasures) -> FaceDistortion:
 def distortion(measures: FaceMeasures, *, bracket: Bracket | None = None) -> Distortion:
     """Area-weighted mean, median, 95th percentile and maximum of the three measures.
 
-    One pass over the faces computes each measure block by block and keeps only its sums,
-    maximum and what :func:`weighted_quantile` needs inside a bracket found from a sample
-    (one bracket per quantile); the per-face arrays of :func:`face_distortion` are made only
-    if a bracket misses.
+    Each measure is computed once per face (:func:`_values_of`); one pass over its values
+    keeps its weighted sum, its maximum and what the quantiles need inside the brackets a
+    sample gives them (:func:`_quantiles`).
 
     Parameters
     ----------
     measures : FaceMeasures, from :func:`.faces.measure_faces`
-    bracket : how the quantiles are bracketed from the sample, here and in
-        :func:`weighted_quantile` when a bracket misses; None: :func:`_bracket`. Any bracket
-        gives the same answer, a good one sooner.
+    bracket : how the quantiles are bracketed from the sample; None: :func:`_brackets`'
+        own. Any bracket gives the same answer, a good one sooner.
 
     Returns
     -------
     Distortion
     """
     measured, squared_scale = _measured_faces(measures)
-    weights = measures.double_area  # any common factor cancels in means and quantiles
-    total = float(weights[_rows_of(measured, slice(None), len(measures))].sum())
-    sample = measured[:: max(measured.size // _SAMPLE, 1)]
-    bracket = _bracket if bracket is None else bracket
-    scans = [
-        [_Scan(q, *bracket(values, weights[sample], q)) for q in (_P50, _P95)]
-        for values in _measures_of(measures, sample, squared_scale)
-    ]
-    sums, largest = np.zeros(3), np.full(3, -np.inf)
-    for block in blocks(measured.size):
-        faces = _rows_of(measured, block, len(measures))
-        w = weights[faces]
-        for i, values in enumerate(_measures_of(measures, faces, squared_scale)):
-            sums[i] += np.dot(values, w)
-            largest[i] = max(largest[i], values.max())
-            for scan in scans[i]:
-                scan.add(values, w)
-    per_face: list[FaceDistortion] = []
-
-    def long_way(i: int, q: float) -> Callable[[], float]:
-        def quantile() -> float:  # the sample misled: every face's values
-            if not per_face:
-                per_face.append(face_distortion(measures))
-            found = per_face[0]
-            values = (found.conformal, found.area, found.isometric)[i]
-            return weighted_quantile(values, found.weights, q, bracket=bracket)
-
-        return quantile
-
-    conformal, area, isometric = (
-        Summary(
-            mean=float(sums[i] / total),
-            p50=scans[i][0].settle(total, long_way(i, _P50)),
-            p95=scans[i][1].settle(total, long_way(i, _P95)),
-            max=float(largest[i]),
+    every = measured.size == len(measures)
+    # Any common factor of the weights cancels in means and quantiles.
+    weights = measures.double_area if every else measures.double_area[measured]
+    total = float(weights.sum())
+    summaries = []
+    sample = _sample_rows(measured.size)
+    for values in _values_of(measures, measured, squared_scale):
+        checkpoint()
+        weighted, largest, (p50, p95) = _quantiles(
+            values, weights, total, (_P50, _P95), bracket, sample
         )
-        for i in range(3)
-    )
+        summaries.append(Summary(mean=weighted / total, p50=p50, p95=p95, max=largest))
+    conformal, area, isometric = summaries
     return Distortion(
         conformal=conformal,
         area=area,
@@ -182,33 +153,92 @@ def distortion(measures: FaceMeasures, *, bracket: Bracket | None = None) -> Dis
     )
 
 
-@dataclass
-class _Scan:
-    """One weighted quantile ``q`` found in a pass over blocks of values: the weight below
-    the bracket ``[low, high]`` and the values inside it."""
+#: What one quantile's scan found: the weight below its bracket, and the values inside the
+#: bracket with their weights.
+_Found = tuple[float, np.ndarray, np.ndarray]
 
-    q: float
-    low: float
-    high: float
-    below: float = 0.0
-    inside: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
 
-    def add(self, values: np.ndarray, weights: np.ndarray) -> None:
-        below = values < self.low
-        self.below += float(weights[below].sum())  # a dot with the mask casts it: 6x slower
-        keep = values <= self.high
-        keep &= ~below
-        self.inside.append((values[keep], weights[keep]))
+def _scan(
+    values: np.ndarray, weights: np.ndarray, brackets: list[tuple[float, float]]
+) -> tuple[float, float, list[_Found]]:
+    """One pass over ``values`` ((k,) float, finite) and their ``weights``: the weighted
+    sum, the maximum, and for each ``(low, high)`` bracket what :func:`_settle` needs."""
+    lows = np.array([low for low, _ in brackets], dtype=np.float64)
+    highs = np.array([high for _, high in brackets], dtype=np.float64)
+    weighted, largest, below, counts = _scan_pass(values, weights, lows, highs)
+    found = []
+    for i in range(len(brackets)):
+        inside_values, inside_weights = _inside(values, weights, lows[i], highs[i], counts[i])
+        found.append((float(below[i]), inside_values, inside_weights))
+    return float(weighted), float(largest), found
 
-    def settle(self, total: float, otherwise: Callable[[], float]) -> float:
-        """The quantile of values of weight ``total`` in all, from the bracket when it holds
-        the target weight, else ``otherwise()``."""
-        values = np.concatenate([v for v, _ in self.inside])
-        weights = np.concatenate([w for _, w in self.inside])
-        target = self.q * total
-        if self.below < target <= self.below + weights.sum():
-            return _sorted_quantile(values, weights, target - self.below)
-        return otherwise()
+
+def _settled(found: _Found, target: float) -> float | None:
+    """The quantile of weight ``target`` from a bracket's scan when the bracket holds it."""
+    below, values, weights = found
+    if below < target <= below + weights.sum():
+        return _sorted_quantile(values, weights, target - below)
+    return None
+
+
+def _quantiles(
+    values: np.ndarray,
+    weights: np.ndarray,
+    total: float,
+    qs: tuple[float, ...],
+    bracket: Bracket | None,
+    sample: np.ndarray | slice | None = None,
+) -> tuple[float, float, list[float]]:
+    """The weighted sum and the maximum of ``values`` ((k,) float, finite; ``weights`` sum
+    to ``total`` > 0) and their weighted quantiles ``qs``, exactly: a sample's brackets
+    (:func:`_brackets`), checked and read in one pass (:func:`_scan`). Where the sample
+    misled, once more with a bracket four times as wide, then by the histogram. ``sample``:
+    the rows of the sample, :func:`_sample_rows` when None."""
+    sample = _sample_rows(values.size) if sample is None else sample
+    brackets = _brackets(values[sample], weights[sample], qs, bracket)
+    weighted, largest, scans = _scan(values, weights, brackets)
+    found = []
+    for q, scan in zip(qs, scans, strict=True):
+        target = q * total
+        quantile = _settled(scan, target)
+        if quantile is None and bracket is None:
+            wide = _brackets(values[sample], weights[sample], (q,), None, _WIDE)
+            quantile = _settled(_scan(values, weights, wide)[2][0], target)
+        if quantile is None:
+            quantile = _histogram_quantile(values, weights, target)
+        found.append(quantile)
+    return weighted, largest, found
+
+
+@njit(cache=True, nogil=True)
+def _scan_pass(values, weights, lows, highs):
+    """The weighted sum and the maximum of ``values``, and per bracket ``i`` the weight of
+    the values below ``lows[i]`` and how many lie in ``[lows[i], highs[i]]``."""
+    weighted, largest = 0.0, -np.inf
+    below = np.zeros(lows.size)
+    counts = np.zeros(lows.size, dtype=np.int64)
+    for f in range(values.size):
+        value, weight = values[f], weights[f]
+        weighted += value * weight
+        largest = max(largest, value)
+        for i in range(lows.size):
+            if value < lows[i]:
+                below[i] += weight
+            elif value <= highs[i]:
+                counts[i] += 1
+    return weighted, largest, below, counts
+
+
+@njit(cache=True, nogil=True)
+def _inside(values, weights, low, high, count):
+    """The ``count`` values in ``[low, high]``, and their weights, in their order."""
+    inside_values, inside_weights = np.empty(count), np.empty(count)
+    at = 0
+    for f in range(values.size):
+        if low <= values[f] <= high:
+            inside_values[at], inside_weights[at] = values[f], weights[f]
+            at += 1
+    return inside_values, inside_weights
 
 
 def stretched_faces(measures: FaceMeasures, bound: float) -> np.ndarray:
@@ -218,11 +248,7 @@ def stretched_faces(measures: FaceMeasures, bound: float) -> np.ndarray:
     if measures.degenerate.all():
         return np.empty(0, dtype=np.intp)
     measured, squared_scale = _measured_faces(measures)
-    above = np.empty(measured.size, dtype=bool)
-    for block in blocks(measured.size):
-        faces = _rows_of(measured, block, len(measures))
-        above[block] = _measures_of(measures, faces, squared_scale)[2] > bound
-    return measured[above]
+    return measured[_values_of(measures, measured, squared_scale, isometric_only=True)[0] > bound]
 
 
 def _measured_faces(measures: FaceMeasures) -> tuple[np.ndarray, float]:
@@ -245,34 +271,41 @@ def _measured_faces(measures: FaceMeasures) -> tuple[np.ndarray, float]:
     return measured, float(squared_scale)
 
 
-def _rows_of(measured: np.ndarray, block: slice, m: int) -> np.ndarray | slice:
-    """The faces of ``block`` of ``measured``: the block itself when every face is measured
-    (a slice reads without copying)."""
-    return block if measured.size == m else measured[block]
-
-
-def _measures_of(
-    measures: FaceMeasures, faces: np.ndarray | slice, squared_scale: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Conformal, area and isometric distortion of ``faces`` (positions, non-degenerate).
+def _values_of(
+    measures: FaceMeasures, measured: np.ndarray, squared_scale: float, isometric_only=False
+) -> np.ndarray:
+    """(3, k) float: the conformal, area and isometric distortion of the ``measured`` faces
+    ((k,) positions, non-degenerate); (1, k), the isometric alone, with ``isometric_only``.
 
     Scaling the layout by ``k`` scales both singular values by ``k``; ``k^2`` is
     ``squared_scale``. Isometric: ``(s1^2 + s2^2 + s1^-2 + s2^-2) / 4
     = (s1^2 + s2^2)(1 + 1 / (s1 s2)^2) / 4``.
     """
-    s1, s2 = measures.stretch_max[faces], measures.stretch_min[faces]
-    conformal = np.maximum(s1 / s2, 1.0)
-    product = s1 * s2
-    product *= squared_scale
-    area = np.abs(np.log(product))
-    squares = s1 * s1
-    squares += s2 * s2
-    squares *= 0.25 * squared_scale
-    product *= product
-    np.reciprocal(product, out=product)
-    product += 1.0
-    squares *= product
-    return conformal, area, squares
+    rows = measured if measured.size < len(measures) else np.empty(0, dtype=np.intp)
+    return _face_values(
+        measures.stretch_max, measures.stretch_min, rows, squared_scale, isometric_only
+    )
+
+
+@njit(cache=True, nogil=True)
+def _face_values(stretch_max, stretch_min, rows, squared_scale, isometric_only):
+    """:func:`_values_of` over ``rows`` of the stretches (every face when it is empty), one
+    face at a time."""
+    k = rows.size if rows.size else stretch_max.size
+    out = np.empty((1 if isometric_only else 3, k))
+    quarter = 0.25 * squared_scale
+    for f in range(k):
+        face = rows[f] if rows.size else f
+        s1, s2 = stretch_max[face], stretch_min[face]
+        product = s1 * s2 * squared_scale
+        isometric = (s1 * s1 + s2 * s2) * quarter * (1.0 / (product * product) + 1.0)
+        if isometric_only:
+            out[0, f] = isometric
+        else:
+            out[0, f] = max(s1 / s2, 1.0)
+            out[1, f] = abs(math.log(product))
+            out[2, f] = isometric
+    return out
 
 
 def weighted_quantile(
@@ -281,17 +314,18 @@ def weighted_quantile(
     """The smallest value ``v`` with at least the fraction ``q`` of the weight on values
     ``<= v``.
 
-    Exact, in linear time. A strided sample brackets the answer (the sample's quantiles at
-    ``q -+ _BRACKET``); one pass checks that the bracket holds the target weight and collects
-    the values inside it, which are then sorted. When the sample misleads (it cannot when it
-    is the whole input) the search narrows a weighted histogram instead.
+    Exact, in linear time. A sample (:func:`_sample_rows`) brackets the answer (the
+    sample's quantiles at ``q -+ _BRACKET``); one pass checks that the bracket holds the
+    target weight and collects the values inside it, which are then sorted. When the sample
+    misleads (it cannot when it is the whole input), a wider bracket, then a weighted
+    histogram narrowed to the target.
 
     Parameters
     ----------
     values : (k,) float, finite, k >= 1
     weights : (k,) float, >= 0, positive sum
     q : float in [0, 1]
-    bracket : how the sample brackets the answer; None: :func:`_bracket`. Any bracket gives
+    bracket : how the sample brackets the answer; None: :func:`_brackets`' own. Any bracket gives
         the same answer (one that misses falls back to the histogram), a good one sooner.
     """
     values = np.asarray(values, dtype=np.float64)
@@ -300,28 +334,46 @@ def weighted_quantile(
         raise TransformInputError(
             "values", f"need one weight per value and at least one value, got {values.shape}"
         )
-    target = q * weights.sum()
     if len(values) <= _SORT_BELOW:
-        return _sorted_quantile(values, weights, target)
-    stride = max(len(values) // _SAMPLE, 1)
-    bracket = _bracket if bracket is None else bracket
-    scan = _Scan(q, *bracket(values[::stride], weights[::stride], q))
-    for block in blocks(len(values)):
-        scan.add(values[block], weights[block])
-    return scan.settle(float(weights.sum()), lambda: _histogram_quantile(values, weights, target))
+        return _sorted_quantile(values, weights, q * weights.sum())
+    return _quantiles(values, weights, float(weights.sum()), (q,), bracket)[2][0]
 
 
-def _bracket(sample: np.ndarray, weights: np.ndarray, q: float) -> tuple[float, float]:
-    """Values around the ``q`` quantile of a weighted sample (its ``q -+ _BRACKET``
-    quantiles); the whole range when the sample has no weight."""
+def _sample_rows(n: int) -> np.ndarray | slice:
+    """The rows of ``n`` values that bracket their quantiles: every row when there are at
+    most ``_SAMPLE``, else ``_SAMPLE`` drawn with a fixed seed, ascending. Drawn, not every
+    k-th: a subdivided scan's values repeat with a period of a few faces, which a stride can
+    alias so that the sample's quantile lies outside the bracket (the conformal median of
+    the 1.1M-face head did, and took the histogram's way)."""
+    if n <= _SAMPLE:
+        return slice(None)
+    return np.sort(np.random.default_rng(0).integers(0, n, _SAMPLE))
+
+
+def _brackets(
+    sample: np.ndarray,
+    weights: np.ndarray,
+    qs: tuple[float, ...],
+    bracket: Bracket | None,
+    width: float = 1.0,
+) -> list[tuple[float, float]]:
+    """The bracket of each quantile ``q`` of ``qs`` from a weighted sample: ``bracket``'s, or
+    the sample's ``q -+ width * _BRACKET`` quantiles, from one sort of it for all of them (the
+    whole range when the sample has no weight)."""
+    if bracket is not None:
+        return [bracket(sample, weights, q) for q in qs]
     total = weights.sum()
     if not total > 0:
-        return -np.inf, np.inf
+        return [(-np.inf, np.inf)] * len(qs)
     order = np.argsort(sample)
     share = np.cumsum(weights[order]) / total
-    picks = np.searchsorted(share, [q - _BRACKET, q + _BRACKET]).clip(0, len(order) - 1)
-    low, high = sample[order[picks]]
-    return float(low), float(high)
+    found = []
+    for q in qs:
+        half = width * _BRACKET
+        picks = np.searchsorted(share, [q - half, q + half]).clip(0, len(order) - 1)
+        low, high = sample[order[picks]]
+        found.append((float(low), float(high)))
+    return found
 
 
 def _sorted_quantile(values: np.ndarray, weights: np.ndarray, target: float) -> float:

@@ -126,12 +126,13 @@ def _side_values(faces: np.ndarray, orientation: np.ndarray, packed: np.ndarray)
 @njit(cache=True, nogil=True)
 def _walk_edges(
     start: np.ndarray, grouped: np.ndarray, boundary: np.ndarray, outline: np.ndarray
-) -> tuple[int, int]:
+) -> tuple[int, int, int]:
     """Walk the half-edges grouped by edge: write the boundary and the outline edges' ends into
     ``boundary`` and ``outline`` ((k, 2), when they have rows) and return how many of each
-    there are. An edge from a vertex to itself is no edge."""
+    there are, and how many edges have an odd number of half-edges. An edge from a vertex to
+    itself is no edge."""
     fill = boundary.shape[0] > 0 or outline.shape[0] > 0
-    n_boundary = n_outline = 0
+    n_boundary = n_outline = n_odd = 0
     for v in range(start.shape[0] - 1):
         j, last = start[v], start[v + 1]
         while j < last:
@@ -142,8 +143,11 @@ def _walk_edges(
                 summed += (side + 1) * (side + 1)  # 0, 1 or 4
                 uses += 1
                 j += 1
+            if high == v:
+                continue
+            n_odd += uses % 2
             # Smooth: two half-edges on opposite sides (the only two whose squares sum to 4).
-            if high == v or (uses == 2 and summed == 4):
+            if uses == 2 and summed == 4:
                 continue
             if fill:
                 outline[n_outline, 0], outline[n_outline, 1] = v, high
@@ -152,14 +156,15 @@ def _walk_edges(
                 if fill:
                     boundary[n_boundary, 0], boundary[n_boundary, 1] = v, high
                 n_boundary += 1
-    return n_boundary, n_outline
+    return n_boundary, n_outline, n_odd
 
 
 def edge_classes(
     faces: np.ndarray, orientation: np.ndarray, n_vertices: int
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, int]:
     """The boundary and the outline edges of ``faces``, each ``(k, 2)`` int64 ``(low, high)``
-    pairs in ascending order (docs/math.md, section 6).
+    pairs in ascending order, and how many edges have an odd number of faces (docs/math.md,
+    section 6).
 
     An edge is smooth interior when exactly two half-edges run along it and the third
     vertices of their faces lie on opposite sides of the plane through the centre and the
@@ -181,12 +186,12 @@ def edge_classes(
     low = _side_values(faces, np.ascontiguousarray(orientation, dtype=np.int8), packed)
     start, grouped = _grouped(low, packed, n_vertices)
     none = np.empty((0, 2), dtype=np.int64)
-    n_boundary, n_outline = _walk_edges(start, grouped, none, none)
+    n_boundary, n_outline, n_odd = _walk_edges(start, grouped, none, none)
     boundary = np.empty((n_boundary, 2), dtype=np.int64)
     outline = np.empty((n_outline, 2), dtype=np.int64)
     if n_outline:
         _walk_edges(start, grouped, boundary, outline)
-    return boundary, outline
+    return boundary, outline, n_odd
 
 
 def _checked(faces: np.ndarray, limit: int, n_vertices: int = 0) -> np.ndarray:

@@ -26,10 +26,13 @@ class RegionEdges:
         folds (the two faces on the same side of the edge as seen from the centre), edges of
         faces seen edge-on, and edges with more than two faces. Seen from the centre, the
         outline of the region lies on these edges.
+    odd_edges : int, how many edges have an odd number of faces (none: the faces close up,
+        every edge an even number of times, folds allowed)
     """
 
     boundary: np.ndarray
     outline: np.ndarray
+    odd_edges: int = 0
 
     def boundary_loops(self) -> int:
         """Number of boundary loops: connected components of the boundary edges (a disk has
@@ -158,5 +161,5 @@ def region_edges(faces: np.ndarray, orientation: np.ndarray, n_vertices: int) ->
     RegionEdges
     """
     checkpoint()
-    boundary, outline = edge_classes(faces, orientation, n_vertices)
-    return RegionEdges(boundary=boundary, outline=outline)
+    boundary, outline, odd = edge_classes(faces, orientation, n_vertices)
+    return RegionEdges(boundary=boundary, outline=outline, odd_edges=odd)

@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arrays import blocks, unit_rows
+from .enclosure import encloses_centre
 from .errors import TransformInputError
 from .faces import FaceMeasures
 from .layouts import LAYOUT_ORIENTATION
@@ -78,9 +79,10 @@ class RegionValidation:
     boundary_edges : (k, 2) int, vertex pairs (indices as in the measured faces) of the edges
         only one region face uses
     winding : int, +1 when the file's winding is outward, -1 when it was flipped
-    encloses_centre : bool, the region has no outline edge (every edge is smooth interior):
-        seen from the centre it closes round it and covers every direction, so no cap of
-        directions is free of it
+    encloses_centre : bool, seen from the centre the region closes round it and covers every
+        direction, so no cap of directions is free of it: it has no outline edge, or its
+        faces close up and a ray from the centre crosses them an odd number of times
+        (:func:`.enclosure.encloses_centre`); False claims nothing
     """
 
     singular_point_faces: np.ndarray
@@ -192,7 +194,7 @@ def validate(
         boundary_loops=edges.boundary_loops(),
         boundary_edges=edges.boundary,
         winding=winding,
-        encloses_centre=len(edges.outline) == 0,
+        encloses_centre=encloses_centre(measures, len(edges.outline), edges.odd_edges),
     )
 
 

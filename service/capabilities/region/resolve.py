@@ -381,8 +381,9 @@ class MeshRegion:
         """Degrees: the angular radius of the largest cap free of the region seen from its
         centre, and that of the largest gap between its vertices' directions
         (:func:`transforms.fit.emptycap.region_free_cap`; found once, for the validation
-        and the warnings). A region that closes round its centre (no outline edge) leaves
-        no cap free whatever its vertices' gaps: ``(0.0, None)`` without a search."""
+        and the warnings). A region that closes round its centre (the validation's
+        ``encloses_centre``) leaves no cap free whatever its vertices' gaps: ``(0.0, None)``
+        without a search."""
         flat = self.flat
         if flat.validation.encloses_centre:
             return 0.0, None

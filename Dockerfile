@@ -25,6 +25,11 @@ RUN /opt/meshflat/bin/pip install --no-compile . \
     && find /opt/meshflat -depth -type d \( -name tests -o -name test \) \
         -path '*site-packages/*' -prune -exec rm -rf {} + \
     && rm -rf /opt/meshflat/lib/python3*/site-packages/pip
+# The numba kernels compiled here, into the image: the running container copies them to its
+# writable /tmp at start (service/cli.py), instead of compiling them for several seconds in
+# every worker (transforms/kernels.py). Keyed by the source files and the CPU: on another CPU
+# model they are compiled at start instead.
+RUN NUMBA_CACHE_DIR=/opt/meshflat/kernels /opt/meshflat/bin/python -m transforms.kernels
 
 # -- run -------------------------------------------------------------------------------
 FROM ${PYTHON_IMAGE}
@@ -39,6 +44,8 @@ ENV PATH=/opt/meshflat/bin:$PATH \
     IGL_NUM_THREADS=1 \
     HOME=/tmp \
     TMPDIR=/tmp \
+    NUMBA_CACHE_DIR=/tmp/meshflat-kernels \
+    MESHFLAT_KERNELS_FROM=/opt/meshflat/kernels \
     MESHFLAT_HOST=0.0.0.0 \
     MESHFLAT_PORT=8000 \
     MESHFLAT_WORKERS=1

@@ -20,7 +20,10 @@ $(VENV)/.installed-run: pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e .
 	touch $@
 
+# Both compile the numba kernels first (or load them: about a second once compiled), so no
+# worker and no test compiles them at its first call (transforms/kernels.py).
 serve: $(VENV)/.installed-run
+	$(BIN)/python -m transforms.kernels
 	$(BIN)/meshflat serve --host $(HOST) --port $(PORT)
 
 # `make test`: ruff, then pytest on every core (pytest-xdist; `--dist loadgroup` keeps each
@@ -37,6 +40,7 @@ LEFT_OUT := echo "make test: the tests marked slow were left out (MESHFLAT_ALL_T
 endif
 
 test: $(VENV)/.installed-test
+	$(BIN)/python -m transforms.kernels
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	@status=0; $(BIN)/python -m pytest -n logical --dist loadgroup $(TEST_SELECTION) $(PYTEST_ARGS) \

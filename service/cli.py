@@ -40,6 +40,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -390,6 +391,7 @@ def serve(args: argparse.Namespace) -> None:
     from .observability import capture_warnings, log_config
 
     settings = Settings.from_env()  # a bad variable stops here, named
+    _seed_compiled_kernels()
     workers = args.workers or settings.workers
     # The workers read their settings from the environment: each one's share of the memory
     # budget depends on how many there are (Settings.memory_budget_bytes).
@@ -408,6 +410,15 @@ def serve(args: argparse.Namespace) -> None:
             timeout_graceful_shutdown=math.ceil(settings.request_timeout) + 5,
             timeout_worker_healthcheck=WORKER_SILENCE_S,
         )
+
+
+def _seed_compiled_kernels() -> None:
+    """Copy the numba kernels compiled into the image (``MESHFLAT_KERNELS_FROM``) to numba's
+    cache (``NUMBA_CACHE_DIR``) where it has none yet: the image's own directory is read-only,
+    and numba only reads a cache it could write (transforms/kernels.py)."""
+    given, cache = os.environ.get("MESHFLAT_KERNELS_FROM"), os.environ.get("NUMBA_CACHE_DIR")
+    if given and cache and Path(given).is_dir() and not Path(cache).exists():
+        shutil.copytree(given, cache)
 
 
 @contextmanager

@@ -358,3 +358,21 @@ def test_behind_an_ingress_the_header_timer_and_the_lingering_close_can_be_switc
         assert received.startswith(b"HTTP/1.1 200")
         cut = seconds_until_cut_off(server.port)
     assert cut is not None and cut < 1.2
+
+
+def test_serve_seeds_numba_with_the_image_s_compiled_kernels_once(tmp_path, monkeypatch):
+    """The image's kernels are copied to NUMBA_CACHE_DIR when it is missing, and a cache
+    that exists is left as it is."""
+    from service.cli import _seed_compiled_kernels
+
+    built = tmp_path / "built" / "opt" / "transforms"
+    built.mkdir(parents=True)
+    (built / "kernel.nbi").write_bytes(b"index")
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("MESHFLAT_KERNELS_FROM", str(tmp_path / "built"))
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
+    _seed_compiled_kernels()
+    assert (cache / "opt" / "transforms" / "kernel.nbi").read_bytes() == b"index"
+    (built / "kernel.nbi").write_bytes(b"newer")
+    _seed_compiled_kernels()
+    assert (cache / "opt" / "transforms" / "kernel.nbi").read_bytes() == b"index"

@@ -228,6 +228,11 @@ def as_faces(faces, n_vertices: int, field: str = "faces") -> np.ndarray:
     return np.ascontiguousarray(array, dtype=np.int32 if n_vertices < 2**31 else np.int64)
 
 
+#: The one type of vertex index the numba kernels are compiled for (transforms/kernels.py):
+#: half the memory traffic of int64, and every mesh the service admits has fewer than 2^31
+#: vertices and half-edges.
+INDEX = np.int32
+
 #: Rows handled at a time by the blocked passes: temporaries stay in cache and are reused by
 #: the allocator instead of touching fresh pages (see docs/benchmarks.md).
 BLOCK_ROWS = 32768

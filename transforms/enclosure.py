@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .arrays import INDEX
 from .faces import FaceMeasures
 from .predicates import orient3d_sign_components
 
@@ -71,7 +72,11 @@ def ray_crossings(measures: FaceMeasures, direction: np.ndarray) -> int | None:
     u /= np.linalg.norm(u)
     w = np.cross(direction, u)
     candidates = np.flatnonzero(
-        _candidates(measures.vertices, measures.faces, np.stack([u, w, direction]))
+        _candidates(
+            np.ascontiguousarray(measures.vertices),
+            np.ascontiguousarray(measures.faces, dtype=INDEX),
+            np.stack([u, w, direction]),
+        )
     )
     if candidates.size == 0:
         return 0

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit
 
-from .arrays import as_angles, as_faces, as_points, unit_scale
+from .arrays import INDEX, as_angles, as_faces, as_points, unit_scale
 from .cap import PoleCap
 from .errors import TransformInputError
 from .parallel import map_blocks
@@ -168,9 +168,11 @@ def measure_checked(
         "stretch_max": np.empty(m),
         "stretch_min": np.empty(m),
     }
+    # The one array layout the kernel is compiled for (no copy when it already is).
+    phi, theta = np.ascontiguousarray(phi), np.ascontiguousarray(theta)
     sides = _sides_of_singular_lines(rows, cap, threads)
     recheck = np.empty(m, dtype=np.uint8)  # _UNSURE, _NEAR_NORTH, _NEAR_SOUTH bits
-    faces = np.ascontiguousarray(faces)
+    faces = np.ascontiguousarray(faces, dtype=INDEX)  # the kernels' one index type
 
     def measure(block: slice) -> float:
         return _measure_block(

@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .arrays import INDEX
+
 #: A vertex's values are sorted by insertion below this many, by numpy's sort above (a fan of
 #: thousands of faces round one vertex stays ``k log k``).
 _INSERTION_BELOW = 33
@@ -195,9 +197,10 @@ def edge_classes(
 
 
 def _checked(faces: np.ndarray, limit: int, n_vertices: int = 0) -> np.ndarray:
-    """``faces`` C-contiguous, once it is known that the half-edges and the vertex ids fit the
-    kernels' integers (far beyond any mesh the service's limits admit)."""
-    faces = np.ascontiguousarray(faces)
+    """``faces`` as C-contiguous int32 (:data:`.arrays.INDEX`, the one type the kernels are
+    compiled for), once it is known that the half-edges and the vertex ids fit the kernels'
+    integers (far beyond any mesh the service's limits admit)."""
+    faces = np.asarray(faces)
     if 3 * len(faces) >= limit or max(n_vertices, int(faces.max(initial=0)) + 1) >= limit:
         raise ValueError("more half-edges or vertices than the kernels' integers hold")
-    return faces
+    return np.ascontiguousarray(faces, dtype=INDEX)

@@ -165,6 +165,7 @@ def _scan(
     sum, the maximum, and for each ``(low, high)`` bracket what :func:`_settle` needs."""
     lows = np.array([low for low, _ in brackets], dtype=np.float64)
     highs = np.array([high for _, high in brackets], dtype=np.float64)
+    values, weights = np.ascontiguousarray(values), np.ascontiguousarray(weights)
     weighted, largest, below, counts = _scan_pass(values, weights, lows, highs)
     found = []
     for i in range(len(brackets)):
@@ -283,7 +284,11 @@ def _values_of(
     """
     rows = measured if measured.size < len(measures) else np.empty(0, dtype=np.intp)
     return _face_values(
-        measures.stretch_max, measures.stretch_min, rows, squared_scale, isometric_only
+        np.ascontiguousarray(measures.stretch_max),
+        np.ascontiguousarray(measures.stretch_min),
+        np.ascontiguousarray(rows, dtype=np.intp),
+        float(squared_scale),
+        bool(isometric_only),
     )
 
 

@@ -131,16 +131,47 @@ def distortion(measures: FaceMeasures, *, bracket: Bracket | None = None) -> Dis
     Distortion
     """
     measured, squared_scale = _measured_faces(measures)
+    values = _values_of(measures, measured, squared_scale)
+    return _summarised(measures, measured, values, squared_scale, bracket)
+
+
+def distortion_and_trusted(
+    measures: FaceMeasures, flagged: np.ndarray
+) -> tuple[Distortion, Distortion | None]:
+    """:func:`distortion` over every measured face, and over those not ``flagged`` ((m,)
+    bool) too: the same per-face values (one layout scale for the whole region), computed
+    once. None for the second when every face is flagged or degenerate."""
+    measured, squared_scale = _measured_faces(measures)
+    values = _values_of(measures, measured, squared_scale)
+    every = _summarised(measures, measured, values, squared_scale, None)
+    kept = ~flagged[measured]
+    if not kept.any():
+        return every, None
+    if kept.all():
+        return every, every
+    trusted = _summarised(measures, measured[kept], values[:, kept], squared_scale, None)
+    return every, trusted
+
+
+def _summarised(
+    measures: FaceMeasures,
+    measured: np.ndarray,
+    values: np.ndarray,
+    squared_scale: float,
+    bracket: Bracket | None,
+) -> Distortion:
+    """The summaries of the three measures' ``values`` ((3, k) float) of the ``measured``
+    faces ((k,) positions)."""
     every = measured.size == len(measures)
     # Any common factor of the weights cancels in means and quantiles.
     weights = measures.double_area if every else measures.double_area[measured]
     total = float(weights.sum())
     summaries = []
     sample = _sample_rows(measured.size)
-    for values in _values_of(measures, measured, squared_scale):
+    for measure in values:
         checkpoint()
         weighted, largest, (p50, p95) = _quantiles(
-            values, weights, total, (_P50, _P95), bracket, sample
+            measure, weights, total, (_P50, _P95), bracket, sample
         )
         summaries.append(Summary(mean=weighted / total, p50=p50, p95=p95, max=largest))
     conformal, area, isometric = summaries

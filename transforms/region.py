@@ -3,7 +3,7 @@ and distortion metrics (docs/math.md end to end: frames, a method, validation, d
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -14,7 +14,7 @@ from .errors import TransformInputError
 from .faces import FaceMeasures, measure_checked, measure_faces
 from .frames import Frame
 from .layouts import Layout, layout_xy, measured_second
-from .metrics import Distortion, FaceDistortion, distortion, face_distortion
+from .metrics import Distortion, FaceDistortion, distortion_and_trusted, face_distortion
 from .topology import representatives, welded_by
 from .validation import RegionValidation, validate
 from .viewpoint import check_center_sees_area
@@ -222,13 +222,6 @@ def _judge(
     and over the trusted ones, and the count of flagged faces."""
     # One after the other: side by side on two threads they only compete for memory.
     validation = validate(measures, winding, threads, links)
-    metrics = distortion(measures)
     flagged = flagged_mask(validation, len(measures))
-    count = int(flagged.sum())
-    if count == 0:
-        return validation, metrics, metrics, 0
-    if count == len(measures):
-        return validation, metrics, None, count
-    # The same per-face values (one layout scale for the whole region), over the rest.
-    trusted = distortion(replace(measures, degenerate=measures.degenerate | flagged))
-    return validation, metrics, trusted, count
+    metrics, trusted = distortion_and_trusted(measures, flagged)
+    return validation, metrics, trusted, int(flagged.sum())

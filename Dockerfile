@@ -20,7 +20,11 @@ COPY transforms ./transforms
 COPY service ./service
 # A regular (not editable) install; the bytecode is compiled here because the running
 # container cannot write it.
+# The sources' times are set to a whole second before anything is compiled from them: the
+# image's layers keep whole seconds, and numba's compiled kernels are keyed by the exact time.
 RUN /opt/meshflat/bin/pip install --no-compile . \
+    && find /opt/meshflat/lib -path '*site-packages/transforms/*' -name '*.py' \
+        -exec touch -d @1700000000 {} + \
     && /opt/meshflat/bin/python -m compileall -q -j 0 /opt/meshflat \
     && find /opt/meshflat -depth -type d \( -name tests -o -name test \) \
         -path '*site-packages/*' -prune -exec rm -rf {} + \
@@ -29,7 +33,8 @@ RUN /opt/meshflat/bin/pip install --no-compile . \
 # writable /tmp at start (service/cli.py), instead of compiling them for several seconds in
 # every worker (transforms/kernels.py). Keyed by the source files and the CPU: on another CPU
 # model they are compiled at start instead.
-RUN NUMBA_CACHE_DIR=/opt/meshflat/kernels /opt/meshflat/bin/python -m transforms.kernels
+# (-P: the installed package, not /src's copy, whose path would key them.)
+RUN NUMBA_CACHE_DIR=/opt/meshflat/kernels /opt/meshflat/bin/python -P -m transforms.kernels
 
 # -- run -------------------------------------------------------------------------------
 FROM ${PYTHON_IMAGE}

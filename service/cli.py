@@ -414,11 +414,19 @@ def serve(args: argparse.Namespace) -> None:
 
 def _seed_compiled_kernels() -> None:
     """Copy the numba kernels compiled into the image (``MESHFLAT_KERNELS_FROM``) to numba's
-    cache (``NUMBA_CACHE_DIR``) where it has none yet: the image's own directory is read-only,
-    and numba only reads a cache it could write (transforms/kernels.py)."""
+    cache (``NUMBA_CACHE_DIR``), each file the cache does not have yet: the image's own
+    directory is read-only, and numba only reads a cache it could write
+    (transforms/kernels.py). Importing the kernels has made the cache's directories already,
+    empty, so files are compared, not directories."""
     given, cache = os.environ.get("MESHFLAT_KERNELS_FROM"), os.environ.get("NUMBA_CACHE_DIR")
-    if given and cache and Path(given).is_dir() and not Path(cache).exists():
-        shutil.copytree(given, cache)
+    if not (given and cache and Path(given).is_dir()):
+        return
+
+    def copy_if_missing(source: str, target: str) -> None:
+        if not Path(target).exists():
+            shutil.copy2(source, target)
+
+    shutil.copytree(given, cache, dirs_exist_ok=True, copy_function=copy_if_missing)
 
 
 @contextmanager

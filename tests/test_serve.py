@@ -361,14 +361,15 @@ def test_behind_an_ingress_the_header_timer_and_the_lingering_close_can_be_switc
 
 
 def test_serve_seeds_numba_with_the_image_s_compiled_kernels_once(tmp_path, monkeypatch):
-    """The image's kernels are copied to NUMBA_CACHE_DIR when it is missing, and a cache
-    that exists is left as it is."""
+    """The image's kernels are copied into NUMBA_CACHE_DIR where it lacks them (its empty
+    directories made by importing the kernels), and a kernel it has is left as it is."""
     from service.cli import _seed_compiled_kernels
 
     built = tmp_path / "built" / "opt" / "transforms"
     built.mkdir(parents=True)
     (built / "kernel.nbi").write_bytes(b"index")
     cache = tmp_path / "cache"
+    (cache / "opt" / "transforms").mkdir(parents=True)  # as importing the kernels leaves it
     monkeypatch.setenv("MESHFLAT_KERNELS_FROM", str(tmp_path / "built"))
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(cache))
     _seed_compiled_kernels()

@@ -26,7 +26,11 @@ def ray_hits(
     directions, points, faces, face_levels, level_counts, cell_start, entry_face, entry_box,
     everyone, held, hit_face, weights, hit_points,
 ):  # fmt: skip
-    """The nearest triangle each direction's ray from the centre meets.
+    """The nearest triangle each direction's ray from the centre meets (the smaller position
+    among equally near ones).
+
+    One function with scalar helpers only: numba counts references on every array handed to
+    a helper, each query.
 
     Parameters
     ----------
@@ -46,17 +50,40 @@ def ray_hits(
     zero = 0
     for k in range(directions.shape[0]):
         x, y, z = _unit_ray(directions[k, 0], directions[k, 1], directions[k, 2])
-        face, depth, w0, w1, w2 = -1, np.nan, np.nan, np.nan, np.nan
+        count = 0
         if np.isnan(x):
             zero += 1
         else:
-            count = _held_faces(
-                x, y, z, face_levels, level_counts, cell_start, entry_face, entry_box,
-                everyone, held,
+            # The triangles whose float32 box holds the ray's (u, v), from its cell on each
+            # level of its cube face, compacted without a branch; then everyone.
+            cube, u, v = _cube_coordinate(x, y, z)
+            qu, qv = np.float32(u), np.float32(v)
+            for level in range(level_counts[cube]):
+                cell = _cell(u, v, face_levels[cube, level, 0], face_levels[cube, level, 1],
+                             face_levels[cube, level, 2], face_levels[cube, level, 3],
+                             face_levels[cube, level, 4], face_levels[cube, level, 5])  # fmt: skip
+                first, stop = (cell_start[cell], cell_start[cell + 1]) if cell >= 0 else (0, 0)
+                for entry in range(first, stop):
+                    inside = (entry_box[entry, 0] <= qu) & (qu <= entry_box[entry, 2])
+                    inside &= (entry_box[entry, 1] <= qv) & (qv <= entry_box[entry, 3])
+                    held[count] = entry_face[entry]
+                    count += inside
+            for slot in range(len(everyone)):
+                held[count] = everyone[slot]
+                count += 1
+        best, nearest, e0, e1, e2, total = -1, np.inf, np.nan, np.nan, np.nan, np.nan
+        for slot in range(count):
+            face = held[slot]
+            a, b, c = faces[face, 0], faces[face, 1], faces[face, 2]
+            hit, depth, f0, f1, f2, sum_ = triangle_hit(
+                x, y, z, points[a, 0], points[a, 1], points[a, 2], points[b, 0], points[b, 1],
+                points[b, 2], points[c, 0], points[c, 1], points[c, 2],
             )  # fmt: skip
-            face, depth, w0, w1, w2 = _nearest_of(x, y, z, points, faces, held, count)
-        hit_face[k] = face
-        weights[k, 0], weights[k, 1], weights[k, 2] = w0, w1, w2
+            if hit and (depth < nearest or (depth == nearest and face < best)):
+                best, nearest, e0, e1, e2, total = face, depth, f0, f1, f2, sum_
+        depth = nearest if best >= 0 else np.nan
+        hit_face[k] = best
+        weights[k, 0], weights[k, 1], weights[k, 2] = e0 / total, e1 / total, e2 / total
         hit_points[k, 0], hit_points[k, 1], hit_points[k, 2] = depth * x, depth * y, depth * z
     return zero
 
@@ -74,52 +101,13 @@ def _unit_ray(x, y, z):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _held_faces(
-    x, y, z, face_levels, level_counts, cell_start, entry_face, entry_box, everyone, held
-):  # fmt: skip
-    """Into ``held``: the triangles whose float32 box on the ray's cube face holds its
-    ``(u, v)``, from its cell on each level of that face, then ``everyone``; their count."""
-    cube, u, v = _cube_coordinate(x, y, z)
-    qu, qv = np.float32(u), np.float32(v)
-    count = 0
-    for level in range(level_counts[cube]):
-        # Element by element: a row view would count references on every level.
-        width = face_levels[cube, level, 0]
-        u0, v0 = face_levels[cube, level, 1], face_levels[cube, level, 2]
-        columns, rows = face_levels[cube, level, 3], face_levels[cube, level, 4]
-        offset = face_levels[cube, level, 5]
-        column, row = math.floor((u - u0) / width), math.floor((v - v0) / width)
-        if 0 <= column < columns and 0 <= row < rows:
-            cell = int(offset + row * columns + column)
-            for entry in range(cell_start[cell], cell_start[cell + 1]):
-                inside = (entry_box[entry, 0] <= qu) & (qu <= entry_box[entry, 2])
-                inside &= (entry_box[entry, 1] <= qv) & (qv <= entry_box[entry, 3])
-                held[count] = entry_face[entry]
-                count += inside
-    for face in range(len(everyone)):
-        held[count] = everyone[face]
-        count += 1
-    return count
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _nearest_of(x, y, z, points, faces, held, count):
-    """The nearest of the triangles ``held[:count]`` that the unit ray ``(x, y, z)`` meets
-    (the smaller position among equally near ones): ``(face, depth, w0, w1, w2)``, -1 and
-    NaN for none."""
-    best, nearest, e0, e1, e2, total = -1, np.inf, np.nan, np.nan, np.nan, np.nan
-    for slot in range(count):
-        face = held[slot]
-        a, b, c = faces[face, 0], faces[face, 1], faces[face, 2]
-        hit, depth, f0, f1, f2, sum_ = triangle_hit(
-            x, y, z, points[a, 0], points[a, 1], points[a, 2], points[b, 0], points[b, 1],
-            points[b, 2], points[c, 0], points[c, 1], points[c, 2],
-        )  # fmt: skip
-        if hit and (depth < nearest or (depth == nearest and face < best)):
-            best, nearest, e0, e1, e2, total = face, depth, f0, f1, f2, sum_
-    if best < 0:
-        return -1, np.nan, np.nan, np.nan, np.nan
-    return best, nearest, e0 / total, e1 / total, e2 / total
+def _cell(u, v, width, u0, v0, columns, rows, offset):
+    """The cell of a grid level (``width`` wide from ``(u0, v0)``, ``columns`` x ``rows``,
+    the first numbered ``offset``) that holds ``(u, v)``; -1 outside."""
+    column, row = math.floor((u - u0) / width), math.floor((v - v0) / width)
+    if 0 <= column < columns and 0 <= row < rows:
+        return int(offset + row * columns + column)
+    return -1
 
 
 @njit(cache=True, nogil=True, inline="always")

@@ -186,9 +186,9 @@ class LocateIndex:
         if k < SORTED_QUERIES:
             self._ray_hits(directions, hits)
         else:  # in cube-map order, then back to the queries' rows
-            order = ray_order(directions, _SQUARES)
+            order, ordered_directions = ray_order(directions, _SQUARES)
             ordered = Hits(np.empty(k, dtype=np.int64), np.empty((k, 3)), np.empty((k, 3)))
-            self._ray_hits(take_rows(directions, order), ordered)
+            self._ray_hits(ordered_directions, ordered)
             put_rows(order, *_arrays(ordered), *_arrays(hits))
         return hits
 

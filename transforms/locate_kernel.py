@@ -144,8 +144,9 @@ def _cube_coordinate(x, y, z):
 
 @njit(cache=True, nogil=True)
 def ray_order(directions, squares):
-    """(k,) int: the directions ((k, 3) float) by cube face, then row and column of
-    ``squares`` x ``squares`` squares of it (a counting sort; zero directions first)."""
+    """The directions ((k, 3) float) by cube face, then row and column of ``squares`` x
+    ``squares`` squares of it (a counting sort; zero directions first): (k,) int, their
+    rows in that order, and (k, 3) float, the directions in it."""
     k = directions.shape[0]
     key = np.zeros(k, dtype=np.int64)
     start = np.zeros(6 * squares * squares + 1, dtype=np.int64)
@@ -161,10 +162,14 @@ def ray_order(directions, squares):
     for j in range(1, len(start)):
         start[j] += start[j - 1]
     order = np.empty(k, dtype=np.int64)
+    ordered = np.empty((k, 3))
     for i in range(k):
-        order[start[key[i]]] = i
+        place = start[key[i]]
         start[key[i]] += 1
-    return order
+        order[place] = i
+        ordered[place, 0], ordered[place, 1] = directions[i, 0], directions[i, 1]
+        ordered[place, 2] = directions[i, 2]
+    return order, ordered
 
 
 @njit(cache=True, nogil=True)

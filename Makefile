@@ -56,9 +56,10 @@ bench-fit: $(VENV)/.installed-bench
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.fit_bench $(BENCH_ARGS)
 
 # A click on the map (/v1/locate) end to end through a real server, and the locate index's
-# queries per second against the k-d trees it replaced. Needs curl besides the bench extra.
-bench-locate: $(VENV)/.installed-bench
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.locate_bench $(BENCH_ARGS)
+# queries against Open3D's RaycastingScene (the sites-peers extra; one thread, timed
+# alternately). Needs curl besides the extras.
+bench-locate: $(VENV)/.installed-bench $(VENV)/.installed-sites-peers
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m benchmarks.locate_bench $(BENCH_ARGS)
 
 # Zones and a curve drawn on the map of a 1M-face scalp, measured on the surface, against
 # shapely 2 clipping the triangles (one thread, timed alternately in one process).

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
 
 from transforms import Chart, Frame, PoleCap, TransformInputError, locate, world_to_angles
-from transforms.locate import DIRECT_QUERIES, FEW_QUERIES, LocateIndex
+from transforms.locate import DIRECT_QUERIES, FEW_QUERIES, SORTED_QUERIES, LocateIndex
 
 from .conftest import scalp
 
@@ -187,6 +187,58 @@ def test_rays_that_miss_a_patch_are_misses():
     assert_first_hits(hits, local, faces, directions)
 
 
+def test_many_queries_taken_in_cube_map_order_get_the_answers_each_gets_alone():
+    """From SORTED_QUERIES queries on, the compiled walk takes them in cube-map order and
+    puts the answers back to their rows: brute force's hits, and bit for bit what each
+    query gets alone (the scalar path) and among fewer (the walk in the queries' order)."""
+    rng = np.random.default_rng(10)
+    inner, faces = closed_surface(rng, 300, 0.3)
+    # Two nested layers with a hole above: rays up miss, the others meet the inner one.
+    kept = faces[inner[faces].mean(axis=1)[:, 2] < 0.6]
+    points = np.concatenate([2.0 * inner, inner])
+    both = np.concatenate([kept, kept + len(inner)])
+    directions = rng.normal(size=(SORTED_QUERIES + 500, 3))
+    index = LocateIndex.build(points, both)
+    hits = index.query(directions)
+    assert 0 < (hits.faces == -1).sum() < len(directions)
+    assert (hits.faces[hits.faces >= 0] >= len(kept)).all()
+    assert_first_hits(hits, points, both, directions)
+    for rows in (slice(0, FEW_QUERIES), slice(100, 100 + FEW_QUERIES), slice(0, 1000)):
+        alone = index.query(directions[rows])
+        np.testing.assert_array_equal(alone.faces, hits.faces[rows])
+        np.testing.assert_array_equal(alone.barycentric, hits.barycentric[rows])
+        np.testing.assert_array_equal(alone.points, hits.points[rows])
+
+
+def test_the_index_hits_the_triangles_open3d_hits():
+    """Against an independent ray caster (Open3D's Embree scene, float32; installed with the
+    sites-peers extra): the same triangle for every ray but those within float32's
+    rounding of an edge, at the same distance."""
+    o3d = pytest.importorskip("open3d")
+    vertices, faces = scalp()
+    frame = Frame.from_pole_up([0, 0, -1], [0, 1, 0], (vertices.min(0) + vertices.max(0)) / 2)
+    local = frame.to_local(vertices)
+    directions = np.random.default_rng(11).normal(size=(SORTED_QUERIES + 6000, 3))
+    hits = LocateIndex.build(local, faces).query(directions)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(
+        o3d.core.Tensor(local.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32))
+    )
+    rays = np.zeros((len(directions), 6), dtype=np.float32)
+    rays[:, 3:] = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    answer = scene.cast_rays(o3d.core.Tensor(rays))
+    theirs = answer["primitive_ids"].numpy().astype(np.int64)
+    theirs[theirs == o3d.t.geometry.RaycastingScene.INVALID_ID] = -1
+    assert 0 < (theirs == -1).sum() < len(directions)
+    differ = np.flatnonzero(hits.faces != theirs)
+    assert len(differ) <= len(directions) // 1000
+    ours = hits.faces[differ] >= 0
+    np.testing.assert_array_less(hits.barycentric[differ[ours]].min(axis=1), 1e-5)
+    same = (hits.faces == theirs) & (theirs >= 0)
+    depth = np.linalg.norm(hits.points[same], axis=1)
+    np.testing.assert_allclose(answer["t_hit"].numpy()[same], depth, rtol=1e-5)
+
+
 def test_the_index_is_immutable_and_reused():
     points, faces = closed_surface(np.random.default_rng(7), 50, 0.1)
     index = LocateIndex.build(points, faces)
@@ -215,6 +267,13 @@ def test_locate_refuses_a_zero_direction_and_a_vertex_at_the_centre():
     with pytest.raises(TransformInputError) as error:
         locate(points, faces, [[0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
     assert error.value.field == "directions"
+    index = LocateIndex.build(points, faces)
+    for count in (FEW_QUERIES, FEW_QUERIES + 1, SORTED_QUERIES):
+        directions = np.ones((count, 3))
+        directions[[1, 3]] = 0.0
+        with pytest.raises(TransformInputError, match="zero") as error:
+            index.query(directions)
+        assert error.value.field == "directions"
     with pytest.raises(TransformInputError) as error:
         LocateIndex.build(np.concatenate([points, [[0.0, 0.0, 0.0]]]), [[0, 1, len(points)]])
     assert error.value.field == "vertices"

@@ -19,8 +19,11 @@ there before the exact test (:mod:`.cubemap` builds the map). Triangles that rea
 without being in front of it (a few very large ones next to the centre) are tested against
 every query.
 
-For a handful of queries the index would cost more than it saves: :func:`locate` then tests
-every triangle against the four planes through each ray (no index; same exact test).
+Many queries walk the index in one compiled loop (:mod:`.locate_kernel`, numba), in cube-map
+order; a click's few in plain floats (:meth:`LocateIndex._query_few`); both with the same
+operations, so the same bits. For a handful of queries the index would cost more than it
+saves: :func:`locate` then tests every triangle against the four planes through each ray (no
+index; same exact test).
 """
 
 from __future__ import annotations
@@ -43,9 +46,8 @@ from .cubemap import (
     triangle_boxes,
 )
 from .errors import TransformInputError, listed_rows
+from .locate_kernel import INSIDE, put_rows, ray_hits, ray_order
 
-#: A direction counts as inside when each edge's determinant is above this (relative) amount.
-_INSIDE = -1e-12
 #: Up to this many queries, testing every triangle costs no more than building the index: a
 #: build costs about as much as 15 to 18 direct passes on 100k and on 1.6M faces
 #: (docs/benchmarks.md, locate).
@@ -54,10 +56,13 @@ DIRECT_QUERIES = 16
 #: arithmetic (a click on the map): for so few, a pass of array operations per step costs
 #: more than the step.
 FEW_QUERIES = 4
+#: From this many queries on, :meth:`LocateIndex.query` takes them in cube-map order: its
+#: counting sort costs about as much as the cache misses it saves on this many.
+SORTED_QUERIES = 4096
+#: The cube-map order's squares per side of a cube face.
+_SQUARES = 128
 #: (query, triangle) pairs handled at a time.
 _PAIRS = 1 << 18
-#: Queries looked up at a time (their candidates' arrays stay in cache).
-_QUERIES = 8192
 
 
 @dataclass(frozen=True)
@@ -176,26 +181,39 @@ class LocateIndex:
         directions = as_points(directions, "directions")
         if len(directions) <= FEW_QUERIES:
             return self._query_few(_few_rays(directions))
-        rays = _rays(directions)
-        k = len(rays)
-        cube, u, v = cube_coordinates(rays)
-        # Neighbouring queries one after another: they read the same cells and vertices. A
-        # 16-bit key (the cube face, then 64 x 64 squares of it) sorts in one radix pass.
-        key = (cube.astype(np.uint16) << 12) | (_square(v) << 6) | _square(u)
-        order = np.argsort(key, kind="stable")
-        ordered, cube, u, v = take_rows(rays, order), cube[order], u[order], v[order]
-        # Chunks of queries such that their pairs with the everyone list stay bounded.
-        per_chunk = max(1, _QUERIES // (1 + len(self.everyone) // 16))
+        k = len(directions)
         hits = Hits(np.empty(k, dtype=np.int64), np.empty((k, 3)), np.empty((k, 3)))
-        for part in blocks(k, per_chunk):
-            found = self._query_chunk(ordered[part], cube[part], u[part], v[part])
-            # Each chunk's answers straight to their queries' rows (np.put: fast for rows).
-            mine = order[part]
-            hits.faces[mine] = found[0]
-            row_items = (3 * mine[:, None] + np.arange(3)).ravel()
-            np.put(hits.barycentric, row_items, found[1])
-            np.put(hits.points, row_items, found[2][:, None] * ordered[part])
+        if k < SORTED_QUERIES:
+            self._ray_hits(directions, hits)
+        else:  # in cube-map order, then back to the queries' rows
+            order, ordered_directions = ray_order(directions, _SQUARES)
+            ordered = Hits(np.empty(k, dtype=np.int64), np.empty((k, 3)), np.empty((k, 3)))
+            self._ray_hits(ordered_directions, ordered)
+            put_rows(order, *_arrays(ordered), *_arrays(hits))
         return hits
+
+    def _ray_hits(self, directions: np.ndarray, hits: Hits) -> None:
+        """:func:`.locate_kernel.ray_hits` of ``directions`` into ``hits``; a zero direction
+        refused."""
+        face_levels, level_counts = self._level_table
+        zero = ray_hits(
+            directions,
+            self.points,
+            self.faces,
+            face_levels,
+            level_counts,
+            self.cell_start,
+            self.entry_face,
+            self.entry_box,
+            self.everyone,
+            np.empty(self._held_size, dtype=np.int64),
+            hits.faces,
+            hits.barycentric,
+            hits.points,
+        )
+        if zero:
+            rows = np.flatnonzero(~directions.any(axis=1))
+            raise TransformInputError("directions", "a direction is zero", rows)
 
     def _query_few(self, rays: np.ndarray) -> Hits:
         """:meth:`query` for a few rays, each looked up alone: the same cells, the same
@@ -241,47 +259,24 @@ class LocateIndex:
             by_face[int(face)].append((width, u0, v0, int(columns), int(rows), int(offset)))
         return tuple(tuple(levels) for levels in by_face)
 
-    def _query_chunk(self, rays, cube, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        k = len(rays)
-        query, cell = self._lookups(cube, u, v)
-        start = self.cell_start[cell]
-        counts = self.cell_start[cell + 1] - start
-        first = np.cumsum(counts) - counts
-        entry = np.arange(counts.sum()) + np.repeat(start - first, counts)
-        box = take_rows(self.entry_box, entry)
-        # float32 like the boxes, which are padded by more than its rounding; u first, then v
-        # on what is left.
-        pair_query = np.repeat(query, counts)
-        qu = np.repeat(u.astype(np.float32)[query], counts)
-        rows = np.flatnonzero((box[:, 0] <= qu) & (qu <= box[:, 2]))
-        pair_query = pair_query[rows]
-        qv = v.astype(np.float32)[pair_query]
-        near = (box[:, 1][rows] <= qv) & (qv <= box[:, 3][rows])
-        pairs = [(pair_query[near], self.entry_face[entry[rows[near]]])]
-        if len(self.everyone):
-            pairs.append((np.repeat(np.arange(k), len(self.everyone)), np.tile(self.everyone, k)))
-        return _nearest(self.points, self.faces, rays, pairs)
+    @cached_property
+    def _held_size(self) -> int:
+        """Room for the entries of the fullest cell on each level, and the everyone list."""
+        most = int(np.diff(self.cell_start).max(initial=0))
+        return len(self.levels) * most + len(self.everyone)
 
-    def _lookups(self, cube, u, v) -> tuple[np.ndarray, np.ndarray]:
-        """(query, cell): the cell each query is in on each level of its cube face (none on
-        a level whose boxes it is outside); ``cube`` sorted."""
-        queries, cells = [], []
-        bounds = np.searchsorted(cube, np.arange(7))
-        for face, width, u0, v0, columns, rows, offset in self.levels:
-            mine = slice(bounds[int(face)], bounds[int(face) + 1])
-            column = np.floor((u[mine] - u0) / width)
-            row = np.floor((v[mine] - v0) / width)
-            inside = np.flatnonzero((column >= 0) & (column < columns) & (row >= 0) & (row < rows))
-            queries.append(inside + mine.start)
-            cells.append((offset + row[inside] * columns + column[inside]).astype(np.int64))
-        if not queries:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
-        return np.concatenate(queries), np.concatenate(cells)
-
-
-def _square(coordinate: np.ndarray) -> np.ndarray:
-    """A gnomonic coordinate in [-1, 1] as one of 64 steps (6 bits)."""
-    return np.clip((coordinate + 1.0) * 32.0, 0, 63).astype(np.uint16)
+    @cached_property
+    def _level_table(self) -> tuple[np.ndarray, np.ndarray]:
+        """The grid levels by cube face for :func:`.locate_kernel.ray_hits`: (6, L, 6)
+        float, per face its levels' width, origin u and v, columns, rows and first cell id
+        (the first ``counts[face]`` rows), and (6,) int counts."""
+        counts = np.zeros(6, dtype=np.int64)
+        table = np.zeros((6, max(1, max(map(len, self._face_levels))), 6))
+        for face, levels in enumerate(self._face_levels):
+            counts[face] = len(levels)
+            if levels:
+                table[face, : len(levels)] = levels
+        return table, counts
 
 
 def _rays(directions) -> np.ndarray:
@@ -393,7 +388,7 @@ def _nearest_hit(ray, faces: list[int], corners: list):
         total = e0 + e1 + e2
         if total == 0.0:
             continue
-        slack = _INSIDE * (abs(e0) + abs(e1) + abs(e2))
+        slack = INSIDE * (abs(e0) + abs(e1) + abs(e2))
         side = 1.0 if total > 0.0 else -1.0
         if side * e0 < slack or side * e1 < slack or side * e2 < slack:
             continue
@@ -428,7 +423,7 @@ def _pair_hits(points, faces, rays, query, face):
     across = cross_rows(c1, c2)
     e0, e1, e2 = _dot(q, across), _dot(q, cross_rows(c2, c0)), _dot(q, cross_rows(c0, c1))
     total = e0 + e1 + e2  # q . n with n = (c1 - c0) x (c2 - c0)
-    slack = _INSIDE * (np.abs(e0) + np.abs(e1) + np.abs(e2))
+    slack = INSIDE * (np.abs(e0) + np.abs(e1) + np.abs(e2))
     side = np.sign(total)
     inside = (side * e0 >= slack) & (side * e1 >= slack) & (side * e2 >= slack)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -442,6 +437,11 @@ def _pair_hits(points, faces, rays, query, face):
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise ``a . b`` of (p, 3) arrays."""
     return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+
+
+def _arrays(hits: Hits) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The faces, barycentric weights and points of ``hits`` (the arrays themselves)."""
+    return hits.faces, hits.barycentric, hits.points
 
 
 def _hits(rays, hit_face, weights, depth) -> Hits:

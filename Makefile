@@ -49,7 +49,7 @@ bench: $(VENV)/.installed-bench
 
 # BLAS on one thread, as in the service (service/__init__.py).
 bench-fit: $(VENV)/.installed-bench
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.fit_bench $(BENCH_ARGS)
+	IGL_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.fit_bench $(BENCH_ARGS)
 
 # A click on the map (/v1/locate) end to end through a real server, and the locate index's
 # queries per second against the k-d trees it replaced. Needs curl besides the bench extra.

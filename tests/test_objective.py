@@ -9,7 +9,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from transforms import Chart, Frame, Layout, Method, PoleCap, flatten_region
-from transforms.fit.objective import Candidates, FaceEnergy, Motion, region_energy
+from transforms.fit import fused
+from transforms.fit.objective import (
+    Candidates,
+    FaceEnergy,
+    Motion,
+    _energy_gradient,
+    _Warped,
+    region_energy,
+)
 
 from .conftest import scalp
 
@@ -104,3 +112,45 @@ def test_the_slope_is_the_derivative_of_the_energy(region, layout, method):
     cap = (ahead.cap_cosine - behind.cap_cosine) / (2 * step)
     np.testing.assert_allclose(slope.cap_cosine, cap, rtol=1e-5, atol=1e-8)
     assert slope.scores.objective[0] == pytest.approx(energy.scores(start).objective[0])
+
+
+@pytest.mark.parametrize("split", [True, False])
+@pytest.mark.parametrize("layout", list(Layout))
+@pytest.mark.parametrize("method", [Method.DISTORTED, Method.STANDARD])
+def test_the_compiled_scores_are_numpys_to_rounding(region, layout, method, split):
+    vertices, faces = region
+    energy = FaceEnergy(vertices, faces, method, layout)
+    batch = _candidates(vertices, 12, seed=3)
+    fused = energy.scores(batch, split)
+    plain = energy._chunk(batch, split)
+    for name, expected in zip(("objective", "energy", "hidden", "cap_cosine"), plain, strict=True):
+        np.testing.assert_allclose(getattr(fused, name), expected, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("layout", list(Layout))
+def test_the_compiled_gradient_is_numpys_to_rounding(region, layout):
+    vertices, faces = region
+    energy = FaceEnergy(vertices, faces, Method.DISTORTED, layout)
+    one = _candidates(vertices, 1, seed=4)
+    center = one.centers[0] * energy.scale
+    warped = _Warped.of(energy.points - center, one.rotations[0], float(one.sigmas[0]), layout)
+    sums = energy.shapes.sums(warped.plane[None], center[None])
+    expected = _energy_gradient(energy.shapes, warped.plane, center, sums)
+    shapes = energy.shapes
+    by_phi, by_second = fused.energy_gradient(
+        shapes.faces,
+        shapes.metric,
+        shapes.double_area,
+        shapes.cubed_area,
+        shapes.measurable,
+        shapes.normals,
+        shapes.offsets,
+        center,
+        warped.plane.real.copy(),
+        warped.plane.imag.copy(),
+        len(warped.plane),
+        *(float(v[0]) for v in sums[:5]),
+    )
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(by_phi, expected.real, rtol=1e-9, atol=1e-12 * scale)
+    np.testing.assert_allclose(by_second, expected.imag, rtol=1e-9, atol=1e-12 * scale)

@@ -29,8 +29,10 @@ from ..errors import TransformInputError
 from ..sampling import area_sample
 from ..topology import region_edges
 
-#: Faces in the first linear program, and the most violated faces added per round.
-_FIRST_FACES = 2048
+#: Faces in the first linear program, and the most violated faces added per round (a few
+#: planes bind; a solve's cost grows with its rows, so a small first program answers most
+#: regions in one round or two).
+_FIRST_FACES = 256
 _ADDED_FACES = 4096
 _ROUNDS = 30
 #: Faces in the least-back-facing programs when the kernel is empty, and their rounds.

@@ -29,10 +29,13 @@ from ..errors import TransformInputError
 from ..sampling import area_sample
 from ..topology import region_edges
 
-#: Faces in the first linear program, and the most violated faces added per round (a few
-#: planes bind; a solve's cost grows with its rows, so a small first program answers most
-#: regions in one round or two).
-_FIRST_FACES = 256
+#: Faces in the first linear program, and the most violated faces added per round. A few
+#: planes bind: on a region of up to ``_SMALL_REGION`` faces the first program takes
+#: ``_FIRST_FACES_SMALL`` (a solve's cost grows with its rows), on a larger one
+#: ``_FIRST_FACES``, so that fewer rounds check every plane.
+_FIRST_FACES = 2048
+_FIRST_FACES_SMALL = 256
+_SMALL_REGION = 32_768
 _ADDED_FACES = 4096
 _ROUNDS = 30
 #: Faces in the least-back-facing programs when the kernel is empty, and their rounds.
@@ -310,7 +313,8 @@ def _chebyshev(planes: KernelPlanes, count: int) -> tuple[np.ndarray, float] | N
     """The largest ball inside the first ``count`` planes (faces first, then the closing
     ones) and the box, by constraint generation; None when there is none."""
     j = len(planes.faces)
-    rows = np.concatenate([area_sample(planes.areas[:j], _FIRST_FACES), np.arange(j, count)])
+    first = _FIRST_FACES_SMALL if j <= _SMALL_REGION else _FIRST_FACES
+    rows = np.concatenate([area_sample(planes.areas[:j], first), np.arange(j, count)])
     normals, offsets = planes.normals[:count], planes.offsets[:count]
     for _ in range(_ROUNDS):
         checkpoint()

@@ -30,7 +30,8 @@ from scipy.spatial import ConvexHull, QhullError
 
 from ..arrays import cross_rows, unit_rows
 from ..checkpoints import checkpoint
-from ..margins import arcs_to_point
+from ..margins import _POINT_ARC
+from . import fused
 
 #: Rounds of :func:`exact_empty_cap`, and the most directions a round adds (a region that
 #: covers nearly every direction has only gaps between its vertices, which take many rounds
@@ -147,8 +148,8 @@ def free_cap(
     corners = units[faces[:, 0]], units[faces[:, 1]], units[faces[:, 2]]
     sides = _Sides.of(*corners)
     poles = [pole, *_boundary_poles(units, edge, loops, edge_pole)]
-    ends = (faces[:, 0], faces[:, 1]), (faces[:, 1], faces[:, 2]), (faces[:, 2], faces[:, 0])
-    clear = [_clear(units, corners, sides, ends, candidate) for candidate in poles]
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    clear = [_clear(units, faces, sides, candidate) for candidate in poles]
     best = int(np.argmax(clear))
     return poles[best], clear[best], vertex_gap
 
@@ -206,33 +207,32 @@ class _Sides:
         sides, lengths = [], []
         for start, end in ((a, b), (b, c), (c, a)):
             checkpoint()
-            sides.append(cross_rows(start, end))
+            sides.append(np.ascontiguousarray(cross_rows(start, end)))
             lengths.append(np.arccos(np.clip(np.einsum("ij,ij->i", start, end), -1.0, 1.0)))
-        return cls(*sides, a + b + c, np.array(lengths))
+        return cls(*sides, np.ascontiguousarray(a + b + c), np.array(lengths))
 
 
-def _clear(
-    units: np.ndarray, corners: tuple, sides: _Sides, ends: tuple, pole: np.ndarray
-) -> float:
+def _clear(units: np.ndarray, faces: np.ndarray, sides: _Sides, pole: np.ndarray) -> float:
     """Radians from unit ``pole`` to the nearest point of the region seen from the centre:
-    0 when a face's spherical triangle holds it, else the nearest vertex or edge arc (an
-    arc of length L whose nearer end is d away comes no nearer than d - L / 2, so only the
-    arcs that may come nearer than the vertices are measured). ``ends``: each side's two
-    corners' rows of ``units``, (m,) each."""
+    0 when a face's spherical triangle holds it (:func:`_covers`), else the nearest vertex or
+    edge arc (an arc of length L whose nearer end is d away comes no nearer than d - L / 2,
+    so only the arcs that may come nearer than the nearest so far are measured, by
+    :func:`transforms.margins.arcs_to_point`'s formula): one compiled pass
+    (:func:`.fused.clear_of`)."""
     checkpoint()
-    a, b, c = corners
-    if _covers(sides, pole).any():
-        return 0.0
-    cosine = units @ pole
-    free = math.acos(float(np.clip(cosine.max(), -1.0, 1.0)))
-    for (start, end), (first, last), length in zip(
-        ((a, b), (b, c), (c, a)), ends, sides.lengths, strict=True
-    ):
-        nearest = np.arccos(np.clip(np.maximum(cosine[first], cosine[last]), -1.0, 1.0))
-        dips = np.flatnonzero(nearest - length / 2.0 < free)
-        if len(dips):
-            free = min(free, float(arcs_to_point(start[dips], end[dips], pole).min()))
-    return free
+    return float(
+        fused.clear_of(
+            units,
+            faces,
+            sides.ab,
+            sides.bc,
+            sides.ca,
+            sides.middle,
+            sides.lengths,
+            np.ascontiguousarray(pole, dtype=np.float64),
+            _POINT_ARC,
+        )
+    )
 
 
 def _covers(sides: _Sides, pole: np.ndarray) -> np.ndarray:

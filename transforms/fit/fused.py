@@ -221,3 +221,68 @@ def energy_gradient(
         gx[i0] -= first_x + second_x
         gy[i0] -= first_y + second_y
     return gx, gy
+
+
+@njit(cache=True, nogil=True)
+def _angle(p0, p1, p2, q0, q1, q2):
+    """:func:`transforms.margins._angle` of two vectors."""
+    c0 = p1 * q2 - p2 * q1
+    c1 = p2 * q0 - p0 * q2
+    c2 = p0 * q1 - p1 * q0
+    return math.atan2(math.sqrt(c0 * c0 + c1 * c1 + c2 * c2), p0 * q0 + p1 * q1 + p2 * q2)
+
+
+@njit(cache=True, nogil=True)
+def _arc_to_point(a, b, point, point_arc):
+    """:func:`transforms.margins.arcs_to_point` of one arc ``a -> b`` (unit, (3,) each)."""
+    a0, a1, a2 = a[0], a[1], a[2]
+    b0, b1, b2 = b[0], b[1], b[2]
+    p0, p1, p2 = point[0], point[1], point[2]
+    n0 = a1 * b2 - a2 * b1
+    n1 = a2 * b0 - a0 * b2
+    n2 = a0 * b1 - a1 * b0
+    length = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    ends = min(_angle(a0, a1, a2, p0, p1, p2), _angle(b0, b1, b2, p0, p1, p2))
+    if not length > point_arc:
+        return ends
+    u0, u1, u2 = n0 / length, n1 / length, n2 / length
+    off_plane = u0 * p0 + u1 * p1 + u2 * p2
+    i0, i1, i2 = p0 - off_plane * u0, p1 - off_plane * u1, p2 - off_plane * u2
+    # a x point and point x b against the normal: the foot between a and b.
+    s0 = (a1 * p2 - a2 * p1) * n0 + (a2 * p0 - a0 * p2) * n1 + (a0 * p1 - a1 * p0) * n2
+    s1 = (p1 * b2 - p2 * b1) * n0 + (p2 * b0 - p0 * b2) * n1 + (p0 * b1 - p1 * b0) * n2
+    if s0 >= 0 and s1 >= 0:
+        to_circle = math.atan2(abs(off_plane), math.sqrt(i0 * i0 + i1 * i1 + i2 * i2))
+        return min(to_circle, ends)
+    return ends
+
+
+@njit(cache=True, nogil=True)
+def clear_of(units, faces, ab, bc, ca, middle, lengths, pole, point_arc):
+    """:func:`.emptycap._clear`: radians from unit ``pole`` to the nearest point of the
+    region seen from the centre, 0 when a face's spherical triangle holds it."""
+    m = faces.shape[0]
+    q0, q1, q2 = pole[0], pole[1], pole[2]
+    for f in range(m):
+        x = ab[f, 0] * q0 + ab[f, 1] * q1 + ab[f, 2] * q2
+        y = bc[f, 0] * q0 + bc[f, 1] * q1 + bc[f, 2] * q2
+        z = ca[f, 0] * q0 + ca[f, 1] * q1 + ca[f, 2] * q2
+        same = (x >= 0 and y >= 0 and z >= 0) or (x <= 0 and y <= 0 and z <= 0)
+        facing = middle[f, 0] * q0 + middle[f, 1] * q1 + middle[f, 2] * q2 > 0
+        if same and facing and (x != 0 or y != 0 or z != 0):
+            return 0.0
+    n = units.shape[0]
+    cosine = np.empty(n)
+    largest = -math.inf
+    for i in range(n):
+        cosine[i] = units[i, 0] * q0 + units[i, 1] * q1 + units[i, 2] * q2
+        largest = max(largest, cosine[i])
+    free = math.acos(min(max(largest, -1.0), 1.0))
+    for side in range(3):
+        for f in range(m):
+            start, end = faces[f, side], faces[f, (side + 1) % 3]
+            ends = max(cosine[start], cosine[end])
+            nearest = math.acos(min(max(ends, -1.0), 1.0))
+            if nearest - lengths[side, f] / 2.0 < free:
+                free = min(free, _arc_to_point(units[start], units[end], pole, point_arc))
+    return free

@@ -154,3 +154,25 @@ def test_the_compiled_gradient_is_numpys_to_rounding(region, layout):
     scale = np.abs(expected).max()
     np.testing.assert_allclose(by_phi, expected.real, rtol=1e-9, atol=1e-12 * scale)
     np.testing.assert_allclose(by_second, expected.imag, rtol=1e-9, atol=1e-12 * scale)
+
+
+@pytest.mark.parametrize("layout", list(Layout))
+@pytest.mark.parametrize("method", [Method.DISTORTED, Method.STANDARD])
+def test_the_compiled_slope_is_numpys_to_rounding(region, layout, method):
+    """The slope's compiled contraction against numpy's: the vertices' moves
+    (``_Warped.moves``) times the energy's gradient per vertex (``_energy_gradient``)."""
+    vertices, faces = region
+    energy = FaceEnergy(vertices, faces, method, layout)
+    one = _candidates(vertices, 1, seed=6)
+    rng = np.random.default_rng(8)
+    motion = Motion(rng.normal(size=(6, 3, 3)), rng.normal(size=(6, 3)), rng.normal(size=6))
+    slope = energy.slope(one, motion)
+    center = one.centers[0] * energy.scale
+    sigma = 1.0 if method is Method.STANDARD else float(one.sigmas[0])
+    warped = _Warped.of(energy.points - center, one.rotations[0], sigma, layout)
+    sums = energy.shapes.sums(warped.plane[None], center[None])
+    toward = _energy_gradient(energy.shapes, warped.plane, center, sums)
+    moves = warped.moves(motion, energy.scale, 0.0 if method is Method.STANDARD else 1.0)
+    expected = moves.phi @ toward.real + moves.second @ toward.imag
+    np.testing.assert_allclose(slope.energy, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(slope.cap_cosine, moves.cap_cosine, rtol=1e-12, atol=1e-15)

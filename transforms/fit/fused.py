@@ -286,3 +286,61 @@ def clear_of(units, faces, ab, bc, ca, middle, lengths, pole, point_arc):
             if nearest - lengths[side, f] / 2.0 < free:
                 free = min(free, _arc_to_point(units[start], units[end], pole, point_arc))
     return free
+
+
+@njit(cache=True, nogil=True)
+def moved_gradient(
+    offsets, rotation, local, r, warped, theta, by_phi, by_second,
+    turns, shifts, log_sigma, sigma, sigma_moves, mercator, margin,
+):  # fmt: skip
+    """:meth:`.objective._Warped.moves` contracted with the energy's gradient per vertex
+    (``by_phi``, ``by_second``): the energy's gradient along each of ``d`` motions (d,) and
+    the cap cosine's (d,). ``turns`` (d, 3, 3): the rotation's derivatives; ``shifts``
+    (d, 3): the centre's, scaled as ``offsets``; ``log_sigma`` (d,)."""
+    d, n = log_sigma.shape[0], offsets.shape[0]
+    gradient = np.zeros(d)
+    cap = np.zeros(d)
+    top = 0
+    for i in range(n):
+        if local[1, i] / r[i] > local[1, top] / r[top]:
+            top = i
+    for k in range(d):
+        t = turns[k]
+        s0 = rotation[0, 0] * shifts[k, 0] + rotation[0, 1] * shifts[k, 1]
+        s0 += rotation[0, 2] * shifts[k, 2]
+        s1 = rotation[1, 0] * shifts[k, 0] + rotation[1, 1] * shifts[k, 1]
+        s1 += rotation[1, 2] * shifts[k, 2]
+        s2 = rotation[2, 0] * shifts[k, 0] + rotation[2, 1] * shifts[k, 1]
+        s2 += rotation[2, 2] * shifts[k, 2]
+        dsigma = sigma_moves * sigma * log_sigma[k]
+        total = 0.0
+        for i in range(n):
+            o0, o1, o2 = offsets[i, 0], offsets[i, 1], offsets[i, 2]
+            dx = (t[0, 0] * o0 + t[0, 1] * o1 + t[0, 2] * o2) - s0
+            dy = (t[1, 0] * o0 + t[1, 1] * o1 + t[1, 2] * o2) - s1
+            dz = (t[2, 0] * o0 + t[2, 1] * o1 + t[2, 2] * o2) - s2
+            x, y, z, ri = local[0, i], local[1, i], local[2, i], r[i]
+            dr = (x * dx + y * dy + z * dz) / ri
+            if i == top:
+                cap[k] = (dy - (y / ri) * dr) / ri
+            a, b, c = warped[0, i], warped[1, i], warped[2, i]
+            da = 2.0 * (sigma * dx + x * dsigma)
+            dc = 2.0 * (sigma * dz + z * dsigma)
+            db = (
+                (sigma * sigma - 1.0) * dr
+                + (sigma * sigma + 1.0) * dy
+                + 2.0 * sigma * (ri + y) * dsigma
+            )
+            across = a * a + b * b
+            rho = math.sqrt(across)
+            dphi = (a * db - b * da) / across
+            drho = (a * da + b * db) / rho
+            dtheta = (c * drho - rho * dc) / (across + c * c)
+            if mercator:
+                if theta[i] > margin and theta[i] < math.pi - margin:
+                    dtheta = dtheta / math.sin(theta[i])
+                else:
+                    dtheta = 0.0
+            total += dphi * by_phi[i] + dtheta * by_second[i]
+        gradient[k] = total
+    return gradient, cap

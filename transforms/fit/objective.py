@@ -250,9 +250,24 @@ class FaceEnergy:
             zero = np.zeros(len(motion.log_sigma))
             return Slope(scores, zero, zero)
         by_phi, by_second = fused.energy_gradient(*faces, phi, second, len(phi), *sums[:5])
-        moves = warped.moves(motion, self.scale, 0.0 if self.method is Method.STANDARD else 1.0)
-        gradient = moves.phi @ by_phi + moves.second @ by_second
-        return Slope(scores, gradient, moves.cap_cosine)
+        gradient, cap_slope = fused.moved_gradient(
+            warped.offsets,
+            np.ascontiguousarray(warped.rotation),
+            warped.local,
+            warped.r,
+            warped.warped,
+            warped.theta,
+            by_phi,
+            by_second,
+            np.ascontiguousarray(motion.rotation, dtype=np.float64),
+            np.ascontiguousarray(motion.center * self.scale, dtype=np.float64),
+            np.ascontiguousarray(motion.log_sigma, dtype=np.float64),
+            sigma,
+            0.0 if self.method is Method.STANDARD else 1.0,
+            self.layout is Layout.MERCATOR,
+            MERCATOR_THETA_MARGIN,
+        )
+        return Slope(scores, gradient, cap_slope)
 
 
 def region_energy(

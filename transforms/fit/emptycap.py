@@ -115,6 +115,7 @@ def free_cap(
     faces: np.ndarray,
     rows: np.ndarray | None = None,
     boundary: np.ndarray | None = None,
+    loops: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, float, float]:
     """A cap free of a region seen from its centre, as large as found, and the largest gap
     between the region's vertices' directions (docs/math.md, section 9).
@@ -131,6 +132,7 @@ def free_cap(
     faces : (m, 3) int, the region's faces, indices into ``directions``
     rows : (k,) int or None, the rows the hull starts from (:func:`exact_empty_cap`)
     boundary : (b, 2) int or None, the region's boundary edges (rows of ``directions``)
+    loops : :func:`boundary_loops` of ``boundary`` when already known
 
     Returns
     -------
@@ -141,7 +143,7 @@ def free_cap(
     vertex_gap : float, radians: the radius of the largest cap free of vertex directions
     """
     units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
-    edge, loops = _boundary_loops(len(units), boundary)
+    edge, loops = boundary_loops(len(units), boundary) if loops is None else loops
     edge_pole = largest_empty_cap(units[edge])[0] if len(edge) else None
     pole, vertex_gap = exact_empty_cap(units, rows)
     checkpoint()
@@ -154,7 +156,7 @@ def free_cap(
     return poles[best], clear[best], vertex_gap
 
 
-def _boundary_loops(n: int, boundary: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+def boundary_loops(n: int, boundary: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """The boundary's vertices (rows of the ``n`` directions, ascending) and each one's loop
     label; both empty without a boundary. ``boundary``: (k, 2) int, the boundary edges."""
     if boundary is None or len(boundary) == 0:
@@ -175,7 +177,7 @@ def _boundary_poles(
     and ``edge_pole``, the largest cap free of every boundary direction
     (:func:`largest_empty_cap`).
 
-    ``vertices``, ``labels``: the boundary's vertices and their loops (:func:`_boundary_loops`).
+    ``vertices``, ``labels``: the boundary's vertices and their loops (:func:`boundary_loops`).
     """
     if edge_pole is None:
         return []

@@ -29,8 +29,8 @@ from ..frames import Frame
 from ..layouts import Layout
 from ..region import FlatRegion, flatten_region
 from ..sampling import area_sample
-from ..topology import region_edges
 from ..viewpoint import check_center_sees_area
+from .emptycap import boundary_loops
 from .kernel import Kernel, kernel_planes
 from .objective import Candidates, FaceEnergy, region_energy
 
@@ -224,9 +224,17 @@ class _Problem:
 
     @cached_property
     def boundary_edges(self) -> np.ndarray:
-        """(b, 2) int: the region's boundary edges, rows of ``region_points``."""
-        faces = self.region_faces
-        return region_edges(faces, np.ones(len(faces), dtype=np.int8), len(self.used)).boundary
+        """(b, 2) int: the region's boundary edges, rows of ``region_points`` (the kernel's,
+        renumbered: ``used`` ascends, so each edge keeps its order and its lower end first)."""
+        position = np.zeros(len(self.points), dtype=np.int64)
+        position[self.used] = np.arange(len(self.used))
+        return position[self.planes.boundary_edges]
+
+    @cached_property
+    def boundary_loops(self) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`.emptycap.boundary_loops` of :attr:`boundary_edges`: the boundary's
+        vertices (rows of ``region_points``) and their loops."""
+        return boundary_loops(len(self.used), self.boundary_edges)
 
     def release(self) -> None:
         """Let go of what only the search reads: the kernel's planes, the region's own
@@ -236,6 +244,7 @@ class _Problem:
         self.cap_rows = None
         self.__dict__.pop("region_faces", None)
         self.__dict__.pop("boundary_edges", None)
+        self.__dict__.pop("boundary_loops", None)
 
     @property
     def closed(self) -> bool:

@@ -98,7 +98,13 @@ def _frame_and_sigma(
     directions = problem.directions(center)
     cap = None
     if fixed.rotation is None:
-        cap = free_cap(directions, problem.region_faces, problem.cap_rows, problem.boundary_edges)
+        cap = free_cap(
+            directions,
+            problem.region_faces,
+            problem.cap_rows,
+            problem.boundary_edges,
+            problem.boundary_loops,
+        )
         rotation = pole_and_roll(directions, cap[0], fixed.up, notes)
     else:
         rotation = fixed.rotation.rotation

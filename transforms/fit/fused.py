@@ -344,3 +344,51 @@ def moved_gradient(
             total += dphi * by_phi[i] + dtheta * by_second[i]
         gradient[k] = total
     return gradient, cap
+
+
+@njit(cache=True, nogil=True)
+def warp_one(offsets, rotation, sigma, mercator, margin):
+    """:class:`.objective._Warped` of one candidate: the local rows (3, n), the distances
+    (n,), the warped directions times ``r`` (3, n), theta, phi and the measured second
+    coordinate (n,), whether a vertex is at the centre and the cap cosine."""
+    n = offsets.shape[0]
+    local = np.empty((3, n))
+    r = np.empty(n)
+    warped = np.empty((3, n))
+    theta = np.empty(n)
+    phi = np.empty(n)
+    second = np.empty(n)
+    at_centre = False
+    cap = -np.inf
+    for i in range(n):
+        o0, o1, o2 = offsets[i, 0], offsets[i, 1], offsets[i, 2]
+        x = rotation[0, 0] * o0 + rotation[0, 1] * o1 + rotation[0, 2] * o2
+        y = rotation[1, 0] * o0 + rotation[1, 1] * o1 + rotation[1, 2] * o2
+        z = rotation[2, 0] * o0 + rotation[2, 1] * o1 + rotation[2, 2] * o2
+        local[0, i], local[1, i], local[2, i] = x, y, z
+        ri = math.sqrt(x * x + y * y + z * z)
+        if ri < MIN_RADIUS:
+            at_centre = True
+            ri = 1.0
+        r[i] = ri
+        exact = abs(y) + ri
+        complement = (x * x + z * z) / exact
+        if y < 0.0:
+            plus, minus = complement, exact
+        else:
+            plus, minus = exact, complement
+        a = 2.0 * sigma * x
+        b = sigma * sigma * plus - minus
+        c = 2.0 * sigma * z
+        warped[0, i], warped[1, i], warped[2, i] = a, b, c
+        t = math.atan2(math.sqrt(a * a + b * b), c)
+        theta[i] = t
+        angle = math.atan2(b, a)
+        phi[i] = math.pi if angle == -math.pi else angle
+        if mercator:
+            kept = min(max(t, margin), math.pi - margin)
+            second[i] = math.log(math.tan(0.5 * kept))
+        else:
+            second[i] = t
+        cap = max(cap, y / ri)
+    return local, r, warped, theta, phi, second, at_centre, cap

@@ -230,7 +230,11 @@ class FaceEnergy:
         rotation, sigma = candidate.rotations[0], float(candidate.sigmas[0])
         if self.method is Method.STANDARD:
             sigma = 1.0
-        warped = _Warped.of(self.points - center, rotation, sigma, self.layout)
+        offsets = self.points - center
+        mercator = self.layout is Layout.MERCATOR
+        local, r, warped, theta, phi, second, at_centre, cap_cosine = fused.warp_one(
+            offsets, np.ascontiguousarray(rotation), sigma, mercator, MERCATOR_THETA_MARGIN
+        )
         shapes = self.shapes
         faces = (
             shapes.faces,
@@ -242,21 +246,20 @@ class FaceEnergy:
             shapes.offsets,
             np.ascontiguousarray(center),
         )
-        phi, second = warped.plane.real.copy(), warped.plane.imag.copy()
         sums = fused.sums_of_plane(*faces, phi, second)
-        objective, energy, hidden = _objective(tuple(sums[:, None]), np.array([warped.at_centre]))
-        scores = Scores(objective, energy, hidden, np.array([warped.cap_cosine]))
+        objective, energy, hidden = _objective(tuple(sums[:, None]), np.array([at_centre]))
+        scores = Scores(objective, energy, hidden, np.array([cap_cosine]))
         if not np.isfinite(objective[0]):
             zero = np.zeros(len(motion.log_sigma))
             return Slope(scores, zero, zero)
         by_phi, by_second = fused.energy_gradient(*faces, phi, second, len(phi), *sums[:5])
         gradient, cap_slope = fused.moved_gradient(
-            warped.offsets,
-            np.ascontiguousarray(warped.rotation),
-            warped.local,
-            warped.r,
-            warped.warped,
-            warped.theta,
+            offsets,
+            np.ascontiguousarray(rotation),
+            local,
+            r,
+            warped,
+            theta,
             by_phi,
             by_second,
             np.ascontiguousarray(motion.rotation, dtype=np.float64),
@@ -264,7 +267,7 @@ class FaceEnergy:
             np.ascontiguousarray(motion.log_sigma, dtype=np.float64),
             sigma,
             0.0 if self.method is Method.STANDARD else 1.0,
-            self.layout is Layout.MERCATOR,
+            mercator,
             MERCATOR_THETA_MARGIN,
         )
         return Slope(scores, gradient, cap_slope)

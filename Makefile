@@ -47,7 +47,7 @@ test: $(VENV)/.installed-test
 bench: $(VENV)/.installed-bench
 	$(BIN)/python -m benchmarks.transforms_bench $(BENCH_ARGS)
 
-# BLAS on one thread, as in the service (service/__init__.py).
+# BLAS on one thread, as in the service (service/__init__.py), and libigl on one thread.
 bench-fit: $(VENV)/.installed-bench
 	IGL_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.fit_bench $(BENCH_ARGS)
 

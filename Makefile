@@ -51,9 +51,9 @@ test: $(VENV)/.installed-test
 bench: $(VENV)/.installed-bench
 	$(BIN)/python -m benchmarks.transforms_bench $(BENCH_ARGS)
 
-# BLAS on one thread, as in the service (service/__init__.py).
+# BLAS on one thread, as in the service (service/__init__.py), and libigl on one thread.
 bench-fit: $(VENV)/.installed-bench
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.fit_bench $(BENCH_ARGS)
+	IGL_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 $(BIN)/python -m benchmarks.fit_bench $(BENCH_ARGS)
 
 # A click on the map (/v1/locate) end to end through a real server, and the locate index's
 # queries against Open3D's RaycastingScene (the sites-peers extra; one thread, timed

@@ -9,7 +9,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from transforms import Chart, Frame, Layout, Method, PoleCap, flatten_region
-from transforms.fit.objective import Candidates, FaceEnergy, Motion, region_energy
+from transforms.fit import fused
+from transforms.fit.objective import (
+    Candidates,
+    FaceEnergy,
+    Motion,
+    _energy_gradient,
+    _Warped,
+    region_energy,
+)
 
 from .conftest import scalp
 
@@ -104,3 +112,67 @@ def test_the_slope_is_the_derivative_of_the_energy(region, layout, method):
     cap = (ahead.cap_cosine - behind.cap_cosine) / (2 * step)
     np.testing.assert_allclose(slope.cap_cosine, cap, rtol=1e-5, atol=1e-8)
     assert slope.scores.objective[0] == pytest.approx(energy.scores(start).objective[0])
+
+
+@pytest.mark.parametrize("split", [True, False])
+@pytest.mark.parametrize("layout", list(Layout))
+@pytest.mark.parametrize("method", [Method.DISTORTED, Method.STANDARD])
+def test_the_compiled_scores_are_numpys_to_rounding(region, layout, method, split):
+    vertices, faces = region
+    energy = FaceEnergy(vertices, faces, method, layout)
+    batch = _candidates(vertices, 12, seed=3)
+    fused = energy.scores(batch, split)
+    plain = energy._chunk(batch, split)
+    for name, expected in zip(("objective", "energy", "hidden", "cap_cosine"), plain, strict=True):
+        np.testing.assert_allclose(getattr(fused, name), expected, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("layout", list(Layout))
+def test_the_compiled_gradient_is_numpys_to_rounding(region, layout):
+    vertices, faces = region
+    energy = FaceEnergy(vertices, faces, Method.DISTORTED, layout)
+    one = _candidates(vertices, 1, seed=4)
+    center = one.centers[0] * energy.scale
+    warped = _Warped.of(energy.points - center, one.rotations[0], float(one.sigmas[0]), layout)
+    sums = energy.shapes.sums(warped.plane[None], center[None])
+    expected = _energy_gradient(energy.shapes, warped.plane, center, sums)
+    shapes = energy.shapes
+    by_phi, by_second = fused.energy_gradient(
+        shapes.faces,
+        shapes.metric,
+        shapes.double_area,
+        shapes.cubed_area,
+        shapes.measurable,
+        shapes.normals,
+        shapes.offsets,
+        center,
+        warped.plane.real.copy(),
+        warped.plane.imag.copy(),
+        len(warped.plane),
+        *(float(v[0]) for v in sums[:5]),
+    )
+    scale = np.abs(expected).max()
+    np.testing.assert_allclose(by_phi, expected.real, rtol=1e-9, atol=1e-12 * scale)
+    np.testing.assert_allclose(by_second, expected.imag, rtol=1e-9, atol=1e-12 * scale)
+
+
+@pytest.mark.parametrize("layout", list(Layout))
+@pytest.mark.parametrize("method", [Method.DISTORTED, Method.STANDARD])
+def test_the_compiled_slope_is_numpys_to_rounding(region, layout, method):
+    """The slope's compiled contraction against numpy's: the vertices' moves
+    (``_Warped.moves``) times the energy's gradient per vertex (``_energy_gradient``)."""
+    vertices, faces = region
+    energy = FaceEnergy(vertices, faces, method, layout)
+    one = _candidates(vertices, 1, seed=6)
+    rng = np.random.default_rng(8)
+    motion = Motion(rng.normal(size=(6, 3, 3)), rng.normal(size=(6, 3)), rng.normal(size=6))
+    slope = energy.slope(one, motion)
+    center = one.centers[0] * energy.scale
+    sigma = 1.0 if method is Method.STANDARD else float(one.sigmas[0])
+    warped = _Warped.of(energy.points - center, one.rotations[0], sigma, layout)
+    sums = energy.shapes.sums(warped.plane[None], center[None])
+    toward = _energy_gradient(energy.shapes, warped.plane, center, sums)
+    moves = warped.moves(motion, energy.scale, 0.0 if method is Method.STANDARD else 1.0)
+    expected = moves.phi @ toward.real + moves.second @ toward.imag
+    np.testing.assert_allclose(slope.energy, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(slope.cap_cosine, moves.cap_cosine, rtol=1e-12, atol=1e-15)

@@ -30,7 +30,8 @@ from scipy.spatial import ConvexHull, QhullError
 
 from ..arrays import cross_rows, unit_rows
 from ..checkpoints import checkpoint
-from ..margins import arcs_to_point
+from ..margins import _POINT_ARC
+from . import fused
 
 #: Rounds of :func:`exact_empty_cap`, and the most directions a round adds (a region that
 #: covers nearly every direction has only gaps between its vertices, which take many rounds
@@ -114,6 +115,7 @@ def free_cap(
     faces: np.ndarray,
     rows: np.ndarray | None = None,
     boundary: np.ndarray | None = None,
+    loops: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, float, float]:
     """A cap free of a region seen from its centre, as large as found, and the largest gap
     between the region's vertices' directions (docs/math.md, section 9).
@@ -130,6 +132,7 @@ def free_cap(
     faces : (m, 3) int, the region's faces, indices into ``directions``
     rows : (k,) int or None, the rows the hull starts from (:func:`exact_empty_cap`)
     boundary : (b, 2) int or None, the region's boundary edges (rows of ``directions``)
+    loops : :func:`boundary_loops` of ``boundary`` when already known
 
     Returns
     -------
@@ -140,33 +143,48 @@ def free_cap(
     vertex_gap : float, radians: the radius of the largest cap free of vertex directions
     """
     units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
+    edge, loops = boundary_loops(len(units), boundary) if loops is None else loops
+    edge_pole = largest_empty_cap(units[edge])[0] if len(edge) else None
     pole, vertex_gap = exact_empty_cap(units, rows)
     checkpoint()
     corners = units[faces[:, 0]], units[faces[:, 1]], units[faces[:, 2]]
     sides = _Sides.of(*corners)
-    poles = [pole, *_boundary_poles(units, boundary)]
-    clear = [_clear(units, corners, sides, candidate) for candidate in poles]
+    poles = [pole, *_boundary_poles(units, edge, loops, edge_pole)]
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    clear = [_clear(units, faces, sides, candidate) for candidate in poles]
     best = int(np.argmax(clear))
     return poles[best], clear[best], vertex_gap
 
 
-def _boundary_poles(units: np.ndarray, boundary: np.ndarray | None) -> list[np.ndarray]:
-    """Middles of caps free of the boundary's directions: for each of the ``_FREE_TRIES``
-    longest loops, the mean of its directions and its opposite (the two sides of the loop),
-    and the largest cap free of every boundary direction (:func:`largest_empty_cap`).
-
-    ``boundary``: (k, 2) int, the boundary edges (rows of ``units``)."""
+def boundary_loops(n: int, boundary: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The boundary's vertices (rows of the ``n`` directions, ascending) and each one's loop
+    label; both empty without a boundary. ``boundary``: (k, 2) int, the boundary edges."""
     if boundary is None or len(boundary) == 0:
-        return []
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty
     ends = np.asarray(boundary, dtype=np.int64).reshape(-1, 2)
-    n = len(units)
     graph = coo_matrix((np.ones(len(ends)), (ends[:, 0], ends[:, 1])), shape=(n, n))
     _, labels = connected_components(graph, directed=False)
     vertices = np.unique(ends)
-    loops, sizes = np.unique(labels[vertices], return_counts=True)
-    poles = [largest_empty_cap(units[vertices])[0]]
+    return vertices, labels[vertices]
+
+
+def _boundary_poles(
+    units: np.ndarray, vertices: np.ndarray, labels: np.ndarray, edge_pole: np.ndarray | None
+) -> list[np.ndarray]:
+    """Middles of caps free of the boundary's directions: for each of the ``_FREE_TRIES``
+    longest loops, the mean of its directions and its opposite (the two sides of the loop),
+    and ``edge_pole``, the largest cap free of every boundary direction
+    (:func:`largest_empty_cap`).
+
+    ``vertices``, ``labels``: the boundary's vertices and their loops (:func:`boundary_loops`).
+    """
+    if edge_pole is None:
+        return []
+    loops, sizes = np.unique(labels, return_counts=True)
+    poles = [edge_pole]
     for loop in loops[np.argsort(-sizes, kind="stable")[:_FREE_TRIES]]:
-        mean = units[vertices[labels[vertices] == loop]].sum(axis=0)
+        mean = units[vertices[labels == loop]].sum(axis=0)
         length = float(np.linalg.norm(mean))
         if length > 0:
             poles += [mean / length, -mean / length]
@@ -176,41 +194,47 @@ def _boundary_poles(units: np.ndarray, boundary: np.ndarray | None) -> list[np.n
 @dataclass(frozen=True)
 class _Sides:
     """The normals of the great circles through each spherical triangle's sides (``ab``,
-    ``bc``, ``ca``: (m, 3) each, not unit) and the sum of its corners ((m, 3)): what
-    :func:`_covers` asks of every candidate pole, computed once."""
+    ``bc``, ``ca``: (m, 3) each, not unit), the sum of its corners ((m, 3)) and its sides'
+    arc lengths ((3, m)): what :func:`_covers` and :func:`_clear` ask of every candidate pole,
+    computed once."""
 
     ab: np.ndarray
     bc: np.ndarray
     ca: np.ndarray
     middle: np.ndarray
+    lengths: np.ndarray
 
     @classmethod
     def of(cls, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> _Sides:
-        sides = []
+        sides, lengths = [], []
         for start, end in ((a, b), (b, c), (c, a)):
             checkpoint()
-            sides.append(cross_rows(start, end))
-        return cls(*sides, a + b + c)
+            sides.append(np.ascontiguousarray(cross_rows(start, end)))
+            lengths.append(np.arccos(np.clip(np.einsum("ij,ij->i", start, end), -1.0, 1.0)))
+        return cls(*sides, np.ascontiguousarray(a + b + c), np.array(lengths))
 
 
-def _clear(units: np.ndarray, corners: tuple, sides: _Sides, pole: np.ndarray) -> float:
+def _clear(units: np.ndarray, faces: np.ndarray, sides: _Sides, pole: np.ndarray) -> float:
     """Radians from unit ``pole`` to the nearest point of the region seen from the centre:
-    0 when a face's spherical triangle holds it, else the nearest vertex or edge arc (an
-    arc of length L whose nearer end is d away comes no nearer than d - L / 2, so only the
-    arcs that may come nearer than the vertices are measured)."""
+    0 when a face's spherical triangle holds it (:func:`_covers`), else the nearest vertex or
+    edge arc (an arc of length L whose nearer end is d away comes no nearer than d - L / 2,
+    so only the arcs that may come nearer than the nearest so far are measured, by
+    :func:`transforms.margins.arcs_to_point`'s formula): one compiled pass
+    (:func:`.fused.clear_of`)."""
     checkpoint()
-    a, b, c = corners
-    if _covers(sides, pole).any():
-        return 0.0
-    free = cap_radius(units, pole)
-    for start, end in ((a, b), (b, c), (c, a)):
-        ends = np.maximum(start @ pole, end @ pole)
-        nearest = np.arccos(np.clip(ends, -1.0, 1.0))
-        length = np.arccos(np.clip(np.einsum("ij,ij->i", start, end), -1.0, 1.0))
-        dips = np.flatnonzero(nearest - length / 2.0 < free)
-        if len(dips):
-            free = min(free, float(arcs_to_point(start[dips], end[dips], pole).min()))
-    return free
+    return float(
+        fused.clear_of(
+            units,
+            faces,
+            sides.ab,
+            sides.bc,
+            sides.ca,
+            sides.middle,
+            sides.lengths,
+            np.ascontiguousarray(pole, dtype=np.float64),
+            _POINT_ARC,
+        )
+    )
 
 
 def _covers(sides: _Sides, pole: np.ndarray) -> np.ndarray:

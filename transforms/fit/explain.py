@@ -25,7 +25,7 @@ from ..chart import Chart, Method
 from ..frames import Frame
 from ..region import FlatRegion
 from .emptycap import region_free_cap
-from .problem import HULL_VERTICES, _Candidate, _cap_radii, _Problem
+from .problem import CAP_HULL_VERTICES, _Candidate, _cap_radii, _Problem
 from .start import _Search, pole_and_roll
 
 #: Sigmas whose energy the explanation reports.
@@ -218,13 +218,13 @@ def _free_cap_seen(
 ) -> _FreeCap:
     """The free cap seen from ``center`` of the region as ``flat`` holds it: ``known``'s, by
     centre, when a stage found it there; else found, its hull started on the boundary's
-    vertices and ``HULL_VERTICES`` spread over the rest."""
+    vertices and ``CAP_HULL_VERTICES`` spread over the rest."""
     points = problem.points[flat.vertex_ids]
     directions = unit_rows(points - center)[0]
     found = known.get(_key(center))
     if found is None:
         boundary = flat.validation.boundary_edges
-        found = region_free_cap(points, flat.faces, center, boundary, HULL_VERTICES)
+        found = region_free_cap(points, flat.faces, center, boundary, CAP_HULL_VERTICES)
     pole, free, vertex_cap = found
     return _FreeCap(pole, free, vertex_cap, directions)
 

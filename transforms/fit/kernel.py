@@ -29,8 +29,13 @@ from ..errors import TransformInputError
 from ..sampling import area_sample
 from ..topology import region_edges
 
-#: Faces in the first linear program, and the most violated faces added per round.
+#: Faces in the first linear program, and the most violated faces added per round. A few
+#: planes bind: on a region of up to ``_SMALL_REGION`` faces the first program takes
+#: ``_FIRST_FACES_SMALL`` (a solve's cost grows with its rows), on a larger one
+#: ``_FIRST_FACES``, so that fewer rounds check every plane.
 _FIRST_FACES = 2048
+_FIRST_FACES_SMALL = 256
+_SMALL_REGION = 32_768
 _ADDED_FACES = 4096
 _ROUNDS = 30
 #: Faces in the least-back-facing programs when the kernel is empty, and their rounds.
@@ -63,6 +68,8 @@ class KernelPlanes:
     box_middle : (3,) float, the centre of its bounding box
     axes : (3, 3) float, the region's inertia axes (rows)
     boundary_vertices : (b,) int, ascending: the vertices on the region's boundary
+    boundary_edges : (e, 2) int: the region's boundary edges (lower vertex first), as
+        :func:`transforms.topology.region_edges` finds them
     """
 
     normals: np.ndarray
@@ -74,6 +81,7 @@ class KernelPlanes:
     box_middle: np.ndarray
     axes: np.ndarray
     boundary_vertices: np.ndarray
+    boundary_edges: np.ndarray
 
     def depth(self, center: np.ndarray) -> float:
         """Distance from ``center`` to the nearest face plane (the closing planes left out),
@@ -142,7 +150,7 @@ def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
     rows = np.ascontiguousarray(scaled.T)
     # The closing planes first (their side flips with the winding, found last), so that
     # every plane is written once into arrays of the final size.
-    boundary, closing_normals, closing_offsets = _closing_planes(scaled, faces)
+    boundary, edges, closing_normals, closing_offsets = _closing_planes(scaled, faces)
     m, loops = len(faces), len(closing_offsets)
     normals, offsets, areas = np.empty((m + loops, 3)), np.empty(m + loops), np.zeros(m + loops)
     normals[m:], offsets[m:] = closing_normals, closing_offsets
@@ -185,6 +193,7 @@ def kernel_planes(vertices: np.ndarray, faces: np.ndarray) -> KernelPlanes:
         box_middle=(used.min(axis=0) + used.max(axis=0)) / (2.0 * scale),
         axes=axes.T,
         boundary_vertices=boundary,
+        boundary_edges=edges,
     )
 
 
@@ -243,15 +252,15 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _closing_planes(
     vertices: np.ndarray, faces: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The boundary's vertices (b,) and one plane per boundary loop, ``(normals (l, 3),
-    offsets (l,))``: through the loop's centroid, its normal against the loop's vector area
-    (outward, the side the region's faces turn away from, when the faces are wound
-    outward; the caller turns them round otherwise)."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The boundary's vertices (b,), its edges (e, 2) and one plane per boundary loop,
+    ``(normals (l, 3), offsets (l,))``: through the loop's centroid, its normal against the
+    loop's vector area (outward, the side the region's faces turn away from, when the faces
+    are wound outward; the caller turns them round otherwise)."""
     n = len(vertices)
     boundary = region_edges(faces, np.ones(len(faces), dtype=np.int8), n).boundary
     if len(boundary) == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
+        return np.zeros(0, dtype=np.int64), boundary, np.zeros((0, 3)), np.zeros(0)
     # Direct each boundary edge as its face runs it: only half-edges between two boundary
     # vertices can be boundary edges, so only those are looked up.
     boundary_vertex = np.zeros(n, dtype=bool)
@@ -282,7 +291,7 @@ def _closing_planes(
     keep = length > 0
     normals = -vector_area[keep] / length[keep, None]
     on_boundary = np.flatnonzero(boundary_vertex)
-    return on_boundary, normals, np.einsum("ij,ij->i", normals, centroid[keep])
+    return on_boundary, boundary, normals, np.einsum("ij,ij->i", normals, centroid[keep])
 
 
 def chebyshev_center(planes: KernelPlanes) -> Kernel:
@@ -308,7 +317,8 @@ def _chebyshev(planes: KernelPlanes, count: int) -> tuple[np.ndarray, float] | N
     """The largest ball inside the first ``count`` planes (faces first, then the closing
     ones) and the box, by constraint generation; None when there is none."""
     j = len(planes.faces)
-    rows = np.concatenate([area_sample(planes.areas[:j], _FIRST_FACES), np.arange(j, count)])
+    first = _FIRST_FACES_SMALL if j <= _SMALL_REGION else _FIRST_FACES
+    rows = np.concatenate([area_sample(planes.areas[:j], first), np.arange(j, count)])
     normals, offsets = planes.normals[:count], planes.offsets[:count]
     for _ in range(_ROUNDS):
         checkpoint()

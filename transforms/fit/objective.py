@@ -27,8 +27,9 @@ from ..chart import Method
 from ..faces import DEGENERATE_RTOL
 from ..layouts import MERCATOR_THETA_MARGIN, Layout, measured_second
 from ..separable import separable_angles
-from ..spherical import MIN_RADIUS, angles
+from ..spherical import MIN_RADIUS, angles, half_open_azimuth
 from ..warp import plus_minus
+from . import fused
 
 #: What a candidate pays for each unit of the fraction of the area it sees from behind
 #: (1% costs 10, more than any energy difference the faces seen from the front make).
@@ -165,12 +166,42 @@ class FaceEnergy:
         -------
         Scores
         """
+        chunk = self._chunk if self.method is Method.SEPARABLE else self._fused
         per_chunk = max(1, _CHUNK_ELEMENTS // max(len(self), len(self.points), 1))
         parts = [
-            self._chunk(candidates[start : start + per_chunk], split_backfacing)
+            chunk(candidates[start : start + per_chunk], split_backfacing)
             for start in range(0, len(candidates), per_chunk)
         ]
         return Scores(*(np.concatenate(column) for column in zip(*parts, strict=True)))
+
+    def _fused(self, candidates: Candidates, split: bool) -> tuple[np.ndarray, ...]:
+        """:meth:`_chunk` in compiled loops (:mod:`.fused`) round numpy's vectorised
+        ``atan2``."""
+        shapes = self.shapes
+        centers = np.ascontiguousarray(candidates.centers * self.scale)
+        across, height, second, first, at_centre, cap_cosine = fused.warp_batch(
+            self.points,
+            centers,
+            np.ascontiguousarray(candidates.rotations),
+            np.ascontiguousarray(candidates.sigmas),
+            self.method is Method.DISTORTED,
+        )
+        theta = np.arctan2(across, height, out=height)
+        phi = half_open_azimuth(np.arctan2(second, first, out=second))
+        sums = fused.sums_batch(
+            shapes.faces,
+            shapes.metric,
+            shapes.double_area,
+            shapes.cubed_area,
+            shapes.measurable,
+            shapes.normals,
+            shapes.offsets,
+            centers,
+            split,
+            phi,
+            measured_second(theta, self.layout),
+        )
+        return (*_objective(tuple(sums), at_centre), cap_cosine)
 
     def _chunk(self, candidates: Candidates, split: bool) -> tuple[np.ndarray, ...]:
         centers = candidates.centers * self.scale
@@ -199,18 +230,47 @@ class FaceEnergy:
         rotation, sigma = candidate.rotations[0], float(candidate.sigmas[0])
         if self.method is Method.STANDARD:
             sigma = 1.0
-        warped = _Warped.of(self.points - center, rotation, sigma, self.layout)
-        plane = warped.plane[None]
-        sums = self.shapes.sums(plane, center[None])
-        objective, energy, hidden = _objective(sums, np.array([warped.at_centre]))
-        scores = Scores(objective, energy, hidden, np.array([warped.cap_cosine]))
+        offsets = self.points - center
+        mercator = self.layout is Layout.MERCATOR
+        local, r, warped, theta, phi, second, at_centre, cap_cosine = fused.warp_one(
+            offsets, np.ascontiguousarray(rotation), sigma, mercator, MERCATOR_THETA_MARGIN
+        )
+        shapes = self.shapes
+        faces = (
+            shapes.faces,
+            shapes.metric,
+            shapes.double_area,
+            shapes.cubed_area,
+            shapes.measurable,
+            shapes.normals,
+            shapes.offsets,
+            np.ascontiguousarray(center),
+        )
+        sums = fused.sums_of_plane(*faces, phi, second)
+        objective, energy, hidden = _objective(tuple(sums[:, None]), np.array([at_centre]))
+        scores = Scores(objective, energy, hidden, np.array([cap_cosine]))
         if not np.isfinite(objective[0]):
             zero = np.zeros(len(motion.log_sigma))
             return Slope(scores, zero, zero)
-        toward = _energy_gradient(self.shapes, warped.plane, center, sums)
-        moves = warped.moves(motion, self.scale, 0.0 if self.method is Method.STANDARD else 1.0)
-        gradient = moves.phi @ toward.real + moves.second @ toward.imag
-        return Slope(scores, gradient, moves.cap_cosine)
+        by_phi, by_second = fused.energy_gradient(*faces, phi, second, len(phi), *sums[:5])
+        gradient, cap_slope = fused.moved_gradient(
+            offsets,
+            np.ascontiguousarray(rotation),
+            local,
+            r,
+            warped,
+            theta,
+            by_phi,
+            by_second,
+            np.ascontiguousarray(motion.rotation, dtype=np.float64),
+            np.ascontiguousarray(motion.center * self.scale, dtype=np.float64),
+            np.ascontiguousarray(motion.log_sigma, dtype=np.float64),
+            sigma,
+            0.0 if self.method is Method.STANDARD else 1.0,
+            mercator,
+            MERCATOR_THETA_MARGIN,
+        )
+        return Slope(scores, gradient, cap_slope)
 
 
 def region_energy(
@@ -485,7 +545,8 @@ def _energy_gradient(shapes: _FaceShapes, plane, center, sums) -> np.ndarray:
     """(n,) complex: the gradient of the energy of the faces seen from the front
     (:func:`_objective`) with respect to each vertex's layout point, ``dE/dphi + i dE/ds``,
     for one candidate whose sums (:meth:`_FaceShapes.sums`) are given; the faces seen from
-    behind and the measured ones are held as they are."""
+    behind and the measured ones are held as they are. The slope runs its compiled twin,
+    :func:`.fused.energy_gradient`; this is the reference the tests hold it to."""
     seen_area, seen_layout, weight, frobenius_sum, inverse_sum, _ = (float(v[0]) for v in sums)
     i0, i1, i2 = shapes.faces
     corner = plane[i0]

@@ -29,8 +29,8 @@ from ..frames import Frame
 from ..layouts import Layout
 from ..region import FlatRegion, flatten_region
 from ..sampling import area_sample
-from ..topology import region_edges
 from ..viewpoint import check_center_sees_area
+from .emptycap import boundary_loops
 from .kernel import Kernel, kernel_planes
 from .objective import Candidates, FaceEnergy, region_energy
 
@@ -39,6 +39,10 @@ from .objective import Candidates, FaceEnergy, region_energy
 SAMPLE_FACES = 600
 COARSE_SAMPLE_FACES = 250
 HULL_VERTICES = 500
+#: Vertices the free cap's hull starts from (:func:`.emptycap.exact_empty_cap`: every
+#: boundary vertex and as many spread over the rest, each thinned to this many at most). Any
+#: start ends on the same cap, the directions it holds added; a small one is the fastest.
+CAP_HULL_VERTICES = 64
 #: Where sigma is searched (beyond these the warp squeezes the region to a point or a line).
 SIGMA_SEARCH = (1e-3, 10.0)
 #: How far from the region's middle the centre may go, in region sizes.
@@ -162,6 +166,8 @@ class _Problem:
         # The rows of region_points the pole's hull and the slide's caps are judged on.
         self.hull_rows = _hull_rows(self.used, self.planes.boundary_vertices)
         self.hull_points = self.region_points[self.hull_rows]
+        # The rows the free cap's hull starts from.
+        self.cap_rows = _hull_rows(self.used, self.planes.boundary_vertices, CAP_HULL_VERTICES)
 
     @classmethod
     def checked(
@@ -218,17 +224,27 @@ class _Problem:
 
     @cached_property
     def boundary_edges(self) -> np.ndarray:
-        """(b, 2) int: the region's boundary edges, rows of ``region_points``."""
-        faces = self.region_faces
-        return region_edges(faces, np.ones(len(faces), dtype=np.int8), len(self.used)).boundary
+        """(b, 2) int: the region's boundary edges, rows of ``region_points`` (the kernel's,
+        renumbered: ``used`` ascends, so each edge keeps its order and its lower end first)."""
+        position = np.zeros(len(self.points), dtype=np.int64)
+        position[self.used] = np.arange(len(self.used))
+        return position[self.planes.boundary_edges]
+
+    @cached_property
+    def boundary_loops(self) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`.emptycap.boundary_loops` of :attr:`boundary_edges`: the boundary's
+        vertices (rows of ``region_points``) and their loops."""
+        return boundary_loops(len(self.used), self.boundary_edges)
 
     def release(self) -> None:
         """Let go of what only the search reads: the kernel's planes, the region's own
         vertices and faces and the hull's (the flatten and the energies read the input's
         arrays)."""
         self.planes = self.region_points = self.used = self.hull_points = self.hull_rows = None
+        self.cap_rows = None
         self.__dict__.pop("region_faces", None)
         self.__dict__.pop("boundary_edges", None)
+        self.__dict__.pop("boundary_loops", None)
 
     @property
     def closed(self) -> bool:
@@ -423,20 +439,20 @@ def _best_on_grid(grid: np.ndarray, energies: np.ndarray) -> tuple[np.ndarray, n
     return grid[rows, pick], energies[rows, pick]
 
 
-def _hull_rows(used: np.ndarray, boundary: np.ndarray) -> np.ndarray:
+def _hull_rows(used: np.ndarray, boundary: np.ndarray, count: int = HULL_VERTICES) -> np.ndarray:
     """Rows of the region's vertices (``used``, ascending ids) whose directions the largest
-    empty cap is found among: every boundary vertex and ``HULL_VERTICES`` spread over the
-    rest, each list thinned evenly to ``HULL_VERTICES`` at most.
+    empty cap is found among: every boundary vertex and ``count`` spread over the rest, each
+    list thinned evenly to ``count`` at most.
 
     Seen from inside the kernel, the part of the sphere the region leaves empty is bounded
     by its boundary loops' directions (no triangle is seen edge-on there), so the cap the
     hull finds is that of every vertex; the spread rows keep it close where the kernel is
     empty and folds bound it too. The hull of directions on a sphere has every one as a
     vertex (20,000 cost 0.2 s), so fewer is faster."""
-    spread = np.linspace(0, len(used) - 1, min(HULL_VERTICES, len(used))).astype(np.int64)
+    spread = np.linspace(0, len(used) - 1, min(count, len(used))).astype(np.int64)
     edge = np.searchsorted(used, boundary)
-    if len(edge) > HULL_VERTICES:
-        edge = edge[np.linspace(0, len(edge) - 1, HULL_VERTICES).astype(np.int64)]
+    if len(edge) > count:
+        edge = edge[np.linspace(0, len(edge) - 1, count).astype(np.int64)]
     return np.union1d(spread, edge)
 
 

@@ -92,13 +92,19 @@ def _frame_and_sigma(
 ) -> _Choice:
     """Seen from ``center``: unless fixed, the rotation with its pole in the middle of the
     cap free of the region (:func:`.emptycap.free_cap`: the largest cap free of every vertex
-    direction, its hull started on :func:`.problem._hull_rows`, or one free of the boundary's
+    direction, its hull started on ``problem.cap_rows``, or one free of the boundary's
     directions, whichever the region leaves clearer) and the roll of :func:`pole_and_roll`;
     unless fixed, the best sigma whose cap fits inside the empty cap less the margin."""
     directions = problem.directions(center)
     cap = None
     if fixed.rotation is None:
-        cap = free_cap(directions, problem.region_faces, problem.hull_rows, problem.boundary_edges)
+        cap = free_cap(
+            directions,
+            problem.region_faces,
+            problem.cap_rows,
+            problem.boundary_edges,
+            problem.boundary_loops,
+        )
         rotation = pole_and_roll(directions, cap[0], fixed.up, notes)
     else:
         rotation = fixed.rotation.rotation

@@ -22,16 +22,19 @@ import numpy as np
 from .arrays import INDEX
 from .cap import PoleCap
 from .chart import Chart
+from .fit import fit_region
 from .frames import Frame
+from .locate import SORTED_QUERIES, LocateIndex
 from .metrics import weighted_quantile
 from .region import flatten_region
 from .topology import face_components, welded
 
 
 def compile_kernels() -> float:
-    """Call every compiled kernel once on a small closed surface seen from inside and from
-    outside (the paths of a closed region, an open one and the exact tests), and on enough
-    values for the quantiles' scans; return the seconds it took."""
+    """Call every compiled kernel once: flatten a small closed surface seen from inside and
+    from outside (the paths of a closed region, an open one and the exact tests), enough
+    values for the quantiles' scans, a fit of half of it and rays located on it, few and
+    many; return the seconds it took."""
     start = time.perf_counter()
     vertices, faces = _octahedron_sphere()
     chart = Chart.distorted(PoleCap.from_sigma(0.3))
@@ -43,8 +46,15 @@ def compile_kernels() -> float:
     dented[0] *= -0.5
     flatten_region(dented, faces, Frame.identity(np.array([0.01, 0.02, 0.03])), chart)
     face_components(welded(faces, vertices))
-    values = np.random.default_rng(0).random(70_000)
+    rng = np.random.default_rng(0)
+    values = rng.random(70_000)
     weighted_quantile(values, values + 1.0, 0.5)
+    # A fit of the sphere's upper half (its own kernels, transforms/fit/fused.py).
+    fit_region(vertices, faces[vertices[faces].mean(axis=1)[:, 1] > 0.0])
+    # Locating rays: a few (the walk as they come) and many (sorted first).
+    index = LocateIndex.build(vertices - [0.01, 0.02, 0.03], faces)
+    for count in (16, SORTED_QUERIES):
+        index.query(rng.normal(size=(count, 3)))
     return time.perf_counter() - start
 
 

@@ -89,7 +89,6 @@ __all__ = [
     "default_choice",
     "fit_region",
     "roll_axis",
-    "warm_up",
 ]
 
 
@@ -310,26 +309,3 @@ def default_choice(
     frame = Frame.from_matrix(best.rotation, best.center)
     fit = Fit(frame=frame, chart=problem.chart(best.sigma), region=answer.flat, explanation=None)
     return posed.to_world(fit)
-
-
-def warm_up() -> None:
-    """Compile the fit's numba kernels (:mod:`.fused`), or load them from numba's cache: one
-    fit of a small cap of a sphere, which runs every kernel with the argument types a fit
-    passes. Compiling takes seconds, loading well under one: the image's build runs this so
-    that its cache ships with it (Dockerfile)."""
-    import numpy as np
-
-    rings, segments = 6, 16
-    polar = np.linspace(0.0, np.radians(80.0), rings + 1)[1:]
-    longitude = 2.0 * np.pi * np.arange(segments) / segments
-    a, lam = np.meshgrid(polar, longitude, indexing="ij")
-    ring_points = np.stack([np.sin(a) * np.sin(lam), np.cos(a), np.sin(a) * np.cos(lam)], axis=-1)
-    vertices = np.vstack([[0.0, 1.0, 0.0], ring_points.reshape(-1, 3)])
-    faces = []
-    for k in range(segments):
-        faces.append([0, 1 + (k + 1) % segments, 1 + k])
-        for j in range(rings - 1):
-            here, next_ = 1 + j * segments, 1 + (j + 1) * segments
-            faces.append([here + k, here + (k + 1) % segments, next_ + k])
-            faces.append([next_ + k, here + (k + 1) % segments, next_ + (k + 1) % segments])
-    fit_region(vertices, np.array(faces))

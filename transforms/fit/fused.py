@@ -8,9 +8,9 @@ calls per batch; these loops do the same arithmetic as :class:`.objective._Angle
 formulas in the same order, so the results agree to rounding: the sums are added in another
 order). The separable method, whose angles come from a root search, stays in numpy.
 
-Compiled on first use and cached on disk (``cache=True``: numba's cache beside this file, or
-its user-wide one where that is read-only); :func:`transforms.fit.warm_up` pays the
-compilation (seconds; loading from the cache, well under one) outside a request.
+Compiled on first use and cached on disk (``cache=True``); :func:`transforms.kernels.
+compile_kernels` pays the compilation (seconds; loading from the cache, well under one)
+outside a request, at start-up and in the image's build.
 """
 
 from __future__ import annotations

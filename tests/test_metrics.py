@@ -164,3 +164,23 @@ def test_a_misleading_sample_falls_back_to_the_exact_quantile():
     got = distortion(measures, bracket=lambda sample, weights, q: (-2.0, -1.0))
     assert got.isometric.p95 == weighted_quantile(per_face.isometric, per_face.weights, 0.95)
     assert got.isometric.p50 == reference_quantile(per_face.isometric, per_face.weights, 0.5)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_weighted_quickselect_finds_the_sorted_cumulative_quantile(seed):
+    """Against the definition by a sort: the smallest value whose cumulative weight, in
+    ascending order, reaches the target; ties, zero weights, and targets at and beyond the
+    ends."""
+    from transforms.metrics import _sorted_quantile
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 300))
+    values = rng.integers(0, 6, n).astype(float) if seed % 2 else rng.random(n)
+    weights = rng.random(n)
+    weights[rng.random(n) < 0.2] = 0.0
+    order = np.argsort(values, kind="stable")
+    cumulative = np.cumsum(weights[order])
+    for share in (-0.5, 0.0, 0.05, 0.5, 0.95, 1.5):
+        target = share * cumulative[-1]
+        at = min(int(np.searchsorted(cumulative, target)), n - 1)
+        assert _sorted_quantile(values, weights, target) == values[order[at]]

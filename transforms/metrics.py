@@ -394,29 +394,63 @@ def _brackets(
     width: float = 1.0,
 ) -> list[tuple[float, float]]:
     """The bracket of each quantile ``q`` of ``qs`` from a weighted sample: ``bracket``'s, or
-    the sample's ``q -+ width * _BRACKET`` quantiles, from one sort of it for all of them (the
-    whole range when the sample has no weight)."""
+    the sample's ``q -+ width * _BRACKET`` quantiles (the whole range when the sample has no
+    weight)."""
     if bracket is not None:
         return [bracket(sample, weights, q) for q in qs]
     total = weights.sum()
     if not total > 0:
         return [(-np.inf, np.inf)] * len(qs)
-    order = np.argsort(sample)
-    share = np.cumsum(weights[order]) / total
-    found = []
-    for q in qs:
-        half = width * _BRACKET
-        picks = np.searchsorted(share, [q - half, q + half]).clip(0, len(order) - 1)
-        low, high = sample[order[picks]]
-        found.append((float(low), float(high)))
-    return found
+    half = width * _BRACKET
+    return [
+        (
+            _sorted_quantile(sample, weights, (q - half) * total),
+            _sorted_quantile(sample, weights, (q + half) * total),
+        )
+        for q in qs
+    ]
 
 
 def _sorted_quantile(values: np.ndarray, weights: np.ndarray, target: float) -> float:
-    """The smallest value whose cumulative weight, in ascending order, reaches ``target``."""
-    order = np.argsort(values, kind="stable")
-    cumulative = np.cumsum(weights[order])
-    return float(values[order[min(int(np.searchsorted(cumulative, target)), len(values) - 1)]])
+    """The smallest value whose cumulative weight, in ascending order, reaches ``target``
+    (the first value when ``target <= 0``, the last when it is above the total): found by a
+    weighted quickselect (:func:`_select`) in linear time, without sorting."""
+    return float(_select(np.ascontiguousarray(values), np.ascontiguousarray(weights), target))
+
+
+@njit(cache=True, nogil=True)
+def _select(values: np.ndarray, weights: np.ndarray, target: float) -> float:
+    """:func:`_sorted_quantile` of (k,) ``values`` (k >= 1) and ``weights``: partition round
+    a pivot (the median of three) into the values below it, equal to it and above it, and go
+    on in the part that holds the target weight."""
+    v, w = values.copy(), weights.copy()
+    low, high = 0, v.size  # the part still searched, [low, high)
+    while True:
+        a, b, c = v[low], v[(low + high - 1) // 2], v[high - 1]
+        pivot = max(min(a, b), min(max(a, b), c))
+        below = equal = 0.0
+        smaller, i, larger = low, low, high
+        while i < larger:
+            if v[i] < pivot:
+                v[i], v[smaller] = v[smaller], v[i]
+                w[i], w[smaller] = w[smaller], w[i]
+                below += w[smaller]
+                smaller += 1
+                i += 1
+            elif v[i] > pivot:
+                larger -= 1
+                v[i], v[larger] = v[larger], v[i]
+                w[i], w[larger] = w[larger], w[i]
+            else:
+                equal += w[i]
+                i += 1
+        if smaller > low and target <= below:
+            high = smaller
+        elif target <= below + equal or larger == high:
+            return pivot
+        else:
+            target -= below + equal
+            low = larger
 
 
 def _histogram_quantile(values: np.ndarray, weights: np.ndarray, target: float) -> float:

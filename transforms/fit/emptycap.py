@@ -21,14 +21,13 @@ between its ends (the radius is then the arc's distance, :func:`transforms.margi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
-from ..arrays import cross_rows, unit_rows
+from ..arrays import INDEX, unit_rows
 from ..checkpoints import checkpoint
 from ..margins import _POINT_ARC
 from . import fused
@@ -93,7 +92,11 @@ def exact_empty_cap(
     pole : (3,) float, unit
     radius : float, radians in ``[0, pi]``, the angle from ``pole`` to the nearest direction
     """
-    units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
+    return _exact_empty_cap(unit_rows(np.asarray(directions, dtype=np.float64))[0], rows)
+
+
+def _exact_empty_cap(units: np.ndarray, rows: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """:func:`exact_empty_cap` of directions already unit."""
     subset = np.arange(len(units)) if rows is None else np.unique(rows)
     for _ in range(_ROUNDS):
         checkpoint()
@@ -124,7 +127,7 @@ def free_cap(
     (:func:`exact_empty_cap`, its hull started on ``rows``), and those of caps free of the
     ``boundary``'s directions (:func:`_boundary_poles`: the region's edge bounds the
     directions it leaves free, where no fold does). Each is measured exactly
-    (:func:`_clear`) and the clearest kept.
+    (:func:`_clearances`) and the clearest kept.
 
     Parameters
     ----------
@@ -145,15 +148,12 @@ def free_cap(
     units = unit_rows(np.asarray(directions, dtype=np.float64))[0]
     edge, loops = boundary_loops(len(units), boundary) if loops is None else loops
     edge_pole = largest_empty_cap(units[edge])[0] if len(edge) else None
-    pole, vertex_gap = exact_empty_cap(units, rows)
+    pole, vertex_gap = _exact_empty_cap(units, rows)
     checkpoint()
-    corners = units[faces[:, 0]], units[faces[:, 1]], units[faces[:, 2]]
-    sides = _Sides.of(*corners)
     poles = [pole, *_boundary_poles(units, edge, loops, edge_pole)]
-    faces = np.ascontiguousarray(faces, dtype=np.int64)
-    clear = [_clear(units, faces, sides, candidate) for candidate in poles]
+    clear = _clearances(units, faces, np.array(poles))
     best = int(np.argmax(clear))
-    return poles[best], clear[best], vertex_gap
+    return poles[best], float(clear[best]), vertex_gap
 
 
 def boundary_loops(n: int, boundary: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -191,59 +191,19 @@ def _boundary_poles(
     return poles
 
 
-@dataclass(frozen=True)
-class _Sides:
-    """The normals of the great circles through each spherical triangle's sides (``ab``,
-    ``bc``, ``ca``: (m, 3) each, not unit), the sum of its corners ((m, 3)) and its sides'
-    arc lengths ((3, m)): what :func:`_covers` and :func:`_clear` ask of every candidate pole,
-    computed once."""
-
-    ab: np.ndarray
-    bc: np.ndarray
-    ca: np.ndarray
-    middle: np.ndarray
-    lengths: np.ndarray
-
-    @classmethod
-    def of(cls, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> _Sides:
-        sides, lengths = [], []
-        for start, end in ((a, b), (b, c), (c, a)):
-            checkpoint()
-            sides.append(np.ascontiguousarray(cross_rows(start, end)))
-            lengths.append(np.arccos(np.clip(np.einsum("ij,ij->i", start, end), -1.0, 1.0)))
-        return cls(*sides, np.ascontiguousarray(a + b + c), np.array(lengths))
-
-
-def _clear(units: np.ndarray, faces: np.ndarray, sides: _Sides, pole: np.ndarray) -> float:
-    """Radians from unit ``pole`` to the nearest point of the region seen from the centre:
-    0 when a face's spherical triangle holds it (:func:`_covers`), else the nearest vertex or
-    edge arc (an arc of length L whose nearer end is d away comes no nearer than d - L / 2,
-    so only the arcs that may come nearer than the nearest so far are measured, by
-    :func:`transforms.margins.arcs_to_point`'s formula): one compiled pass
-    (:func:`.fused.clear_of`)."""
+def _clearances(units: np.ndarray, faces: np.ndarray, poles: np.ndarray) -> np.ndarray:
+    """(k,) radians from each unit row of ``poles`` (k, 3) to the nearest point of the region
+    seen from the centre: 0 when a face's spherical triangle holds it (the same side of its
+    three great circles, on the triangle's side of the sphere), else the nearest vertex or
+    edge arc (:func:`transforms.margins.arcs_to_point`'s formula): one compiled pass for
+    all the candidates (:func:`.fused.clearances`)."""
     checkpoint()
-    return float(
-        fused.clear_of(
-            units,
-            faces,
-            sides.ab,
-            sides.bc,
-            sides.ca,
-            sides.middle,
-            sides.lengths,
-            np.ascontiguousarray(pole, dtype=np.float64),
-            _POINT_ARC,
-        )
+    return fused.clearances(
+        np.ascontiguousarray(units, dtype=np.float64),
+        np.ascontiguousarray(faces, dtype=INDEX),
+        np.ascontiguousarray(poles, dtype=np.float64),
+        _POINT_ARC,
     )
-
-
-def _covers(sides: _Sides, pole: np.ndarray) -> np.ndarray:
-    """(m,) bool: whether each spherical triangle (its ``sides``) holds ``pole`` (the same
-    side of its three great circles, and on the triangle's side of the sphere)."""
-    ab, bc, ca = sides.ab @ pole, sides.bc @ pole, sides.ca @ pole
-    same = ((ab >= 0) & (bc >= 0) & (ca >= 0)) | ((ab <= 0) & (bc <= 0) & (ca <= 0))
-    facing = sides.middle @ pole > 0
-    return same & facing & ((ab != 0) | (bc != 0) | (ca != 0))
 
 
 def region_free_cap(
@@ -264,7 +224,7 @@ def region_free_cap(
     -------
     as :func:`free_cap`
     """
-    directions = unit_rows(np.asarray(points, dtype=np.float64) - center)[0]
+    directions = np.asarray(points, dtype=np.float64) - center  # made unit by free_cap
     n = len(directions)
     rows = np.linspace(0, n - 1, min(spread, n)).astype(np.int64)
     edge = np.unique(boundary)

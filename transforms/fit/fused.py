@@ -259,33 +259,69 @@ def _arc_to_point(a, b, point, point_arc):
 
 
 @njit(cache=True, nogil=True)
-def clear_of(units, faces, ab, bc, ca, middle, lengths, pole, point_arc):
-    """:func:`.emptycap._clear`: radians from unit ``pole`` to the nearest point of the
-    region seen from the centre, 0 when a face's spherical triangle holds it."""
-    m = faces.shape[0]
-    q0, q1, q2 = pole[0], pole[1], pole[2]
-    for f in range(m):
-        x = ab[f, 0] * q0 + ab[f, 1] * q1 + ab[f, 2] * q2
-        y = bc[f, 0] * q0 + bc[f, 1] * q1 + bc[f, 2] * q2
-        z = ca[f, 0] * q0 + ca[f, 1] * q1 + ca[f, 2] * q2
-        same = (x >= 0 and y >= 0 and z >= 0) or (x <= 0 and y <= 0 and z <= 0)
-        facing = middle[f, 0] * q0 + middle[f, 1] * q1 + middle[f, 2] * q2 > 0
-        if same and facing and (x != 0 or y != 0 or z != 0):
-            return 0.0
-    n = units.shape[0]
-    cosine = np.empty(n)
-    largest = -math.inf
-    for i in range(n):
-        cosine[i] = units[i, 0] * q0 + units[i, 1] * q1 + units[i, 2] * q2
-        largest = max(largest, cosine[i])
-    free = math.acos(min(max(largest, -1.0), 1.0))
+def clearances(units, faces, poles, point_arc):
+    """:func:`.emptycap.free_cap`'s measure of each candidate: (k,) radians from each unit
+    row of ``poles`` (k, 3) to the nearest point of the region (``units`` (n, 3), ``faces``
+    (m, 3)) seen from the centre, 0 when a face's spherical triangle holds it: one pass over
+    the faces for every candidate's cover test (:func:`_covered`), then the uncovered ones
+    measured (:func:`_nearest`)."""
+    covered, least_dot = _covered(units, faces, poles)
+    half_longest = 0.5 * math.acos(min(max(least_dot, -1.0), 1.0))
+    free = np.zeros(poles.shape[0])
+    for p in range(poles.shape[0]):
+        if not covered[p]:
+            free[p] = _nearest(units, faces, poles[p], half_longest, point_arc)
+    return free
+
+
+@njit(cache=True, nogil=True)
+def _covered(units, faces, poles):
+    """(k,) bool: whether a face's spherical triangle holds each of ``poles`` (the same side
+    of its three great circles, and on the triangle's side of the sphere); and the least
+    cosine between an edge's ends (the longest edge's)."""
+    k = poles.shape[0]
+    covered = np.zeros(k, dtype=np.bool_)
+    least_dot = 1.0
+    for f in range(faces.shape[0]):
+        a, b, c = units[faces[f, 0]], units[faces[f, 1]], units[faces[f, 2]]
+        least_dot = min(least_dot, a[0] * b[0] + a[1] * b[1] + a[2] * b[2])
+        least_dot = min(least_dot, b[0] * c[0] + b[1] * c[1] + b[2] * c[2])
+        least_dot = min(least_dot, c[0] * a[0] + c[1] * a[1] + c[2] * a[2])
+        ab = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+        bc = (b[1] * c[2] - b[2] * c[1], b[2] * c[0] - b[0] * c[2], b[0] * c[1] - b[1] * c[0])
+        ca = (c[1] * a[2] - c[2] * a[1], c[2] * a[0] - c[0] * a[2], c[0] * a[1] - c[1] * a[0])
+        middle = ((a[0] + b[0]) + c[0], (a[1] + b[1]) + c[1], (a[2] + b[2]) + c[2])
+        for p in range(k):
+            q0, q1, q2 = poles[p, 0], poles[p, 1], poles[p, 2]
+            x = ab[0] * q0 + ab[1] * q1 + ab[2] * q2
+            y = bc[0] * q0 + bc[1] * q1 + bc[2] * q2
+            z = ca[0] * q0 + ca[1] * q1 + ca[2] * q2
+            same = (x >= 0 and y >= 0 and z >= 0) or (x <= 0 and y <= 0 and z <= 0)
+            facing = middle[0] * q0 + middle[1] * q1 + middle[2] * q2 > 0
+            covered[p] |= same and facing and (x != 0 or y != 0 or z != 0)
+    return covered, least_dot
+
+
+@njit(cache=True, nogil=True)
+def _nearest(units, faces, pole, half_longest, point_arc):
+    """Radians from unit ``pole`` (held by no face) to the nearest vertex or edge arc. An arc
+    of length L whose nearer end is d away comes no nearer than d - L / 2, so only the edges
+    with an end within the nearest vertex's angle plus half the longest edge are measured."""
+    cosine = units[:, 0] * pole[0] + units[:, 1] * pole[1] + units[:, 2] * pole[2]
+    free = math.acos(min(max(cosine.max(), -1.0), 1.0))
+    # A margin over the rounding of acos and cos.
+    reach = math.cos(min(free + half_longest + 1e-9, math.pi))
     for side in range(3):
-        for f in range(m):
+        for f in range(faces.shape[0]):
             start, end = faces[f, side], faces[f, (side + 1) % 3]
             ends = max(cosine[start], cosine[end])
+            if ends < reach:
+                continue
             nearest = math.acos(min(max(ends, -1.0), 1.0))
-            if nearest - lengths[side, f] / 2.0 < free:
-                free = min(free, _arc_to_point(units[start], units[end], pole, point_arc))
+            s, e = units[start], units[end]
+            length = math.acos(min(max(s[0] * e[0] + s[1] * e[1] + s[2] * e[2], -1.0), 1.0))
+            if nearest - length / 2.0 < free:
+                free = min(free, _arc_to_point(s, e, pole, point_arc))
     return free
 
 

@@ -72,6 +72,7 @@ def flatten_region(
     winding: int | None = None,
     threads: int = 1,
     layout: Layout | str = Layout.THETA_PHI,
+    distinct: bool = False,
 ) -> FlatRegion:
     """Flatten the faces of a mesh region and check the result.
 
@@ -84,6 +85,8 @@ def flatten_region(
     winding : +1 or -1 to fix which way normals point (see :func:`.validation.validate`)
     threads : int, threads to share the work
     layout : the 2D layout returned and measured (:mod:`.layouts`)
+    distinct : bool, the caller knows that no two of ``vertices`` share a position (it
+        welded them already, :func:`.topology.representatives`): the weld is not searched
 
     Returns
     -------
@@ -112,7 +115,7 @@ def flatten_region(
     # What is done with is let go as soon as it is (faces, used, rows): the validation's
     # edge classification, the peak of the call, then runs beside less.
     del faces
-    weld = representatives(used)
+    weld = np.arange(len(used)) if distinct else representatives(used)
     # The local rows come out of the same pass as the angles; measured without checking
     # again, since everything here was made checked.
     rows = np.empty((3, len(used)))

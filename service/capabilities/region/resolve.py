@@ -482,8 +482,15 @@ def _flatten(given: MeshInput, ctx: Context) -> MeshRegion:
         flat = fit.region  # else fitted on the faces welded: flattened with the file's ids
     else:
         faces = region_faces(mesh, selection)
+        # No links: the selection found every vertex of the mesh at a position of its own.
         flat = flatten_region(
-            mesh.vertices, faces, frame, chart, threads=ctx.threads, layout=params.layout
+            mesh.vertices,
+            faces,
+            frame,
+            chart,
+            threads=ctx.threads,
+            layout=params.layout,
+            distinct=selection.links is None,
         )
     untangled = untangle_layout(mesh, flat) if params.untangle else None
     region = MeshRegion(mesh, selection, chart, frame, flat, fit, untangled, facing_of(params))

@@ -316,10 +316,13 @@ def route_call(case: Case) -> Callable[[], float]:
 
 def route_peak_in_a_fresh_process(subdivisions: int, title: str) -> int:
     """:func:`route_peak_bytes` of the case ``title``, measured in a child process of its
-    own (glibc's default allocator settings: what the call takes from the system)."""
+    own whose allocator gives large blocks back when they are freed."""
     child = [sys.executable, "-m", "benchmarks.transforms_bench", "--peak", title]
     child += ["--subdivisions", str(subdivisions)]
-    env = os.environ | {"OPENBLAS_NUM_THREADS": "1"}
+    # Every block of 64 kB or more its own mapping, given back when freed, so that what the
+    # kernels' warm-up left free is not counted as already resident.
+    env = os.environ | {"OPENBLAS_NUM_THREADS": "1", "MALLOC_MMAP_THRESHOLD_": "65536"}
+    env |= {"MALLOC_TRIM_THRESHOLD_": "0"}
     return int(subprocess.run(child, check=True, capture_output=True, text=True, env=env).stdout)
 
 

@@ -6,8 +6,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
-from .arrays import as_faces, as_points
+from .arrays import INDEX, as_faces, as_points
 from .cap import PoleCap
 from .chart import Chart
 from .errors import TransformInputError
@@ -104,14 +105,11 @@ def flatten_region(
     if len(faces) == 0:
         raise TransformInputError("faces", "the region has no faces")
     check_center_sees_area(vertices, faces, frame.center)
-    vertex_ids = np.flatnonzero(np.bincount(faces.ravel(), minlength=len(vertices)))
+    vertex_ids, compact = _compacted(np.ascontiguousarray(faces, dtype=INDEX), len(vertices))
     if len(vertex_ids) == len(vertices):  # every vertex used (the whole mesh): no renumbering
-        compact, used = faces, vertices
+        used = vertices
     else:
-        position = np.empty(len(vertices), dtype=faces.dtype)  # int32 where the ids fit
-        position[vertex_ids] = np.arange(len(vertex_ids))
-        compact, used = position[faces], vertices[vertex_ids]
-        del position
+        used = vertices[vertex_ids]
     # What is done with is let go as soon as it is (faces, used, rows): the validation's
     # edge classification, the peak of the call, then runs beside less.
     del faces
@@ -228,3 +226,31 @@ def _judge(
     flagged = flagged_mask(validation, len(measures))
     metrics, trusted = distortion_and_trusted(measures, flagged)
     return validation, metrics, trusted, int(flagged.sum())
+
+
+@njit(cache=True, nogil=True)
+def _compacted(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices ``faces`` ((m, 3) int32, ids below ``n``) use, ascending ((k,) int64), and
+    the faces as positions among them ((m, 3) int32; ``faces`` itself when every vertex is
+    used): one pass to mark, one to number, one to renumber."""
+    used = np.zeros(n, dtype=np.bool_)
+    for f in range(faces.shape[0]):
+        for c in range(3):
+            used[faces[f, c]] = True
+    position = np.empty(n, dtype=np.int32)
+    k = 0
+    for v in range(n):
+        if used[v]:
+            position[v] = k
+            k += 1
+    ids = np.empty(k, dtype=np.int64)
+    for v in range(n):
+        if used[v]:
+            ids[position[v]] = v
+    if k == n:
+        return ids, faces
+    compact = np.empty_like(faces)
+    for f in range(faces.shape[0]):
+        for c in range(3):
+            compact[f, c] = position[faces[f, c]]
+    return ids, compact

@@ -25,6 +25,7 @@ from trimesh.registration import procrustes
 
 from .arrays import blocks, combine, face_cross, triangle_areas, unit_rows
 from .checkpoints import checkpoint
+from .onmesh import MeshNearest
 from .sampling import systematic_picks
 
 #: A scale's bounds (least, most), or None for none.
@@ -36,6 +37,13 @@ SAMPLES = 20_000
 #: (each with its own trimming distance), and the step (radians, and in units of the
 #: follow-up samples' RMS distance from their centroid) that ends them.
 MAX_ROUNDS, COARSE_ROUNDS, STAGE_ROUNDS, SETTLED = 60, 15, 5, 1e-4
+#: ICP starts on every ``SPARSE_EVERY``-th follow-up sample (when that leaves at least
+#: ``SPARSE_LEAST``), and the last rounds against the baseline's mesh (:func:`on_mesh`) end
+#: when a step would move the samples by less than ``EXACT`` of their spread, after
+#: ``MESH_ROUNDS`` at the most.
+SPARSE_EVERY, SPARSE_LEAST, EXACT, MESH_ROUNDS = 4, 1_000, 1e-5, 10
+#: The most follow-up vertices the last rounds fit (:attr:`Surface.corners`).
+CORNERS_MOST = 100_000
 #: Neighbours whose plane gives a target sample its normal for small_gicp (its default).
 NORMAL_NEIGHBOURS = 20
 #: The starts are compared on every ``COARSE_EVERY``-th sample; the ``REFINED_STARTS`` that
@@ -52,6 +60,12 @@ DISTINCT_DEG, AMBIGUOUS, PLAUSIBLE = 10.0, 0.1, 0.5
 #: Pairs farther apart than this many times the ``TRIM_QUANTILE`` of their distances are
 #: left out of a round: up to about two thirds of either surface may have no counterpart.
 TRIM, TRIM_QUANTILE = 2.5, 30.0
+#: The last rounds (:func:`on_mesh`) keep the pairs within this many times that percentile:
+#: there the distances are the scans' noise, whose 30th percentile is 0.385 of its standard
+#: deviation, so 8 times it is 3 deviations, and leaves out almost no pair that has a
+#: counterpart (at 2.5 times, about one deviation, a third of them went, and with them half
+#: of the accuracy).
+MESH_TRIM = 8.0
 
 
 class NearestTree:
@@ -80,10 +94,14 @@ class NearestTree:
 
 @dataclass(frozen=True)
 class Surface:
-    """Area-weighted samples of a surface and their unit normals ((n, 3) float each)."""
+    """Area-weighted samples of a surface and their unit normals ((n, 3) float each); when
+    drawn from a mesh (:meth:`of`), its ``vertices`` and ``faces`` too, for the last rounds'
+    nearest points on the mesh itself (:attr:`mesh`)."""
 
     points: np.ndarray
     normals: np.ndarray
+    vertices: np.ndarray | None = None
+    faces: np.ndarray | None = None
 
     @classmethod
     def of(cls, vertices: np.ndarray, faces: np.ndarray, count: int = SAMPLES) -> Surface:
@@ -95,7 +113,7 @@ class Surface:
         root = np.sqrt(share)
         weights = np.column_stack([1.0 - root, 0.5 * root, 0.5 * root])
         normals, _ = unit_rows(face_cross(vertices, faces[face]))
-        return cls(combine(vertices, faces, face, weights), normals)
+        return cls(combine(vertices, faces, face, weights), normals, vertices, faces)
 
     @staticmethod
     def log_size(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -133,9 +151,37 @@ class Surface:
         small_gicp.estimate_normals(cloud, tree, num_neighbors=NORMAL_NEIGHBOURS)
         return cloud, tree
 
+    @cached_property
+    def mesh(self) -> MeshNearest | None:
+        """Nearest points on the mesh the samples were drawn from (None: no mesh)."""
+        if self.vertices is None or self.faces is None:
+            return None
+        return MeshNearest(self.vertices, self.faces)
+
     def every(self, step: int) -> Surface:
-        """Every ``step``-th sample: a coarser surface for comparing starts."""
-        return Surface(self.points[::step], self.normals[::step])
+        """Every ``step``-th sample (of the same mesh): a coarser surface for comparing
+        starts and for the first rounds of ICP."""
+        if step == 1:
+            return self
+        return Surface(self.points[::step], self.normals[::step], self.vertices, self.faces)
+
+    @cached_property
+    def corners(self) -> Surface:
+        """The mesh's vertices that its faces use (every k-th, for at most ``CORNERS_MOST``),
+        as points (without normals): each carries the scan's noise of its own, where the
+        samples of a face share its three corners', so the last rounds fit them (against the
+        samples alone, the transform's error was about 1.5 times as large); the samples
+        themselves when there is no mesh."""
+        if self.vertices is None or self.faces is None:
+            return self
+        used = np.unique(self.faces)
+        used = used[:: -(-len(used) // CORNERS_MOST)]
+        return Surface(self.vertices[used], np.zeros((len(used), 3)))
+
+    @cached_property
+    def sparse(self) -> Surface:
+        """Every ``SPARSE_EVERY``-th sample, taken once: the follow-up ICP starts on."""
+        return self.every(SPARSE_EVERY)
 
 
 @dataclass(frozen=True)
@@ -244,16 +290,37 @@ def icp(
     scale: bool = False,
     rounds: int = MAX_ROUNDS,
     bounds: Bounds = None,
+    last: str = "samples",
 ) -> Registration:
-    """Point-to-plane ICP from ``start`` (eq. 15.1), by small_gicp's ``PLANE_ICP``, in stages
-    of ``STAGE_ROUNDS`` rounds: each stage leaves out the pairs farther apart than the
-    trimming distance of the pose it starts from, so the distance shrinks as the surfaces
+    """Point-to-plane ICP from ``start`` (eq. 15.1), coarse to fine: by small_gicp's
+    ``PLANE_ICP`` (:func:`_stages`) on every ``SPARSE_EVERY``-th follow-up sample until they
+    settle (when there are at least ``SPARSE_LEAST`` of them), then per ``last``: ``"sparse"``
+    stops there; ``"samples"`` goes on with all the samples until they settle; ``"mesh"``
+    takes all the samples onto the nearest points of the baseline's mesh itself
+    (:func:`on_mesh`, when ``target`` was drawn from one; else as ``"samples"``). The
+    residuals are all the samples'. With ``scale``, the scale about the follow-up's centroid
+    is fitted too, held within ``bounds``."""
+    matrix = start
+    sparse = source.sparse if len(source.points) >= SPARSE_EVERY * SPARSE_LEAST else source
+    if sparse is not source:
+        matrix = _stages(sparse, target, matrix, scale, rounds, bounds)
+    if sparse is source or last == "samples" or (last == "mesh" and target.mesh is None):
+        matrix = _stages(source, target, matrix, scale, rounds, bounds)
+    elif last == "mesh":
+        matrix = onto_mesh(source, target.mesh, matrix, scale, bounds)
+    return measured(source, target, matrix)
+
+
+def _stages(source, target, start, scale, rounds, bounds) -> np.ndarray:
+    """The 4x4 transform small_gicp's point-to-plane ICP (eq. 15.1) reaches from ``start``,
+    in stages of ``STAGE_ROUNDS`` rounds: each stage leaves out the pairs farther apart than
+    the trimming distance of the pose it starts from, so the distance shrinks as the surfaces
     settle; with ``scale``, each stage then takes the scale about the follow-up's centroid
     that best fits the pairs along the target normals (eq. 15.2), held within ``bounds``
     (least, most: so that it cannot collapse to a point lying on the target, nor blow up;
-    the start's scale is held there too, about the follow-up's centroid). It stops when a stage
-    moves the samples by less than ``SETTLED`` of their spread (in radians, and in units of
-    the spread)."""
+    the start's scale is held there too, about the follow-up's centroid). It stops when a
+    stage moves the samples by less than ``SETTLED`` of their spread (in radians, and in
+    units of the spread), or after ``rounds`` rounds."""
     cloud, cloud_tree = target.cloud
     centre = source.points.mean(axis=0)
     spread = source.size + 1e-300
@@ -296,7 +363,80 @@ def icp(
     matrix = rigid.copy()
     matrix[:3, :3] *= grow
     matrix[:3, 3] += (1.0 - grow) * rigid[:3, :3] @ centre
-    return measured(source, target, matrix)
+    return matrix
+
+
+def onto_mesh(
+    source: Surface, mesh: MeshNearest, start: np.ndarray, scale: bool, bounds: Bounds
+) -> np.ndarray:
+    """The last rounds (:func:`on_mesh`): the sparse samples onto the mesh, then the
+    follow-up's vertices (:attr:`Surface.corners`), the few rounds that need all of them."""
+    matrix = start
+    if len(source.points) >= SPARSE_EVERY * SPARSE_LEAST:
+        matrix = on_mesh(source.sparse, mesh, matrix, scale, bounds)
+    return on_mesh(source.corners, mesh, matrix, scale, bounds)
+
+
+def on_mesh(
+    source: Surface,
+    mesh: MeshNearest,
+    start: np.ndarray,
+    scale: bool = False,
+    bounds: Bounds = None,
+    rounds: int = MESH_ROUNDS,
+) -> np.ndarray:
+    """The 4x4 transform from ``start`` that takes the follow-up's samples onto the baseline's
+    mesh itself (eq. 15.4): each round pairs every moved sample with its nearest point on the
+    mesh (:class:`MeshNearest`, exact), leaves out the pairs beyond the trimming distance,
+    and takes one Gauss-Newton step of eq. 15.1 with that point and its face's normal (with
+    ``scale``, of the scale about where the follow-up's centroid lands too, held within
+    ``bounds``); until a step would move the samples by less than ``EXACT`` of their spread.
+    The baseline's samples lie a sample's spacing apart, and a plane through the nearest one
+    is off the surface by its curvature times the square of that spacing: on a head a few
+    hundredths of a millimetre, the same way over the whole scan, which is what the last
+    rounds remove."""
+    matrix = np.array(start, dtype=np.float64)
+    points = source.points
+    spread = source.size + 1e-300
+    centre = points.mean(axis=0)
+    foot = None
+    for _ in range(rounds):
+        checkpoint()
+        moved = apply(matrix, points)
+        foot = mesh.nearest(moved, foot)
+        keep = foot.distance <= _trim(foot.distance, MESH_TRIM)
+        if not keep.any():
+            break
+        x, normal = moved[keep], foot.normals[keep]
+        middle = x.mean(axis=0)
+        gap = np.einsum("pd,pd->p", x - foot.points[keep], normal)
+        columns = [np.cross(x - middle, normal), normal]
+        grow = float(np.cbrt(np.linalg.det(matrix[:3, :3])))
+        landed = apply(matrix, centre[None, :])[0]
+        if scale:  # x = landed + grow R (p - c): a relative change of grow moves x by x - landed
+            columns.append(np.einsum("pd,pd->p", x - landed, normal)[:, None])
+        jacobian = np.column_stack(columns)
+        normal_matrix = jacobian.T @ jacobian
+        delta = -np.linalg.lstsq(normal_matrix, jacobian.T @ gap, rcond=None)[0]
+        turn, shift = delta[:3], delta[3:6]
+        change = 0.0
+        if scale:
+            change = clamped(grow * (1.0 + delta[6]), bounds) / grow - 1.0
+        size = float(np.linalg.norm(turn)) * grow * spread + float(np.linalg.norm(shift))
+        size += abs(change) * grow * spread
+        if not size >= EXACT * grow * spread:  # settled (or no step at all: NaN)
+            break
+        rotation = Rotation.from_rotvec(turn).as_matrix()
+        step = np.eye(4)
+        step[:3, :3] = rotation
+        step[:3, 3] = middle - rotation @ middle + shift
+        if scale:
+            grown = np.eye(4)
+            grown[:3, :3] *= 1.0 + change
+            grown[:3, 3] = -change * landed
+            matrix = grown @ matrix
+        matrix = step @ matrix
+    return matrix
 
 
 def _scale_fit(source, target, rigid, centre, grow) -> float:
@@ -314,8 +454,8 @@ def _scale_fit(source, target, rigid, centre, grow) -> float:
     return fit if np.isfinite(fit) and fit > 0 else grow  # pairs that give no scale: keep it
 
 
-def _trim(distance: np.ndarray) -> float:
-    return TRIM * float(np.percentile(distance, TRIM_QUANTILE)) + 1e-12
+def _trim(distance: np.ndarray, times: float = TRIM) -> float:
+    return times * float(np.percentile(distance, TRIM_QUANTILE)) + 1e-12
 
 
 def measured(source: Surface, target: Surface, matrix: np.ndarray) -> Registration:
@@ -347,6 +487,7 @@ def register(
     pairs: tuple[np.ndarray, np.ndarray] | None = None,
     scale: bool = False,
     bounds: Bounds = None,
+    last: str = "mesh",
 ) -> Registration:
     """The follow-up (``source``) registered to the baseline (``target``, the whole scan):
     from the landmarks' ``pairs`` ((k, 3) each, follow-up then baseline) when given; else
@@ -355,7 +496,9 @@ def register(
     bound ranked last) on all of them, and the better kept, unless the other fits about as
     well (``AMBIGUOUS``) and either fits (``PLAUSIBLE``), neither held. The residuals are
     against the whole baseline (:func:`register_region` goes on to the region). With
-    ``scale``, every scale is held within ``bounds`` (:func:`icp`).
+    ``scale``, every scale is held within ``bounds`` (:func:`icp`). ``last`` is how far the
+    answer is refined (:func:`icp`): onto the baseline's mesh itself by default; ``"sparse"``
+    when :func:`register_region` goes on from it.
 
     Raises
     ------
@@ -364,11 +507,12 @@ def register(
         the baseline within ``AMBIGUOUS`` of each other, the better at least ``PLAUSIBLE``.
     """
     if pairs is not None:
-        return icp(source, target, from_pairs(*pairs, scale=scale), scale, bounds=bounds)
-    return _best_of_moments(source, target, scale, bounds)
+        start = from_pairs(*pairs, scale=scale)
+        return icp(source, target, start, scale, bounds=bounds, last=last)
+    return _best_of_moments(source, target, scale, bounds, last)
 
 
-def _best_of_moments(source: Surface, target: Surface, scale: bool, bounds: Bounds):
+def _best_of_moments(source: Surface, target: Surface, scale: bool, bounds: Bounds, last: str):
     coarse_source, coarse_target = source.every(COARSE_EVERY), target.every(COARSE_EVERY)
     coarse_tolerance = on_surface_distance(coarse_target)
     starts = moment_starts(source, target, scale, bounds)
@@ -397,8 +541,10 @@ def _best_of_moments(source: Surface, target: Surface, scale: bool, bounds: Boun
         for t in trials[1:]
         if _angle(t.matrix, trials[0].matrix) > DISTINCT_DEG and not held(t.scale, bounds)
     ][:1]
+    # Each compared on the sparse samples (the shares differ by far more than their
+    # settling does), the better then refined as asked.
     refined = sorted(
-        (icp(source, target, trial.matrix, scale, bounds=bounds) for trial in best),
+        (icp(source, target, trial.matrix, scale, bounds=bounds, last="sparse") for trial in best),
         key=lambda found: (held(found.scale, bounds), -_share(found, tolerance)),
     )
     if (
@@ -409,7 +555,9 @@ def _best_of_moments(source: Surface, target: Surface, scale: bool, bounds: Boun
         shares = (_share(refined[0], tolerance), _share(refined[1], tolerance))
         if shares[0] >= PLAUSIBLE and shares[0] - shares[1] < AMBIGUOUS:
             raise RegistrationAmbiguous(_angle(refined[0].matrix, refined[1].matrix), shares)
-    return refined[0]
+    if last == "sparse":
+        return refined[0]
+    return icp(source, target, refined[0].matrix, scale, bounds=bounds, last=last)
 
 
 @dataclass(frozen=True)
@@ -533,11 +681,16 @@ def register_region(
             break
         if source is scans.follow and scans.target is scans.base:  # the start's own pair
             break
-        found = icp(source, scans.target, found.matrix, scale, bounds=bounds)
+        found = icp(source, scans.target, found.matrix, scale, bounds=bounds, last="sparse")
     if source is None:
         empty = np.empty(0)
         return OnRegion(Registration(found.matrix, found.scale, empty, empty), over, None)
-    return OnRegion(measured(source, scans.target, found.matrix), over, source)
+    # The last rounds, onto the region's mesh itself (the choice of faces holds: a step
+    # this small moves no centroid across to another face's).
+    matrix = found.matrix
+    if scans.target.mesh is not None:
+        matrix = onto_mesh(source, scans.target.mesh, matrix, scale, bounds)
+    return OnRegion(measured(source, scans.target, matrix), over, source)
 
 
 def _chosen(starts: list[np.ndarray], landed: list[float]) -> list[int]:

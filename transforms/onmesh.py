@@ -1,0 +1,166 @@
+"""The nearest point of a triangle mesh to each of many points, for the registration's last
+rounds (docs/math.md, section 15), with the unit normal of the face it lies on.
+
+Each point starts from the faces around its nearest vertex (small_gicp's k-d tree) and walks:
+while a face sharing a corner with the best face so far has a nearer point, it moves there
+(each triangle's nearest point in closed form, by the Voronoi regions of its corners and
+edges: Ericson, Real-Time Collision Detection, 5.1.5). That ends at a face nearer than every
+face around it: the nearest point of the mesh wherever the point lies closer to the surface
+than the surface's own folds are wide (the registration's pairs: a scan's noise from the
+other scan), and it costs a few microseconds a point, compiled by numba, where libigl's
+bounding-box tree took 65 ms to build on 100,000 faces and 2 us a point to ask."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numba
+import numpy as np
+import small_gicp
+
+from .arrays import face_cross, unit_rows
+
+
+@dataclass(frozen=True)
+class Foot:
+    """Points' nearest points on a mesh: ``points`` (p, 3), the unit normals of the faces
+    they lie on (p, 3), their distances (p,), and those faces (p,) int (for
+    :meth:`MeshNearest.nearest`'s ``near``)."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    distance: np.ndarray
+    faces: np.ndarray
+
+
+class MeshNearest:
+    """Nearest points on the triangles ``faces`` ((m, 3) int) of ``vertices`` ((n, 3)); the
+    faces of no area left out (they have no normal)."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
+        faces = np.asarray(faces, dtype=np.int64)
+        normals, flat = unit_rows(face_cross(self.vertices, faces))
+        self.normals = normals[~flat]
+        self.faces = np.ascontiguousarray(faces[~flat])
+
+    @cached_property
+    def _tree(self) -> small_gicp.KdTree | None:
+        """A k-d tree of the vertices that faces use, and those vertices."""
+        used = np.unique(self.faces)
+        if not len(used):
+            return None
+        return small_gicp.KdTree(self.vertices[used], num_threads=1), used
+
+    @cached_property
+    def _around(self) -> tuple[np.ndarray, np.ndarray]:
+        """The faces around each vertex: offsets (n + 1,) into face ids."""
+        corner_vertex = self.faces.ravel()
+        order = np.argsort(corner_vertex, kind="stable")
+        counts = np.bincount(corner_vertex, minlength=len(self.vertices))
+        offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        return offsets, (order // 3).astype(np.int64)
+
+    def nearest(self, points: np.ndarray, near: Foot | None = None) -> Foot:
+        """Each point's nearest point on the faces, that face's normal, and the distance;
+        the walk starts from the faces around each point's nearest vertex, or with ``near``
+        (the same points' feet a little while ago) from its faces' corners."""
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        if not len(points) or not len(self.faces):
+            count = len(points)
+            return Foot(points.copy(), np.zeros_like(points), np.full(count, np.inf),
+                        np.full(count, -1))  # fmt: skip
+        offsets, faces_around = self._around
+        if near is not None and len(near.faces) == len(points):
+            starts = near.faces
+        else:  # a face around each point's nearest vertex
+            tree, used = self._tree
+            index, _ = tree.batch_nearest_neighbor_search(points, num_threads=1)
+            starts = faces_around[offsets[used[np.asarray(index, dtype=np.int64)]]]
+        foot, face, squared = _walk(
+            points, self.vertices, self.faces, offsets, faces_around,
+            np.ascontiguousarray(starts, dtype=np.int64),
+        )  # fmt: skip
+        return Foot(foot, self.normals[face], np.sqrt(squared), face)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _closest(p0, p1, p2, a0, a1, a2, b0, b1, b2, c0, c1, c2):  # pragma: no cover - compiled
+    """The nearest point of triangle ``abc`` to ``p`` (Ericson 5.1.5), as weights of b, c."""
+    ab0, ab1, ab2 = b0 - a0, b1 - a1, b2 - a2
+    ac0, ac1, ac2 = c0 - a0, c1 - a1, c2 - a2
+    ap0, ap1, ap2 = p0 - a0, p1 - a1, p2 - a2
+    d1 = ab0 * ap0 + ab1 * ap1 + ab2 * ap2
+    d2 = ac0 * ap0 + ac1 * ap1 + ac2 * ap2
+    if d1 <= 0.0 and d2 <= 0.0:
+        return 0.0, 0.0
+    bp0, bp1, bp2 = p0 - b0, p1 - b1, p2 - b2
+    d3 = ab0 * bp0 + ab1 * bp1 + ab2 * bp2
+    d4 = ac0 * bp0 + ac1 * bp1 + ac2 * bp2
+    if d3 >= 0.0 and d4 <= d3:
+        return 1.0, 0.0
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        return d1 / (d1 - d3), 0.0
+    cp0, cp1, cp2 = p0 - c0, p1 - c1, p2 - c2
+    d5 = ab0 * cp0 + ab1 * cp1 + ab2 * cp2
+    d6 = ac0 * cp0 + ac1 * cp1 + ac2 * cp2
+    if d6 >= 0.0 and d5 <= d6:
+        return 0.0, 1.0
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        return 0.0, d2 / (d2 - d6)
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 1.0 - w, w
+    total = va + vb + vc
+    if total == 0.0:  # a face of no area (left out before: kept for safety)
+        return 0.0, 0.0
+    return vb / total, vc / total
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _foot(p0, p1, p2, face, vertices, faces):  # pragma: no cover - compiled
+    """The nearest point of ``face`` to ``p``, and its squared distance."""
+    ia, ib, ic = faces[face, 0], faces[face, 1], faces[face, 2]
+    a0, a1, a2 = vertices[ia, 0], vertices[ia, 1], vertices[ia, 2]
+    b0, b1, b2 = vertices[ib, 0], vertices[ib, 1], vertices[ib, 2]
+    c0, c1, c2 = vertices[ic, 0], vertices[ic, 1], vertices[ic, 2]
+    s, t = _closest(p0, p1, p2, a0, a1, a2, b0, b1, b2, c0, c1, c2)
+    h0 = a0 + s * (b0 - a0) + t * (c0 - a0)
+    h1 = a1 + s * (b1 - a1) + t * (c1 - a1)
+    h2 = a2 + s * (b2 - a2) + t * (c2 - a2)
+    return (h0 - p0) ** 2 + (h1 - p1) ** 2 + (h2 - p2) ** 2, h0, h1, h2
+
+
+@numba.njit(cache=True, nogil=True)
+def _walk(points, vertices, faces, offsets, around, starts):  # pragma: no cover - compiled
+    """For each point, from its face in ``starts`` ((p,) int), to a face around the best
+    face's corners while one of them comes nearer: the foot, its face, its squared
+    distance."""
+    count = points.shape[0]
+    foot = np.empty((count, 3))
+    found = np.empty(count, dtype=np.int64)
+    squared = np.empty(count)
+    for i in range(count):
+        p0, p1, p2 = points[i, 0], points[i, 1], points[i, 2]
+        best = starts[i]
+        best_d, x0, x1, x2 = _foot(p0, p1, p2, best, vertices, faces)
+        improved = True
+        while improved:
+            improved = False
+            centre = best
+            for k in range(3):
+                v = faces[centre, k]
+                for j in range(offsets[v], offsets[v + 1]):
+                    face = around[j]
+                    dist, h0, h1, h2 = _foot(p0, p1, p2, face, vertices, faces)
+                    if dist < best_d:
+                        best_d, best, x0, x1, x2 = dist, face, h0, h1, h2
+                        improved = True
+        foot[i, 0], foot[i, 1], foot[i, 2] = x0, x1, x2
+        found[i] = best
+        squared[i] = best_d
+    return foot, found, squared

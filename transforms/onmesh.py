@@ -1,7 +1,8 @@
 """The nearest point of a triangle mesh to each of many points, for the registration's last
 rounds (docs/math.md, section 15), with the unit normal of the face it lies on.
 
-Each point starts from the faces around its nearest vertex (small_gicp's k-d tree) and walks:
+Each point starts from the face of its nearest seed (a registration sample, or a vertex;
+small_gicp's k-d tree) and walks:
 while a face sharing a corner with the best face so far has a nearer point, it moves there
 (each triangle's nearest point in closed form, by the Voronoi regions of its corners and
 edges: Ericson, Real-Time Collision Detection, 5.1.5). That ends at a face nearer than every
@@ -36,31 +37,39 @@ class Foot:
 
 class MeshNearest:
     """Nearest points on the triangles ``faces`` ((m, 3) int) of ``vertices`` ((n, 3)); the
-    faces of no area left out (they have no normal)."""
+    faces of no area left out (they have no normal). ``seeds``, when given: a k-d tree of
+    points on the faces and the face (a row of ``faces``) each lies on, which the walks then
+    start from (the registration's samples, whose tree is built already); else a tree of the
+    vertices is built on first use."""
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, seeds=None) -> None:
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         faces = np.asarray(faces, dtype=np.int64)
         normals, flat = unit_rows(face_cross(self.vertices, faces))
         self.normals = normals[~flat]
         self.faces = np.ascontiguousarray(faces[~flat])
+        self._seeds = None
+        if seeds is not None:
+            tree, on = seeds
+            renumbered = np.cumsum(~flat) - 1  # a seed on a face of no area: its neighbour's
+            self._seeds = tree, np.maximum(renumbered[np.asarray(on, dtype=np.int64)], 0)
 
     @cached_property
-    def _tree(self) -> small_gicp.KdTree | None:
-        """A k-d tree of the vertices that faces use, and those vertices."""
+    def _tree(self) -> tuple[small_gicp.KdTree, np.ndarray]:
+        """A k-d tree of seeds, and the face each lies on."""
+        if self._seeds is not None:
+            return self._seeds
         used = np.unique(self.faces)
-        if not len(used):
-            return None
-        return small_gicp.KdTree(self.vertices[used], num_threads=1), used
+        offsets, faces_around = self._around
+        tree = small_gicp.KdTree(self.vertices[used], num_threads=1)
+        return tree, faces_around[offsets[used]]
 
     @cached_property
     def _around(self) -> tuple[np.ndarray, np.ndarray]:
         """The faces around each vertex: offsets (n + 1,) into face ids."""
-        corner_vertex = self.faces.ravel()
-        order = np.argsort(corner_vertex, kind="stable")
-        counts = np.bincount(corner_vertex, minlength=len(self.vertices))
+        counts = np.bincount(self.faces.ravel(), minlength=len(self.vertices))
         offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        return offsets, (order // 3).astype(np.int64)
+        return offsets, _bucketed(self.faces, offsets)
 
     def nearest(self, points: np.ndarray, near: Foot | None = None) -> Foot:
         """Each point's nearest point on the faces, that face's normal, and the distance;
@@ -74,15 +83,28 @@ class MeshNearest:
         offsets, faces_around = self._around
         if near is not None and len(near.faces) == len(points):
             starts = near.faces
-        else:  # a face around each point's nearest vertex
-            tree, used = self._tree
+        else:  # the face of each point's nearest seed
+            tree, on = self._tree
             index, _ = tree.batch_nearest_neighbor_search(points, num_threads=1)
-            starts = faces_around[offsets[used[np.asarray(index, dtype=np.int64)]]]
+            starts = on[np.asarray(index, dtype=np.int64)]
         foot, face, squared = _walk(
             points, self.vertices, self.faces, offsets, faces_around,
             np.ascontiguousarray(starts, dtype=np.int64),
         )  # fmt: skip
         return Foot(foot, self.normals[face], np.sqrt(squared), face)
+
+
+@numba.njit(cache=True, nogil=True)
+def _bucketed(faces, offsets):  # pragma: no cover - compiled
+    """Each face's id at its corners' places: the faces around each vertex, in one pass."""
+    filled = offsets[:-1].copy()
+    around = np.empty(offsets[-1], dtype=np.int64)
+    for face in range(faces.shape[0]):
+        for k in range(3):
+            vertex = faces[face, k]
+            around[filled[vertex]] = face
+            filled[vertex] += 1
+    return around
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

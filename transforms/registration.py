@@ -106,6 +106,7 @@ class Surface:
     normals: np.ndarray
     vertices: np.ndarray | None = None
     faces: np.ndarray | None = None
+    on: np.ndarray | None = None  # (n,) int: the face (a row of ``faces``) each sample is on
 
     @classmethod
     def of(cls, vertices: np.ndarray, faces: np.ndarray, count: int = SAMPLES) -> Surface:
@@ -117,7 +118,7 @@ class Surface:
         root = np.sqrt(share)
         weights = np.column_stack([1.0 - root, 0.5 * root, 0.5 * root])
         normals, _ = unit_rows(face_cross(vertices, faces[face]))
-        return cls(combine(vertices, faces, face, weights), normals, vertices, faces)
+        return cls(combine(vertices, faces, face, weights), normals, vertices, faces, face)
 
     @staticmethod
     def log_size(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -160,14 +161,16 @@ class Surface:
         """Nearest points on the mesh the samples were drawn from (None: no mesh)."""
         if self.vertices is None or self.faces is None:
             return None
-        return MeshNearest(self.vertices, self.faces)
+        seeds = None if self.on is None else (self.tree.kdtree, self.on)
+        return MeshNearest(self.vertices, self.faces, seeds)
 
     def every(self, step: int) -> Surface:
         """Every ``step``-th sample (of the same mesh): a coarser surface for comparing
         starts and for the first rounds of ICP."""
         if step == 1:
             return self
-        return Surface(self.points[::step], self.normals[::step], self.vertices, self.faces)
+        on = None if self.on is None else self.on[::step]
+        return Surface(self.points[::step], self.normals[::step], self.vertices, self.faces, on)
 
     @cached_property
     def corners(self) -> Surface:

@@ -18,10 +18,11 @@ WORKDIR /src
 COPY pyproject.toml README.md ./
 COPY transforms ./transforms
 COPY service ./service
-# A regular (not editable) install; the bytecode is compiled here because the running
-# container cannot write it.
+# A regular (not editable) install; the bytecode, and numba's kernels (its cache beside
+# the source), are compiled here because the running container cannot write them.
 RUN /opt/meshflat/bin/pip install --no-compile . \
     && /opt/meshflat/bin/python -m compileall -q -j 0 /opt/meshflat \
+    && /opt/meshflat/bin/python -c "from transforms.onmesh import compile_kernels as c; c()" \
     && find /opt/meshflat -depth -type d \( -name tests -o -name test \) \
         -path '*site-packages/*' -prune -exec rm -rf {} + \
     && rm -rf /opt/meshflat/lib/python3*/site-packages/pip

@@ -186,3 +186,12 @@ def _walk(points, vertices, faces, offsets, around, starts):  # pragma: no cover
         found[i] = best
         squared[i] = best_d
     return foot, found, squared
+
+
+def compile_kernels() -> None:
+    """Compile (or load from numba's cache) the kernels on a one-triangle mesh: the image's
+    build runs it, so that its cache ships beside the source and the service's first
+    registration does not spend the seconds compiling takes."""
+    vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    mesh = MeshNearest(vertices, np.array([[0, 1, 2]]))
+    mesh.nearest(np.array([[0.2, 0.2, 1.0]]))

@@ -3,7 +3,10 @@
 moments from several starts, refined by point-to-plane ICP over area-weighted samples with
 the pairs beyond a trimming distance left out, so that a cropped follow-up still aligns:
 first on the whole scans, then region to region (the follow-up's faces over the baseline's
-region on that region, :func:`register_region`).
+region on that region, :func:`register_region`). ICP runs coarse to fine (a quarter of the
+follow-up's samples until they settle), and the last rounds take the follow-up's vertices
+onto the nearest points of the baseline's mesh itself (:func:`on_mesh`): a plane through
+the nearest baseline sample is off a curved surface by hundredths of a millimetre.
 
 The ICP is small_gicp's (``PLANE_ICP``: about 1 MB installed, numpy only); Open3D ships the
 same at about 900 MB, and trimesh's ICP is point-to-point, which slides along a smooth head
@@ -43,7 +46,7 @@ MAX_ROUNDS, COARSE_ROUNDS, STAGE_ROUNDS, SETTLED = 60, 15, 5, 1e-4
 RUNNER_UP_ROUNDS = 30
 #: ICP starts on every ``SPARSE_EVERY``-th follow-up sample (when that leaves at least
 #: ``SPARSE_LEAST``), and the last rounds against the baseline's mesh (:func:`on_mesh`) end
-#: when a step would move the samples by less than ``EXACT`` of their spread, after
+#: when a step has moved the points by less than ``EXACT`` of their spread, after
 #: ``MESH_ROUNDS`` at the most.
 SPARSE_EVERY, SPARSE_LEAST, EXACT, MESH_ROUNDS = 4, 1_000, 1e-5, 10
 #: The most follow-up vertices the last rounds fit (:attr:`Surface.corners`).
@@ -311,9 +314,10 @@ def icp(
     sparse = source.sparse if len(source.points) >= SPARSE_EVERY * SPARSE_LEAST else source
     if sparse is not source:
         matrix = _stages(sparse, target, matrix, scale, rounds, bounds)
-    if sparse is source or last == "samples" or (last == "mesh" and target.mesh is None):
+    exact = last == "mesh" and target.mesh is not None
+    if sparse is source or (last != "sparse" and not exact):
         matrix = _stages(source, target, matrix, scale, rounds, bounds)
-    elif last == "mesh":
+    if exact:
         matrix = onto_mesh(source, target.mesh, matrix, scale, bounds)
     return measured(source, target, matrix)
 
@@ -392,16 +396,16 @@ def on_mesh(
     bounds: Bounds = None,
     rounds: int = MESH_ROUNDS,
 ) -> np.ndarray:
-    """The 4x4 transform from ``start`` that takes the follow-up's samples onto the baseline's
-    mesh itself (eq. 15.4): each round pairs every moved sample with its nearest point on the
-    mesh (:class:`MeshNearest`, exact), leaves out the pairs beyond the trimming distance,
-    and takes one Gauss-Newton step of eq. 15.1 with that point and its face's normal (with
-    ``scale``, of the scale about where the follow-up's centroid lands too, held within
-    ``bounds``); until a step has moved the samples by less than ``EXACT`` of their spread.
-    The baseline's samples lie a sample's spacing apart, and a plane through the nearest one
-    is off the surface by its curvature times the square of that spacing: on a head a few
-    hundredths of a millimetre, the same way over the whole scan, which is what the last
-    rounds remove."""
+    """The 4x4 transform from ``start`` that takes the follow-up's points (``source``: its
+    samples, or its vertices) onto the baseline's mesh itself (eq. 15.4): each round pairs
+    every moved point with its nearest point on the mesh (:class:`MeshNearest`),
+    leaves out the pairs beyond the trimming distance, and takes one Gauss-Newton step of
+    eq. 15.1 with that point and its face's normal (with ``scale``, of the scale about where
+    the follow-up's centroid lands too, held within ``bounds``); until a step has moved the
+    points by less than ``EXACT`` of their spread. The baseline's samples lie a sample's
+    spacing apart, and a plane through the nearest one is off the surface by its curvature
+    times the square of that spacing: on a head a few hundredths of a millimetre, the same
+    way over the whole scan, which is what the last rounds remove."""
     matrix = np.array(start, dtype=np.float64)
     points = source.points
     spread = source.size + 1e-300
@@ -697,8 +701,8 @@ def register_region(
     if source is None:
         empty = np.empty(0)
         return OnRegion(Registration(found.matrix, found.scale, empty, empty), over, None)
-    # The last rounds, onto the region's mesh itself (the choice of faces holds: a step
-    # this small moves no centroid across to another face's).
+    # The last rounds, onto the region's mesh itself; the choice of faces is not made again
+    # (they move the follow-up by hundredths of a millimetre).
     matrix = found.matrix
     if scans.target.mesh is not None:
         matrix = onto_mesh(source, scans.target.mesh, matrix, scale, bounds)

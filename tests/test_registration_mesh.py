@@ -1,7 +1,6 @@
-"""The registration's last rounds onto the baseline's mesh (transforms.onmesh,
-transforms.registration.on_mesh; docs/math.md, section 15, eq. 15.4): the nearest points
-are libigl's exact ones, and a follow-up with no noise lands back exactly, where ICP on the
-samples alone stops a curvature's bias away."""
+"""The registration's last rounds onto the baseline's mesh (transforms.onmesh; docs/math.md,
+section 15, eq. 15.4): the nearest points are libigl's exact ones, and a follow-up with no
+noise lands back exactly, where ICP on the samples alone stops a curvature's bias away."""
 
 from __future__ import annotations
 
@@ -12,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from fixtures.meshes import subdivided
 from transforms import registration
-from transforms.onmesh import MeshNearest, _closest
+from transforms.onmesh import MeshNearest, _closest, on_mesh
 
 TURN = Rotation.from_rotvec(np.radians(10.0) * np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0))
 SHIFT = np.array([3.0, -2.0, 2.0])
@@ -106,7 +105,7 @@ def test_the_last_rounds_fit_the_scale_too():
     start = np.eye(4)
     start[:3, :3] = TURN.inv().as_matrix() / 1.49
     start[:3, 3] = -TURN.inv().apply(SHIFT) + 0.2
-    found = registration.on_mesh(follow, base.mesh, start, scale=True, bounds=(0.1, 10.0))
+    found = on_mesh(follow, base.mesh, start, scale=True, bounds=(0.1, 10.0))
     true = np.eye(4)
     true[:3, :3] = TURN.inv().as_matrix() / 1.5
     true[:3, 3] = -TURN.inv().apply(SHIFT)

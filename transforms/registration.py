@@ -28,7 +28,7 @@ from trimesh.registration import procrustes
 
 from .arrays import blocks, combine, face_cross, triangle_areas, unit_rows
 from .checkpoints import checkpoint
-from .onmesh import MeshNearest
+from .onmesh import SPARSE_EVERY, SPARSE_LEAST, MeshNearest, NearestTree, onto_mesh
 from .sampling import systematic_picks
 
 #: A scale's bounds (least, most), or None for none.
@@ -44,11 +44,6 @@ MAX_ROUNDS, COARSE_ROUNDS, STAGE_ROUNDS, SETTLED = 60, 15, 5, 1e-4
 #: settles as fast as the best (15 to 20 rounds); one still sliding after these is no rival
 #: (on the 100k-face head, the 45 rounds more it took were a sixth of the time).
 RUNNER_UP_ROUNDS = 30
-#: ICP starts on every ``SPARSE_EVERY``-th follow-up sample (when that leaves at least
-#: ``SPARSE_LEAST``), and the last rounds against the baseline's mesh (:func:`on_mesh`) end
-#: when a step has moved the points by less than ``EXACT`` of their spread, after
-#: ``MESH_ROUNDS`` at the most.
-SPARSE_EVERY, SPARSE_LEAST, EXACT, MESH_ROUNDS = 4, 1_000, 1e-5, 10
 #: The most follow-up vertices the last rounds fit (:attr:`Surface.corners`).
 CORNERS_MOST = 100_000
 #: Neighbours whose plane gives a target sample its normal for small_gicp (its default).
@@ -67,36 +62,6 @@ DISTINCT_DEG, AMBIGUOUS, PLAUSIBLE = 10.0, 0.1, 0.5
 #: Pairs farther apart than this many times the ``TRIM_QUANTILE`` of their distances are
 #: left out of a round: up to about two thirds of either surface may have no counterpart.
 TRIM, TRIM_QUANTILE = 2.5, 30.0
-#: The last rounds (:func:`on_mesh`) keep the pairs within this many times that percentile:
-#: there the distances are the scans' noise, whose 30th percentile is 0.385 of its standard
-#: deviation, so 8 times it is 3 deviations, and leaves out almost no pair that has a
-#: counterpart (at 2.5 times, about one deviation, a third of them went, and with them half
-#: of the accuracy).
-MESH_TRIM = 8.0
-
-
-class NearestTree:
-    """Nearest neighbours among ``(n, 3)`` points, by small_gicp's k-d tree (nanoflann's) on
-    one thread: what scipy's ``cKDTree.query`` answers (the distances, then the indices),
-    about 1.6 times as fast on a scan's samples, and the tree small_gicp's ICP takes."""
-
-    def __init__(self, points: np.ndarray) -> None:
-        points = np.ascontiguousarray(points, dtype=np.float64)
-        self.kdtree = small_gicp.KdTree(points, num_threads=1)
-
-    def query(self, points: np.ndarray, k: int = 1) -> tuple[np.ndarray, np.ndarray]:
-        """(q,) distances and (q,) int indices of each point's nearest; with ``k`` above 1,
-        (q, k) each, nearest first."""
-        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        if not len(points):
-            shape = (0,) if k == 1 else (0, k)
-            return np.empty(shape), np.empty(shape, dtype=np.int64)
-        if k == 1:
-            index, squared = self.kdtree.batch_nearest_neighbor_search(points, num_threads=1)
-        else:
-            index, squared = self.kdtree.batch_knn_search(points, k, num_threads=1)
-        distance = np.sqrt(np.asarray(squared, dtype=np.float64))
-        return distance, np.asarray(index, dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -374,81 +339,6 @@ def _stages(source, target, start, scale, rounds, bounds) -> np.ndarray:
     matrix = rigid.copy()
     matrix[:3, :3] *= grow
     matrix[:3, 3] += (1.0 - grow) * rigid[:3, :3] @ centre
-    return matrix
-
-
-def onto_mesh(
-    source: Surface, mesh: MeshNearest, start: np.ndarray, scale: bool, bounds: Bounds
-) -> np.ndarray:
-    """The last rounds (:func:`on_mesh`): the sparse samples onto the mesh, then the
-    follow-up's vertices (:attr:`Surface.corners`), the few rounds that need all of them."""
-    matrix = start
-    if len(source.points) >= SPARSE_EVERY * SPARSE_LEAST:
-        matrix = on_mesh(source.sparse, mesh, matrix, scale, bounds)
-    return on_mesh(source.corners, mesh, matrix, scale, bounds)
-
-
-def on_mesh(
-    source: Surface,
-    mesh: MeshNearest,
-    start: np.ndarray,
-    scale: bool = False,
-    bounds: Bounds = None,
-    rounds: int = MESH_ROUNDS,
-) -> np.ndarray:
-    """The 4x4 transform from ``start`` that takes the follow-up's points (``source``: its
-    samples, or its vertices) onto the baseline's mesh itself (eq. 15.4): each round pairs
-    every moved point with its nearest point on the mesh (:class:`MeshNearest`),
-    leaves out the pairs beyond the trimming distance, and takes one Gauss-Newton step of
-    eq. 15.1 with that point and its face's normal (with ``scale``, of the scale about where
-    the follow-up's centroid lands too, held within ``bounds``); until a step has moved the
-    points by less than ``EXACT`` of their spread. The baseline's samples lie a sample's
-    spacing apart, and a plane through the nearest one is off the surface by its curvature
-    times the square of that spacing: on a head a few hundredths of a millimetre, the same
-    way over the whole scan, which is what the last rounds remove."""
-    matrix = np.array(start, dtype=np.float64)
-    points = source.points
-    spread = source.size + 1e-300
-    centre = points.mean(axis=0)
-    foot = None
-    for _ in range(rounds):
-        checkpoint()
-        moved = apply(matrix, points)
-        foot = mesh.nearest(moved, foot)
-        keep = foot.distance <= _trim(foot.distance, MESH_TRIM)
-        if not keep.any():
-            break
-        x, normal = moved[keep], foot.normals[keep]
-        middle = x.mean(axis=0)
-        gap = np.einsum("pd,pd->p", x - foot.points[keep], normal)
-        columns = [np.cross(x - middle, normal), normal]
-        grow = float(np.cbrt(np.linalg.det(matrix[:3, :3])))
-        landed = apply(matrix, centre[None, :])[0]
-        if scale:  # x = landed + grow R (p - c): a relative change of grow moves x by x - landed
-            columns.append(np.einsum("pd,pd->p", x - landed, normal)[:, None])
-        jacobian = np.column_stack(columns)
-        normal_matrix = jacobian.T @ jacobian
-        delta = -np.linalg.lstsq(normal_matrix, jacobian.T @ gap, rcond=None)[0]
-        turn, shift = delta[:3], delta[3:6]
-        change = 0.0
-        if scale:
-            change = clamped(grow * (1.0 + delta[6]), bounds) / grow - 1.0
-        size = float(np.linalg.norm(turn)) * grow * spread + float(np.linalg.norm(shift))
-        size += abs(change) * grow * spread
-        if not np.isfinite(size):  # no step at all
-            break
-        rotation = Rotation.from_rotvec(turn).as_matrix()
-        step = np.eye(4)
-        step[:3, :3] = rotation
-        step[:3, 3] = middle - rotation @ middle + shift
-        if scale:
-            grown = np.eye(4)
-            grown[:3, :3] *= 1.0 + change
-            grown[:3, 3] = -change * landed
-            matrix = grown @ matrix
-        matrix = step @ matrix
-        if size < EXACT * grow * spread:  # settled: this step was the last
-            break
     return matrix
 
 

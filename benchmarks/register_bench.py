@@ -206,28 +206,32 @@ PARTS = (
 )
 
 
-def profile_rows(case: Case) -> list[str]:
-    """The time of one registration of ``case`` per part (:data:`PARTS`), each seeding."""
+def profile_rows(case: Case, runs: int = 5) -> list[str]:
+    """The time of one registration of ``case`` per part (:data:`PARTS`), each seeding: the
+    median over ``runs`` profiled runs (one alone swings with the machine's other work)."""
     times = {}
     for seeded in ("moments", "landmarks"):
         ours(case, seeded)  # warm
-        profile = cProfile.Profile()
-        profile.enable()
-        ours_whole(case, seeded)
-        profile.disable()
-        stats = pstats.Stats(profile)
-        cumulative = {}
-        for (_, _, name), (_, _, _, total, _) in stats.stats.items():
-            if name.startswith("<built-in method "):  # "<built-in method small_gicp.align>"
-                name = name.rstrip(">").rsplit(".", 1)[-1]
-            cumulative[name] = cumulative.get(name, 0.0) + total
-        times[seeded] = cumulative, stats.total_tt
+        parts: dict[str, list[float]] = {}
+        for _ in range(runs):
+            profile = cProfile.Profile()
+            profile.enable()
+            ours_whole(case, seeded)
+            profile.disable()
+            stats = pstats.Stats(profile)
+            cumulative = {"": stats.total_tt}
+            for (_, _, name), (_, _, _, total, _) in stats.stats.items():
+                if name.startswith("<built-in method "):  # "<built-in method small_gicp.align>"
+                    name = name.rstrip(">").rsplit(".", 1)[-1]
+                cumulative[name] = cumulative.get(name, 0.0) + total
+            for _, name in (*PARTS, ("", "")):
+                parts.setdefault(name, []).append(cumulative.get(name, 0.0))
+        times[seeded] = {name: statistics.median(values) for name, values in parts.items()}
     lines = [
-        f"| {label} | {1e3 * times['moments'][0].get(name, 0.0):,.0f} "
-        f"| {1e3 * times['landmarks'][0].get(name, 0.0):,.0f} |"
+        f"| {label} | {1e3 * times['moments'][name]:,.0f} | {1e3 * times['landmarks'][name]:,.0f} |"
         for label, name in PARTS
     ]
-    total = [1e3 * times[seeded][1] for seeded in ("moments", "landmarks")]
+    total = [1e3 * times[seeded][""] for seeded in ("moments", "landmarks")]
     return [*lines, f"| all (under cProfile) | {total[0]:,.0f} | {total[1]:,.0f} |"]
 
 
@@ -314,8 +318,8 @@ def report(runs: int) -> str:
             "",
             *[f"* {note}" for note in notes],
             "",
-            f"Where the time goes on the first baseline ({first.name}; CPU ms of one "
-            "registration under cProfile, each part's time with what it calls):",
+            f"Where the time goes on the first baseline ({first.name}; ms of one "
+            "registration under cProfile, each part's time with what it calls, the median of 5):",
             "",
             "| part | without landmarks | with landmarks |",
             "|---|---:|---:|",

@@ -137,11 +137,21 @@ class MeshNearest:
 
 def onto_mesh(source, mesh: MeshNearest, start: np.ndarray, scale: bool, bounds) -> np.ndarray:
     """The last rounds (:func:`on_mesh`): the sparse samples onto the mesh, then the
-    follow-up's vertices (``Surface.corners``), the few rounds that need all of them."""
+    follow-up's vertices (``Surface.corners``), the few rounds that need all of them (for
+    a follow-up that is :func:`dense`)."""
     matrix = start
     if len(source.points) >= SPARSE_EVERY * SPARSE_LEAST:
         matrix = on_mesh(source.sparse, mesh, matrix, scale, bounds)
     return on_mesh(source.corners, mesh, matrix, scale, bounds)
+
+
+def dense(source) -> bool:
+    """Whether the last rounds pay on this follow-up: it has at least as many vertices as
+    samples. There its vertices carry more of its noise than the samples do (a 100k-face
+    head with 0.1 mm of noise: 0.005 to 0.011 mm, against 0.04 to 0.10 from ICP on the
+    samples); on a coarse scan they carried less, and ICP on the samples did better
+    (fsaverage's 4,062 faces, 0.3 mm of noise: 0.03 to 0.15 mm against 0.045 to 0.077)."""
+    return source.corners is not source and len(source.corners.points) >= len(source.points)
 
 
 def on_mesh(

@@ -28,7 +28,7 @@ from trimesh.registration import procrustes
 
 from .arrays import blocks, combine, face_cross, triangle_areas, unit_rows
 from .checkpoints import checkpoint
-from .onmesh import SPARSE_EVERY, SPARSE_LEAST, MeshNearest, NearestTree, onto_mesh
+from .onmesh import SPARSE_EVERY, SPARSE_LEAST, MeshNearest, NearestTree, dense, onto_mesh
 from .sampling import systematic_picks
 
 #: A scale's bounds (least, most), or None for none.
@@ -279,7 +279,7 @@ def icp(
     sparse = source.sparse if len(source.points) >= SPARSE_EVERY * SPARSE_LEAST else source
     if sparse is not source:
         matrix = _stages(sparse, target, matrix, scale, rounds, bounds)
-    exact = last == "mesh" and target.mesh is not None
+    exact = last == "mesh" and target.mesh is not None and dense(source)
     if sparse is source or (last != "sparse" and not exact):
         matrix = _stages(source, target, matrix, scale, rounds, bounds)
     if exact:
@@ -594,8 +594,10 @@ def register_region(
     # The last rounds, onto the region's mesh itself; the choice of faces is not made again
     # (they move the follow-up by hundredths of a millimetre).
     matrix = found.matrix
-    if scans.target.mesh is not None:
+    if scans.target.mesh is not None and dense(source):
         matrix = onto_mesh(source, scans.target.mesh, matrix, scale, bounds)
+    else:  # a coarse follow-up: ICP on all its samples
+        matrix = _stages(source, scans.target, matrix, scale, MAX_ROUNDS, bounds)
     return OnRegion(measured(source, scans.target, matrix), over, source)
 
 

@@ -22,7 +22,10 @@ seam or a singular point): where a map folds, a point on it has no single place 
   the answer's frame), the follow-up's point taken back by the true transform. The goal: the
   two scans' maps agree to within 1 mm on the scalp.
 
-    python -m benchmarks.repeat_bench [--trials 100] [--write-docs]
+Then issue 37's registration rows against small_gicp (benchmarks/register_bench.py), which
+``--only-register`` runs alone.
+
+    python -m benchmarks.repeat_bench [--trials 100] [--runs 5] [--only-register] [--write-docs]
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
+from benchmarks import register_bench
 from benchmarks.docs import footer, publish
 from benchmarks.measure_bench import progress
 from fixtures.landmarks import NEAR, NEAR_GOAT, NEAR_LEE_PERRY_SMITH, NEAR_NEFERTITI
@@ -225,7 +229,7 @@ def follow_up_rows(head: Head) -> list[str]:
         start = time.perf_counter()
         try:
             scans = RegionScans(moved, kept, v, f, np.unique(region))
-            whole = register(scans.follow, scans.base, pairs)
+            whole = register(scans.follow, scans.base, pairs, last="sparse")  # as the service
             found = register_region(scans, whole).found
         except RegistrationAmbiguous as refused:
             rows.append(f"| {head.scan.name} | {seeded} | refused: {refused} | | | | | |")
@@ -257,9 +261,33 @@ def follow_up_rows(head: Head) -> list[str]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--trials", type=int, default=100, help="landmark trials per scan")
+    parser.add_argument("--runs", type=int, default=5, help="timed runs per registration row")
+    parser.add_argument(
+        "--only-register", action="store_true", help="only the registration rows against small_gicp"
+    )
     parser.add_argument("--write-docs", action="store_true", help="record in docs/benchmarks.md")
     args = parser.parse_args(argv)
     keep_large_blocks()
+    if not args.only_register:
+        same_map(args)
+    publish(
+        "repeat-register",
+        "A follow-up registered, against small_gicp (`make bench-repeat`)",
+        register_bench.report(args.runs)
+        + "\n\n"
+        + footer(f"numpy {np.__version__}", f"small_gicp {small_gicp_version()}"),
+        args.write_docs,
+    )
+    return 0
+
+
+def small_gicp_version() -> str:
+    from importlib.metadata import version
+
+    return version("small_gicp")
+
+
+def same_map(args) -> None:
     heads = [Head.of(scan) for scan in SCANS if available(scan.name)]
     landmark_rows = [landmark_row(head, args.trials) for head in heads]
     follow_rows = [row for head in heads for row in follow_up_rows(head)]
@@ -305,7 +333,6 @@ def main(argv: list[str] | None = None) -> int:
         "\n".join(lines),
         args.write_docs,
     )
-    return 0
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ from .fit import fit_region
 from .frames import Frame
 from .locate import SORTED_QUERIES, LocateIndex
 from .metrics import weighted_quantile
+from .onmesh import MeshNearest
 from .region import flatten_region
 from .topology import face_components, welded
 
@@ -33,8 +34,8 @@ from .topology import face_components, welded
 def compile_kernels() -> float:
     """Call every compiled kernel once: flatten a small closed surface seen from inside and
     from outside (the paths of a closed region, an open one and the exact tests), enough
-    values for the quantiles' scans, a fit of half of it and rays located on it, few and
-    many; return the seconds it took."""
+    values for the quantiles' scans, a fit of half of it, nearest points on it and rays
+    located on it, few and many; return the seconds it took."""
     start = time.perf_counter()
     vertices, faces = _octahedron_sphere()
     chart = Chart.distorted(PoleCap.from_sigma(0.3))
@@ -51,6 +52,8 @@ def compile_kernels() -> float:
     weighted_quantile(values, values + 1.0, 0.5)
     # A fit of the sphere's upper half (its own kernels, transforms/fit/fused.py).
     fit_region(vertices, faces[vertices[faces].mean(axis=1)[:, 1] > 0.0])
+    # Nearest points on the mesh (a registration's last rounds, transforms/onmesh.py).
+    MeshNearest(vertices, faces).nearest(rng.normal(size=(8, 3)))
     # Locating rays: a few (the walk as they come) and many (sorted first).
     index = LocateIndex.build(vertices - [0.01, 0.02, 0.03], faces)
     for count in (16, SORTED_QUERIES):

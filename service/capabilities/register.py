@@ -214,7 +214,11 @@ def register_scans(given: RegisterInput, ctx: Context) -> Registered:
     scans = sent.scaled(unit)
     pairs = _landmark_pairs(mesh, follow, params, unit)
     try:
-        whole = register(scans.follow, scans.base, pairs, scale=similar, bounds=bounds)
+        # Rigid: only as far as the sparse samples, the region's rounds go on from it; with
+        # a scale, on all the samples (from the sparse ones' pose alone, half a head at 10
+        # times its size was answered 200 mm off rather than refused).
+        last = "samples" if similar else "sparse"
+        whole = register(scans.follow, scans.base, pairs, similar, bounds, last=last)
     except RegistrationAmbiguous as error:
         raise _unregistered(str(error), _mismatch(scans, None), similar) from None
     _check_scale(whole.scale, bounds)

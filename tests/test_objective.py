@@ -138,13 +138,7 @@ def test_the_compiled_gradient_is_numpys_to_rounding(region, layout):
     expected = _energy_gradient(energy.shapes, warped.plane, center, sums)
     shapes = energy.shapes
     by_phi, by_second = fused.energy_gradient(
-        shapes.faces,
-        shapes.metric,
-        shapes.double_area,
-        shapes.cubed_area,
-        shapes.measurable,
-        shapes.normals,
-        shapes.offsets,
+        *shapes.arrays,
         center,
         warped.plane.real.copy(),
         warped.plane.imag.copy(),

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 #: Slack of the plane tests (a corner counts as on a plane's side within this part of its
 #: coordinates' sum).
@@ -68,8 +69,10 @@ def cube_coordinates(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     return face, b / scale, c / scale
 
 
+@njit(cache=True, nogil=True, inline="always")
 def cube_coordinate(x: float, y: float, z: float) -> tuple[int, float, float]:
-    """:func:`cube_coordinates` of one point, in plain numbers."""
+    """:func:`cube_coordinates` of one point, in plain numbers (compiled: the locate walk's
+    kernels inline it, and Python calls it too)."""
     ax, ay, az = abs(x), abs(y), abs(z)
     if ax >= ay and ax >= az:
         major, b, c, axis = x, y, z, 0
@@ -77,7 +80,9 @@ def cube_coordinate(x: float, y: float, z: float) -> tuple[int, float, float]:
         major, b, c, axis = y, z, x, 1
     else:
         major, b, c, axis = z, x, y, 2
-    scale = abs(major) or 1.0
+    scale = abs(major)
+    if scale == 0.0:
+        scale = 1.0
     return 2 * axis + (major < 0), b / scale, c / scale
 
 

@@ -223,8 +223,10 @@ class LocateIndex:
         hit_face = np.full(count, -1, dtype=np.int64)
         weights = np.full((count, 3), np.nan)
         depth = np.full(count, np.nan)
+        # The compiled function's own Python, on plain floats: no dispatch for a few rays.
+        cube_of = cube_coordinate.py_func
         for k, ray in enumerate(rays.tolist()):
-            found = self._candidates(*cube_coordinate(*ray))
+            found = self._candidates(*cube_of(*ray))
             if len(self.everyone):
                 found = np.concatenate([found, self.everyone])
             corners = self.points[self.faces[found]].tolist()

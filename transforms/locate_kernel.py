@@ -17,6 +17,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .cubemap import cube_coordinate
+
 #: A direction counts as inside when each edge's determinant is above this (relative) amount.
 INSIDE = -1e-12
 
@@ -56,7 +58,7 @@ def ray_hits(
         else:
             # The triangles whose float32 box holds the ray's (u, v), from its cell on each
             # level of its cube face, compacted without a branch; then everyone.
-            cube, u, v = _cube_coordinate(x, y, z)
+            cube, u, v = cube_coordinate(x, y, z)
             qu, qv = np.float32(u), np.float32(v)
             for level in range(level_counts[cube]):
                 cell = _cell(u, v, face_levels[cube, level, 0], face_levels[cube, level, 1],
@@ -128,20 +130,6 @@ def triangle_hit(qx, qy, qz, x0, y0, z0, x1, y1, z1, x2, y2, z2):
     return depth > 0.0, depth, e0, e1, e2, total
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _cube_coordinate(x, y, z):
-    """:func:`.cubemap.cube_coordinate` of a non-zero point, compiled."""
-    ax, ay, az = abs(x), abs(y), abs(z)
-    if ax >= ay and ax >= az:
-        major, b, c, axis = x, y, z, 0
-    elif ay >= az:
-        major, b, c, axis = y, z, x, 1
-    else:
-        major, b, c, axis = z, x, y, 2
-    scale = abs(major)
-    return 2 * axis + (major < 0), b / scale, c / scale
-
-
 @njit(cache=True, nogil=True)
 def ray_order(directions, squares):
     """The directions ((k, 3) float) by cube face, then row and column of ``squares`` x
@@ -154,7 +142,7 @@ def ray_order(directions, squares):
     for i in range(k):
         x, y, z = directions[i, 0], directions[i, 1], directions[i, 2]
         if x != 0.0 or y != 0.0 or z != 0.0:
-            cube, u, v = _cube_coordinate(x, y, z)
+            cube, u, v = cube_coordinate(x, y, z)
             column = min(max(int((u + 1.0) * half), 0), squares - 1)
             row = min(max(int((v + 1.0) * half), 0), squares - 1)
             key[i] = (cube * squares + row) * squares + column

@@ -24,6 +24,19 @@ from ..faces import DEGENERATE_RTOL
 from ..spherical import MIN_RADIUS
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _warped(x, y, z, r, sigma):
+    """The pole warp of a local point at radius ``r``: warp.plus_minus, then
+    ``(2 sigma x, sigma^2 (r + y) - (r - y), 2 sigma z)`` (docs/math.md, section 3)."""
+    exact = abs(y) + r
+    complement = (x * x + z * z) / exact
+    if y < 0.0:
+        plus, minus = complement, exact
+    else:
+        plus, minus = exact, complement
+    return 2.0 * sigma * x, (sigma * sigma) * plus - minus, 2.0 * sigma * z
+
+
 @njit(cache=True, nogil=True)
 def warp_batch(points, centers, rotations, sigmas, warp):
     """Per candidate (k) and vertex (n): the warped direction's ``sqrt(a^2 + b^2)``, ``b``,
@@ -56,16 +69,7 @@ def warp_batch(points, centers, rotations, sigmas, warp):
                 at_centre[j] = True
                 r = 1.0
             if warp:
-                # warp.plus_minus, then (2 sigma x, sigma^2 (r + y) - (r - y), 2 sigma z).
-                exact = abs(y) + r
-                complement = (x * x + z * z) / exact
-                if y < 0.0:
-                    plus, minus = complement, exact
-                else:
-                    plus, minus = exact, complement
-                a = 2.0 * sigma * x
-                b = plus * (sigma * sigma) - minus
-                c = 2.0 * sigma * z
+                a, b, c = _warped(x, y, z, r, sigma)
             else:
                 a, b, c = x, y, z
             across[j, i] = math.sqrt(a * a + b * b)
@@ -408,15 +412,7 @@ def warp_one(offsets, rotation, sigma, mercator, margin):
             at_centre = True
             ri = 1.0
         r[i] = ri
-        exact = abs(y) + ri
-        complement = (x * x + z * z) / exact
-        if y < 0.0:
-            plus, minus = complement, exact
-        else:
-            plus, minus = exact, complement
-        a = 2.0 * sigma * x
-        b = sigma * sigma * plus - minus
-        c = 2.0 * sigma * z
+        a, b, c = _warped(x, y, z, ri, sigma)
         warped[0, i], warped[1, i], warped[2, i] = a, b, c
         t = math.atan2(math.sqrt(a * a + b * b), c)
         theta[i] = t

@@ -189,13 +189,7 @@ class FaceEnergy:
         theta = np.arctan2(across, height, out=height)
         phi = half_open_azimuth(np.arctan2(second, first, out=second))
         sums = fused.sums_batch(
-            shapes.faces,
-            shapes.metric,
-            shapes.double_area,
-            shapes.cubed_area,
-            shapes.measurable,
-            shapes.normals,
-            shapes.offsets,
+            *shapes.arrays,
             centers,
             split,
             phi,
@@ -236,16 +230,7 @@ class FaceEnergy:
             offsets, np.ascontiguousarray(rotation), sigma, mercator, MERCATOR_THETA_MARGIN
         )
         shapes = self.shapes
-        faces = (
-            shapes.faces,
-            shapes.metric,
-            shapes.double_area,
-            shapes.cubed_area,
-            shapes.measurable,
-            shapes.normals,
-            shapes.offsets,
-            np.ascontiguousarray(center),
-        )
+        faces = (*shapes.arrays, np.ascontiguousarray(center))
         sums = fused.sums_of_plane(*faces, phi, second)
         objective, energy, hidden = _objective(tuple(sums[:, None]), np.array([at_centre]))
         scores = Scores(objective, energy, hidden, np.array([cap_cosine]))
@@ -498,6 +483,20 @@ class _FaceShapes:
 
     def __len__(self) -> int:
         return self.faces.shape[1]
+
+    @property
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """What the compiled sums and gradient read of the faces (:mod:`.fused`), in their
+        arguments' order."""
+        return (
+            self.faces,
+            self.metric,
+            self.double_area,
+            self.cubed_area,
+            self.measurable,
+            self.normals,
+            self.offsets,
+        )
 
     def sums(self, plane, centers) -> tuple[np.ndarray, ...]:
         """Per candidate, ``(k,)``: the area and the layout area of the faces seen from the

@@ -23,7 +23,7 @@ import numpy as np
 import small_gicp
 from scipy.spatial.transform import Rotation
 
-from .arrays import face_cross, unit_rows
+from .arrays import blocks, face_cross, unit_rows
 from .checkpoints import checkpoint
 
 #: The last rounds (:func:`on_mesh`) end when a step has moved the points by less than
@@ -122,16 +122,21 @@ class MeshNearest:
             return Foot(points.copy(), np.zeros_like(points), np.full(count, np.inf),
                         np.full(count, -1))  # fmt: skip
         offsets, faces_around = self._around
-        if near is not None and len(near.faces) == len(points):
-            starts = near.faces
-        else:  # the face of each point's nearest seed
-            tree, on = self._tree
-            index, _ = tree.batch_nearest_neighbor_search(points, num_threads=1)
-            starts = on[np.asarray(index, dtype=np.int64)]
-        foot, face, squared = _walk(
-            points, self.vertices, self.faces, offsets, faces_around,
-            np.ascontiguousarray(starts, dtype=np.int64),
-        )  # fmt: skip
+        foot, face = np.empty_like(points), np.empty(len(points), dtype=np.int64)
+        squared = np.empty(len(points))
+        # A block of points at a time, each after a checkpoint: a served job past its time
+        # limit stops within a block, not after all of a large scan's vertices.
+        for block in blocks(len(points)):
+            if near is not None and len(near.faces) == len(points):
+                starts = near.faces[block]
+            else:  # the face of each point's nearest seed
+                tree, on = self._tree
+                index, _ = tree.batch_nearest_neighbor_search(points[block], num_threads=1)
+                starts = on[np.asarray(index, dtype=np.int64)]
+            foot[block], face[block], squared[block] = _walk(
+                points[block], self.vertices, self.faces, offsets, faces_around,
+                np.ascontiguousarray(starts, dtype=np.int64),
+            )  # fmt: skip
         return Foot(foot, self.normals[face], np.sqrt(squared), face)
 
 

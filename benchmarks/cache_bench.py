@@ -124,18 +124,10 @@ def ms(values: list[float]) -> float:
 
 def clicks(runs: int) -> dict:
     scalp = Scalp.of(5)
-    picked, theta, phi, _ = scalp.map_points(1, seed=1)
-    params = {
-        "center": scalp.frame.center.tolist(),
-        "rotation": ROTATION,
-        "sigma": SIGMA,
-        "theta": theta.tolist(),
-        "phi": phi.tolist(),
-    }
-    glb = trimesh.Trimesh(scalp.vertices, scalp.faces, process=False).export(file_type="glb")
+    picked, params, glb = scalp.click()
 
     def found(answer) -> None:
-        assert answer[1] == 200 and f'"face":{int(picked[0])},'.encode() in answer[2], answer
+        assert answer[1] == 200 and f'"face":{picked},'.encode() in answer[2], answer
 
     measured = dict(faces=len(scalp.faces), upload=len(glb))
     with serving({}, own_limits=True) as served:

@@ -80,6 +80,20 @@ class Scalp:
         theta, phi, _ = self.chart.forward(self.frame.to_local(points))
         return picked, theta, phi, self.chart.inverse(theta, phi, 1.0)
 
+    def click(self) -> tuple[int, dict, bytes]:
+        """One click's request: the face of its point, the params (the fixed frame and the
+        point's map coordinates) and the scalp as GLB."""
+        picked, theta, phi, _ = self.map_points(1, seed=1)
+        params = {
+            "center": self.frame.center.tolist(),
+            "rotation": ROTATION,
+            "sigma": SIGMA,
+            "theta": theta.tolist(),
+            "phi": phi.tolist(),
+        }
+        glb = trimesh.Trimesh(self.vertices, self.faces, process=False).export(file_type="glb")
+        return int(picked[0]), params, glb
+
 
 def progress(text: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {text}", file=sys.stderr, flush=True)
@@ -108,15 +122,7 @@ def curl_post(url: str, body: bytes) -> tuple[float, bytes, str]:
 def click(scalp: Scalp, runs: int) -> dict:
     """One map point posted with the scalp as GLB, ``runs`` times after a warm-up, to a fresh
     server: curl's times, the last Server-Timing, the server's VmHWM before and after."""
-    picked, theta, phi, _ = scalp.map_points(1, seed=1)
-    params = {
-        "center": scalp.frame.center.tolist(),
-        "rotation": ROTATION,
-        "sigma": SIGMA,
-        "theta": theta.tolist(),
-        "phi": phi.tolist(),
-    }
-    glb = trimesh.Trimesh(scalp.vertices, scalp.faces, process=False).export(file_type="glb")
+    picked, params, glb = scalp.click()
     body = multipart_body(params, "scalp.glb", glb)
     with serving({}, own_limits=True) as served:
         idle = status_bytes("VmHWM", served.process.pid) / 2**20
@@ -124,7 +130,7 @@ def click(scalp: Scalp, runs: int) -> dict:
         for _ in range(runs + 1):
             took, answer, timing = curl_post(f"{served.url}/v1/locate", body)
             seconds.append(took)
-            assert f'"face":{int(picked[0])},'.encode() in answer, answer[:300]
+            assert f'"face":{picked},'.encode() in answer, answer[:300]
         peak = status_bytes("VmHWM", served.process.pid) / 2**20
     return dict(seconds=seconds[1:], timing=timing, idle=idle, peak=peak, upload=len(glb))
 

@@ -14,7 +14,7 @@ Two cases are known without looking for a free cap:
 
 The ray's crossings are counted exactly: faces whose corners cannot surround it are set aside
 by the sides of two planes through it (a compiled pass), and the rest decided by exact
-orientation signs (:func:`.predicates.orient3d_sign_components`). A ray that meets an edge
+orientation signs (:func:`.faces.edge_signs`). A ray that meets an edge
 or a vertex, or lies in a face's plane, is not generic: another is drawn (a few tries; then
 nothing is claimed).
 """
@@ -25,8 +25,7 @@ import numpy as np
 from numba import njit
 
 from .arrays import INDEX
-from .faces import FaceMeasures
-from .predicates import orient3d_sign_components
+from .faces import FaceMeasures, edge_signs
 
 #: Rays drawn before giving up (each is generic with probability 1).
 _TRIES = 4
@@ -81,14 +80,7 @@ def ray_crossings(measures: FaceMeasures, direction: np.ndarray) -> int | None:
     if candidates.size == 0:
         return 0
     corners = measures.vertices[:, measures.faces[candidates].T]  # (axis, corner, face)
-    sx, sy, sz = direction
-    cx, cy, cz = corners
-    signs = np.stack(
-        [
-            orient3d_sign_components(sx, sy, sz, cx[i], cy[i], cz[i], cx[j], cy[j], cz[j])
-            for i, j in ((0, 1), (1, 2), (2, 0))
-        ]
-    )
+    signs = edge_signs(corners, direction)
     d = measures.orientation[candidates]
     surrounds = (signs > 0).all(axis=0) | (signs < 0).all(axis=0)
     touches = ((signs >= 0).all(axis=0) | (signs <= 0).all(axis=0)) & ~surrounds

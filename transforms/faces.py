@@ -355,6 +355,21 @@ def _sides_of_singular_lines(rows: np.ndarray, cap: PoleCap, threads: int = 1) -
     return codes
 
 
+def edge_signs(corners: np.ndarray, direction) -> np.ndarray:
+    """(3, k) int: exact ``sign(det[s, c_i, c_j])`` over each triangle's edges ``(0, 1), (1, 2),
+    (2, 0)``, ``s`` the ray ``direction`` ((3,) float) from the centre and ``corners`` (3, 3,
+    k) ``[axis, corner, face]``: which side of each edge's plane through the centre the ray
+    passes (:func:`.predicates.orient3d_sign_components`)."""
+    sx, sy, sz = direction
+    cx, cy, cz = corners
+    return np.stack(
+        [
+            orient3d_sign_components(sx, sy, sz, cx[i], cy[i], cz[i], cx[j], cy[j], cz[j])
+            for i, j in ((0, 1), (1, 2), (2, 0))
+        ]
+    )
+
+
 def _contains_singular_point(corners: np.ndarray, orientation: np.ndarray, point) -> np.ndarray:
     """(k,) bool: whether the ray from the centre through the singular ``point`` meets each
     closed triangle (docs/math.md, section 6: "holds a singular point").
@@ -374,12 +389,7 @@ def _contains_singular_point(corners: np.ndarray, orientation: np.ndarray, point
     orientation : (k,) int8, exact
     point : (3,) float, the singular point
     """
-    sx, sy, sz = point
-    cx, cy, cz = corners
-    signs = [
-        orient3d_sign_components(sx, sy, sz, cx[i], cy[i], cz[i], cx[j], cy[j], cz[j])
-        for i, j in ((0, 1), (1, 2), (2, 0))
-    ]
+    signs = edge_signs(corners, point)
     all_nonnegative = (signs[0] >= 0) & (signs[1] >= 0) & (signs[2] >= 0)
     all_nonpositive = (signs[0] <= 0) & (signs[1] <= 0) & (signs[2] <= 0)
     hit = (all_nonnegative & (orientation > 0)) | (all_nonpositive & (orientation < 0))

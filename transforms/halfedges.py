@@ -105,7 +105,7 @@ def edge_pieces(faces: np.ndarray) -> np.ndarray:
     """(m,) int64: the piece of each of ``faces`` ((m, 3) int, m >= 1, ids >= 0), faces that
     share an edge being in one piece; pieces are numbered from 0 in the order of their first
     face (as :func:`scipy.sparse.csgraph.connected_components` numbers them)."""
-    faces = _checked(faces, 2**31)
+    faces = _checked(faces)
     return _components(faces, int(faces.max()) + 1)
 
 
@@ -181,7 +181,7 @@ def edge_classes(
     orientation : (m,) int8 in {-1, 0, 1}
     n_vertices : int
     """
-    faces = _checked(faces, 2**31, n_vertices)
+    faces = _checked(faces, n_vertices)
     # 32-bit values while the ids leave room for the side's two bits: half the bytes to move.
     narrow = n_vertices < 2 ** (31 - _SIDE_BITS)
     packed = np.empty(3 * len(faces), dtype=np.int32 if narrow else np.int64)
@@ -196,11 +196,12 @@ def edge_classes(
     return boundary, outline, n_odd
 
 
-def _checked(faces: np.ndarray, limit: int, n_vertices: int = 0) -> np.ndarray:
+def _checked(faces: np.ndarray, n_vertices: int = 0) -> np.ndarray:
     """``faces`` as C-contiguous int32 (:data:`.arrays.INDEX`, the one type the kernels are
     compiled for), once it is known that the half-edges and the vertex ids fit the kernels'
     integers (far beyond any mesh the service's limits admit)."""
     faces = np.asarray(faces)
+    limit = 2**31
     if 3 * len(faces) >= limit or max(n_vertices, int(faces.max(initial=0)) + 1) >= limit:
         raise ValueError("more half-edges or vertices than the kernels' integers hold")
     return np.ascontiguousarray(faces, dtype=INDEX)

@@ -35,7 +35,6 @@ _BRACKET = 0.01
 _WIDE = 4.0
 #: The quantiles every summary gives: the median and the 95th percentile.
 _P50, _P95 = 0.5, 0.95
-_BINS = 1024
 
 #: Values around the ``q`` quantile of a weighted sample: ``(sample, weights, q)`` to
 #: ``(low, high)`` (by default the sample's ``q -+ _BRACKET`` quantiles, :func:`_brackets`).
@@ -224,8 +223,8 @@ def _quantiles(
     """The weighted sum and the maximum of ``values`` ((k,) float, finite; ``weights`` sum
     to ``total`` > 0) and their weighted quantiles ``qs``, exactly: a sample's brackets
     (:func:`_brackets`), checked and read in one pass (:func:`_scan`). Where the sample
-    misled, once more with a bracket four times as wide, then by the histogram. ``sample``:
-    the rows of the sample, :func:`_sample_rows` when None."""
+    misled, once more with a bracket four times as wide, then the quickselect over every
+    value. ``sample``: the rows of the sample, :func:`_sample_rows` when None."""
     sample = _sample_rows(values.size) if sample is None else sample
     brackets = _brackets(values[sample], weights[sample], qs, bracket)
     weighted, largest, scans = _scan(values, weights, brackets)
@@ -237,7 +236,7 @@ def _quantiles(
             wide = _brackets(values[sample], weights[sample], (q,), None, _WIDE)
             quantile = _settled(_scan(values, weights, wide)[2][0], target)
         if quantile is None:
-            quantile = _histogram_quantile(values, weights, target)
+            quantile = _sorted_quantile(values, weights, target)  # every value: linear too
         found.append(quantile)
     return weighted, largest, found
 
@@ -352,17 +351,18 @@ def weighted_quantile(
 
     Exact, in linear time. A sample (:func:`_sample_rows`) brackets the answer (the
     sample's quantiles at ``q -+ _BRACKET``); one pass checks that the bracket holds the
-    target weight and collects the values inside it, which are then sorted. When the sample
-    misleads (it cannot when it is the whole input), a wider bracket, then a weighted
-    histogram narrowed to the target.
+    target weight and collects the values inside it, whose quantile a quickselect finds.
+    When the sample misleads (it cannot when it is the whole input), a wider bracket, then
+    the quickselect over every value.
 
     Parameters
     ----------
     values : (k,) float, finite, k >= 1
     weights : (k,) float, >= 0, positive sum
     q : float in [0, 1]
-    bracket : how the sample brackets the answer; None: :func:`_brackets`' own. Any bracket gives
-        the same answer (one that misses falls back to the histogram), a good one sooner.
+    bracket : how the sample brackets the answer; None: :func:`_brackets`' own. Any bracket
+        gives the same answer (one that misses falls back to the quickselect over every
+        value), a good one sooner.
     """
     values = np.asarray(values, dtype=np.float64)
     weights = np.asarray(weights, dtype=np.float64)
@@ -380,7 +380,7 @@ def _sample_rows(n: int) -> np.ndarray | slice:
     most ``_SAMPLE``, else ``_SAMPLE`` drawn with a fixed seed, ascending. Drawn, not every
     k-th: a subdivided scan's values repeat with a period of a few faces, which a stride can
     alias so that the sample's quantile lies outside the bracket (the conformal median of
-    the 1.1M-face head did, and took the histogram's way)."""
+    the 1.1M-face head did, and took the slow way)."""
     if n <= _SAMPLE:
         return slice(None)
     return np.sort(np.random.default_rng(0).integers(0, n, _SAMPLE))
@@ -451,24 +451,3 @@ def _select(values: np.ndarray, weights: np.ndarray, target: float) -> float:
         else:
             target -= below + equal
             low = larger
-
-
-def _histogram_quantile(values: np.ndarray, weights: np.ndarray, target: float) -> float:
-    """:func:`weighted_quantile` by repeatedly narrowing a weighted histogram to the bin that
-    holds ``target``, then sorting what is left."""
-    below = 0.0  # weight of the values already known to lie under the candidates
-    while len(values) > _SORT_BELOW:
-        low, high = float(values.min()), float(values.max())
-        if not high - low > 4e-16 * max(abs(low), abs(high)):
-            return low  # all candidates equal, up to rounding
-        per_unit = _BINS / (high - low)
-        bins = np.minimum(((values - low) * per_unit).astype(np.intp), _BINS - 1)
-        cumulative = below + np.cumsum(np.bincount(bins, weights=weights, minlength=_BINS))
-        chosen = min(int(np.searchsorted(cumulative, target)), _BINS - 1)
-        keep = bins == chosen
-        if not keep.any():
-            break  # rounding in the cumulative sums; sort what is left instead
-        if chosen > 0:
-            below = float(cumulative[chosen - 1])
-        values, weights = values[keep], weights[keep]
-    return _sorted_quantile(values, weights, target - below)
